@@ -1,0 +1,46 @@
+"""What a simulated node's behaviour sees of the bus, and what it must provide.
+
+A behaviour (a plant model or a reference ECU) plays one or more DBC nodes. The restbus sends the
+messages of those nodes at their DBC cycle times with whatever values the behaviour last set,
+so a behaviour never deals with frames, counters or checksums.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Protocol, runtime_checkable
+
+
+class NodeIO(Protocol):
+    """The bus as a behaviour sees it."""
+
+    @property
+    def now(self) -> float:
+        """Bench time, s."""
+
+    def send_values(self, message: str, **signals: float) -> None:
+        """Set signal values of a message this node sends; sent from its next cycle on.
+        Enumerations may be given by their value-table name or number."""
+
+    def latest(self, message: str) -> Mapping[str, float] | None:
+        """The latest valid values of a message (enumerations as numbers); None when never
+        received or timed out (3 x cycle time)."""
+
+    def timed_out(self, message: str) -> bool:
+        """True when the message was never received or not for 3 x its cycle time."""
+
+    def invalid(self, message: str) -> bool:
+        """True when the last frame of the message failed an end-to-end, length or range check."""
+
+
+@runtime_checkable
+class Behaviour(Protocol):
+    """A model that plays DBC nodes. `step` is called every plant tick (1 ms or finer)."""
+
+    nodes: tuple[str, ...]
+
+    def reset(self) -> None:
+        """Back to the initial state (called when a test case starts a new scenario)."""
+
+    def step(self, io: NodeIO, t: float, dt: float) -> None:
+        """Advance by dt to bench time t; read inputs with io.latest, write outputs with io.send_values."""

@@ -1,0 +1,104 @@
+"""The record of a run: test cases, their steps (every check), plots and run facts.
+
+Filled by the pytest plugin, read by the HTML and JUnit writers; plain data so that
+reporting never needs the bus or pytest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+Verdict = Literal["pass", "fail"]
+Outcome = Literal["passed", "failed", "skipped", "error", "aborted"]
+
+
+@dataclass
+class Step:
+    """One check: what was measured against what was expected, with which tolerance."""
+
+    name: str
+    measured: float | str | None
+    expected: float | str | None
+    tolerance: str
+    verdict: Verdict
+    time: float  # bench time of the check, s
+    unit: str = ""
+    detail: str = ""
+
+
+@dataclass
+class Series:
+    name: str
+    x: list[float]
+    y: list[float]
+
+
+@dataclass
+class Plot:
+    """A plot of signals a case looked at. kind "time": x is time in s; kind "xy": a top view (equal axes)."""
+
+    title: str
+    xlabel: str
+    ylabel: str
+    series: list[Series]
+    kind: Literal["time", "xy"] = "time"
+
+
+@dataclass
+class Table:
+    """A free table a case adds to the report (for example measured figures next to a paper's)."""
+
+    title: str
+    columns: list[str]
+    rows: list[list[str]]
+
+
+@dataclass
+class CaseResult:
+    nodeid: str
+    name: str
+    outcome: Outcome
+    wall_time: float = 0.0       # s
+    sim_start: float = 0.0       # bench time at the start of the case, s
+    sim_time: float = 0.0        # bench time the case took, s
+    steps: list[Step] = field(default_factory=list)
+    plots: list[Plot] = field(default_factory=list)
+    tables: list[Table] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    message: str = ""            # failure or skip text
+
+    @property
+    def failed_steps(self) -> list[Step]:
+        return [s for s in self.steps if s.verdict == "fail"]
+
+
+@dataclass
+class RunResult:
+    started: str                 # ISO 8601 wall time
+    interface: str
+    channel: str
+    time_mode: Literal["virtual", "real"]
+    external: list[str] = field(default_factory=list)
+    cases: list[CaseResult] = field(default_factory=list)
+    mcap_path: str = ""
+    aborted: bool = False
+    wall_time: float = 0.0
+    sim_time: float = 0.0
+    frames: int = 0
+    invalid_frames: int = 0
+    tables: list[Table] = field(default_factory=list)
+
+    @property
+    def counts(self) -> dict[str, int]:
+        out = {"passed": 0, "failed": 0, "skipped": 0, "error": 0, "aborted": 0}
+        for case in self.cases:
+            out[case.outcome] += 1
+        return out
+
+    @property
+    def verdict(self) -> Literal["PASS", "FAIL", "ABORTED"]:
+        if self.aborted:
+            return "ABORTED"
+        c = self.counts
+        return "FAIL" if (c["failed"] or c["error"] or not self.cases) else "PASS"
