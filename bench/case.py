@@ -1,0 +1,193 @@
+"""The test-case API (`bench` fixture): drive the bus, wait, observe and check.
+
+Everything a case checks becomes a Step (name, measured, expected, tolerance, verdict), so the
+report shows what was measured, not only that something failed. Checks do not raise: a case runs
+to its end and fails if any step failed (the pytest plugin does that).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+
+import numpy as np
+
+from bench.checks import StepLog, percentile, tolerance_text, within
+from bench.errors import BenchError
+from bench.results import CaseResult, Plot, Series, Table
+from bench.session import BenchSession
+
+SCENARIO_MESSAGE, SCENARIO_SIGNAL = "BENCH_Control", "ScenarioId"
+SCENARIO_ACK_MESSAGE, SCENARIO_ACK_SIGNAL = "PLANT_Status", "ScenarioIdAck"
+SCENARIO_ACK_TIMEOUT = 2.0   # s a plant has to acknowledge a new scenario
+
+
+class Case:
+    """One test case on a bench session."""
+
+    def __init__(self, session: BenchSession, result: CaseResult, steps: StepLog) -> None:
+        self.session = session
+        self.result = result
+        self._steps = steps
+        self.start = session.now()
+        runner = session.runner
+        if runner is None:
+            raise BenchError("a test case needs the runner station")
+        self._runner = runner
+        self._monitor = runner.monitor
+        self._interval_marks = {name: len(s.intervals) for name, s in self._monitor.by_name.items()}
+
+    # -- time --------------------------------------------------------------------------------------
+    @property
+    def now(self) -> float:
+        """Bench time, s."""
+        return self.session.now()
+
+    @property
+    def elapsed(self) -> float:
+        """Bench time since the case (or its scenario) started, s."""
+        return self.now - self.start
+
+    def run(self, seconds: float) -> None:
+        """Let the bus and the plant run for `seconds` of bench time."""
+        self.session.run_until(self.now + seconds)
+
+    def wait_until(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        """Run until predicate() is true (checked every tick) or timeout s pass; returns predicate()."""
+        if predicate():
+            return True
+        return self.session.run_until(self.now + timeout, predicate)
+
+    # -- stimulus ----------------------------------------------------------------------------------
+    def set(self, message: str, **signals: float | int | str) -> None:
+        """Set signals of a stimulus message; sent from its next cycle on."""
+        self._runner.restbus.set(message, **signals)
+
+    def start_scenario(self, **control: float | int | str) -> None:
+        """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`),
+        reset every stimulus message to its start values, and wait for the plant's acknowledgement."""
+        restbus = self._runner.restbus
+        for name in restbus.periodic:
+            restbus.reset_values(name)
+        state = self._monitor.state(SCENARIO_ACK_MESSAGE)
+        previous = int(state.latest[SCENARIO_ACK_SIGNAL]) if state.latest else 0
+        scenario = previous % 255 + 1
+        restbus.set(SCENARIO_MESSAGE, **{SCENARIO_SIGNAL: scenario}, **control)
+
+        def acknowledged() -> bool:
+            latest = self._monitor.latest(SCENARIO_ACK_MESSAGE, self.now)
+            return latest is not None and int(latest[SCENARIO_ACK_SIGNAL]) == scenario
+
+        if not self.wait_until(acknowledged, SCENARIO_ACK_TIMEOUT):
+            raise BenchError(f"the plant did not acknowledge scenario {scenario} within "
+                             f"{SCENARIO_ACK_TIMEOUT:g} s ({SCENARIO_ACK_MESSAGE}.{SCENARIO_ACK_SIGNAL})")
+        self.start = self.now
+        self._interval_marks = {name: len(s.intervals) for name, s in self._monitor.by_name.items()}
+
+    # -- observation -------------------------------------------------------------------------------
+    def value(self, message: str, signal: str) -> float:
+        """Latest valid value of a signal; NaN when the message is timed out or never came."""
+        latest = self._monitor.latest(message, self.now)
+        if latest is None:
+            return math.nan
+        if signal not in latest:
+            self.session.codebook[message].physical(signal, 0.0)  # raises the clear error
+        return latest[signal]
+
+    def history(self, message: str, signal: str, since: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(times, values) of every valid frame of a signal since `since` (default: case start)."""
+        t, v = self._monitor.history(message, signal, self.start if since is None else since)
+        return np.asarray(t, dtype=float), np.asarray(v, dtype=float)
+
+    def timed_out(self, message: str) -> bool:
+        return self._monitor.timed_out(message, self.now)
+
+    def invalid_counts(self, message: str) -> dict[str, int]:
+        return dict(self._monitor.state(message).invalid)
+
+    # -- checks ------------------------------------------------------------------------------------
+    def expect(self, name: str, measured: float, expected: float, *, abs_tol: float = 0.0,
+               rel_tol: float = 0.0, unit: str = "", detail: str = "") -> bool:
+        """measured within max(abs_tol, rel_tol·|expected|) of expected."""
+        if abs_tol < 0 or rel_tol < 0:
+            raise BenchError(f"check {name!r}: tolerances must not be negative")
+        measured, expected = float(measured), float(expected)
+        return self._steps.record(name, within(measured, expected, abs_tol, rel_tol), measured, expected,
+                                  tolerance_text(abs_tol, rel_tol, unit), unit, detail)
+
+    def expect_true(self, name: str, condition: bool, *, measured: float | str | None = None,
+                    expected: float | str | None = None, detail: str = "") -> bool:
+        return self._steps.record(name, bool(condition), measured, expected, "", "", detail)
+
+    def expect_between(self, name: str, measured: float, low: float, high: float, *, unit: str = "",
+                       detail: str = "") -> bool:
+        measured = float(measured)
+        ok = math.isfinite(measured) and low <= measured <= high
+        return self._steps.record(name, ok, measured, f"[{low:g}, {high:g}]", "range", unit, detail)
+
+    def eventually(self, name: str, predicate: Callable[[], bool], within_s: float) -> bool:
+        """Passes when predicate() becomes true within `within_s`; measured = the time it took."""
+        t0 = self.now
+        ok = self.wait_until(predicate, within_s)
+        took = self.now - t0
+        return self._steps.record(name, ok, round(took, 6) if ok else f"not within {within_s:g} s",
+                                  f"≤ {within_s:g} s", "eventually", "s")
+
+    def always(self, name: str, predicate: Callable[[], bool], during: float) -> bool:
+        """Passes when predicate() holds at every tick for `during` s; stops at the first violation."""
+        t0 = self.now
+        violated = self.session.run_until(t0 + during, lambda: not predicate())
+        measured = f"violated at +{self.now - t0:.3f} s" if violated else f"held {during:g} s"
+        return self._steps.record(name, not violated, measured, f"for {during:g} s", "always")
+
+    def check_cycle_times(self, messages: Iterable[str] | None = None, *, p50_band: float = 0.05,
+                          p99_max: float = 1.5, max_max: float = 3.0, min_frames: int = 10) -> bool:
+        """Measured cycle time per message since the case started: p50 within ±p50_band of the DBC
+        cycle, p99 ≤ p99_max × cycle and max < max_max × cycle (the timeout bound), as fractions."""
+        ok_all = True
+        names = list(messages) if messages is not None else [
+            n for n, s in self._monitor.by_name.items() if s.codec.cycle_time and s.frames]
+        for name in names:
+            state = self._monitor.state(name)
+            cycle = state.codec.cycle_time
+            intervals = state.intervals[self._interval_marks.get(name, 0):]
+            if cycle is None or len(intervals) < min_frames:
+                ok_all &= self._steps.record(f"cycle time {name}", False, f"{len(intervals)} intervals",
+                                             f"≥ {min_frames}", "", "s")
+                continue
+            p50, p99, worst = percentile(intervals, 50), percentile(intervals, 99), max(intervals)
+            ms = 1000.0
+            ok = (abs(p50 - cycle) <= p50_band * cycle and p99 <= p99_max * cycle and worst < max_max * cycle)
+            ok_all &= self._steps.record(
+                f"cycle time {name}", ok, f"p50 {p50 * ms:.2f} / p99 {p99 * ms:.2f} / max {worst * ms:.2f}",
+                f"{cycle * ms:g} ms", f"p50 ±{p50_band:.0%}, p99 ≤ {p99_max:g}×, max < {max_max:g}×", "ms",
+                detail=f"{len(intervals)} intervals")
+        return ok_all
+
+    # -- report ------------------------------------------------------------------------------------
+    def plot(self, title: str, signals: Sequence[tuple[str, str] | tuple[str, str, str]], *,
+             ylabel: str = "", since: float | None = None) -> None:
+        """A time plot of signals (message, signal[, label]) since `since` (default case start)."""
+        series = []
+        for item in signals:
+            message, signal = item[0], item[1]
+            label = item[2] if len(item) > 2 else f"{message}.{signal}"
+            t, v = self.history(message, signal, since)
+            series.append(Series(label, (t - self.start).tolist(), v.tolist()))
+        self.result.plots.append(Plot(title, "time since case start [s]", ylabel, series))
+
+    def plot_series(self, title: str, series: Sequence[Series], *, xlabel: str, ylabel: str,
+                    kind: str = "time") -> None:
+        self.result.plots.append(Plot(title, xlabel, ylabel, list(series), kind))  # type: ignore[arg-type]
+
+    def table(self, title: str, columns: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
+        self.result.tables.append(Table(title, list(columns), [[_cell(c) for c in row] for row in rows]))
+
+    def note(self, text: str) -> None:
+        self.result.notes.append(text)
+
+
+def _cell(value: object) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)

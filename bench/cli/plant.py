@@ -1,0 +1,72 @@
+"""`bench plant`: the plant and every simulated ECU on a bus, in real time, until stopped.
+
+Another process (`bench run --external all ...`, a real ECU, any python-can program) drives it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import time
+from pathlib import Path
+
+from rich.console import Console
+
+from bench.bus import is_virtual
+from bench.cli.common import add_bus_options
+from bench.config import RunSettings, load_config
+from bench.errors import ConfigError
+from bench.session import BenchSession
+
+STATUS_PERIOD = 5.0   # s between status lines
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("plant", help="run the plant and the simulated ECUs on a bus in real time",
+                            description="Run the plant and every simulated ECU on a bus in real time "
+                                        "until SIGINT/SIGTERM or --duration.")
+    add_bus_options(parser, "udp_multicast")
+    parser.add_argument("--vehicle", default=None, help="vehicle of the plant at start (BENCH_Control may change it)")
+    parser.add_argument("--duration", type=float, default=None, help="stop after S seconds")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    console = Console(stderr=True)
+    if is_virtual(args.interface):
+        raise ConfigError("--interface virtual: the in-process virtual bus cannot be reached from another "
+                          "process; use udp_multicast, socketcan or a hardware interface")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ConfigError(f"--duration: {args.duration} is not a positive number of seconds")
+    project = load_config(Path(args.config) if args.config else None)
+    settings = RunSettings(interface=args.interface, channel=args.channel, external=args.external,
+                           vehicle=args.vehicle)
+    session = BenchSession(project, settings, role="plant")
+    stop = {"now": False}
+
+    def request_stop(signum: int, frame: object) -> None:
+        stop["now"] = True
+
+    signal.signal(signal.SIGINT, request_stop)
+    signal.signal(signal.SIGTERM, request_stop)
+    plant = session.plant
+    assert plant is not None
+    console.print(f"bench plant: simulating {', '.join(sorted(plant.restbus.nodes))} on "
+                  f"{args.interface} {session.channel or ''}; Ctrl-C to stop", highlight=False)
+    session.start()
+    end = args.duration if args.duration is not None else math.inf
+    wall0 = time.monotonic()
+    next_status = STATUS_PERIOD
+    try:
+        while not stop["now"] and session.now() < end:
+            session.run_until(min(end, session.scheduler.now + 0.1), lambda: stop["now"])
+            if session.now() >= next_status:
+                next_status += STATUS_PERIOD
+                console.print(f"t={session.now():7.1f} s  sent {plant.sent}  received "
+                              f"{plant.monitor.frames - plant.sent}  invalid {plant.monitor.invalid_frames}  "
+                              f"max lag {getattr(session.clock, 'max_lag', 0.0) * 1000:.1f} ms", highlight=False)
+    finally:
+        session.close()
+    console.print(f"bench plant: stopped after {time.monotonic() - wall0:.1f} s, sent {plant.sent} frames")
+    return 0

@@ -1,0 +1,104 @@
+"""Virtual and wall clocks behind one interface, and the tick loop that drives a bench.
+
+The plant steps every `dt` (1 ms); each tick every station receives, steps its behaviours and
+sends what is due. With the virtual clock a tick costs only its work (deterministic, much faster
+than real time); with the wall clock each tick waits for its wall-time deadline while receiving.
+The same test-case code runs under both.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Protocol
+
+from bench.station import Station
+
+DEFAULT_DT = 0.001
+
+
+class Clock(Protocol):
+    realtime: bool
+
+    def start(self) -> None: ...
+
+    def now(self) -> float:
+        """Bench time, s."""
+
+    def wait_until(self, t: float, stations: Sequence[Station]) -> None:
+        """Return at bench time t, receiving frames meanwhile."""
+
+
+class VirtualClock:
+    """Time moves only when the scheduler says so."""
+
+    realtime = False
+
+    def __init__(self) -> None:
+        self._now = 0.0
+
+    def start(self) -> None:
+        self._now = 0.0
+
+    def now(self) -> float:
+        return self._now
+
+    def wait_until(self, t: float, stations: Sequence[Station]) -> None:
+        self._now = t
+
+
+class WallClock:
+    """Bench time = monotonic wall time since start."""
+
+    realtime = True
+
+    def __init__(self) -> None:
+        self._t0 = time.monotonic()
+        self.max_lag = 0.0   # worst lateness of a tick, s
+
+    def start(self) -> None:
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._t0
+
+    def wait_until(self, t: float, stations: Sequence[Station]) -> None:
+        remaining = t - self.now()
+        if remaining < 0:
+            self.max_lag = max(self.max_lag, -remaining)
+        while remaining > 0:
+            if len(stations) == 1:
+                stations[0].poll(timeout=remaining)
+            else:
+                for station in stations:
+                    station.poll(timeout=0.0)
+                time.sleep(min(remaining, 0.0002))
+            remaining = t - self.now()
+
+
+class Scheduler:
+    """The tick loop: one per bench, over all its stations, in a fixed order (determinism)."""
+
+    def __init__(self, stations: Sequence[Station], clock: Clock, dt: float = DEFAULT_DT) -> None:
+        self.stations = list(stations)
+        self.clock = clock
+        self.dt = dt
+        self.tick = 0
+
+    @property
+    def now(self) -> float:
+        return self.tick * self.dt
+
+    def run_until(self, t_end: float, stop: Callable[[], bool] | None = None) -> bool:
+        """Advance tick by tick to bench time t_end, or until stop() is true (checked every tick).
+        Returns whether stop() became true."""
+        last = round(t_end / self.dt)
+        while self.tick < last:
+            self.tick += 1
+            t = self.tick * self.dt
+            self.clock.wait_until(t, self.stations)
+            for station in self.stations:
+                station.tick(self.tick, t, self.dt)
+            if stop is not None and stop():
+                return True
+        return False

@@ -1,0 +1,177 @@
+"""Receive side: every frame on the bus is checked against the DBC and the contract's E2E rules.
+
+One monitor per bus handle decodes every frame, keeps the latest valid values and, when asked,
+a time-stamped history per message; it checks length, checksum, counter sequence, signal ranges
+and timeouts (3 x cycle time). Invalid frames are counted and logged, never applied.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_left
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from bench import e2e
+from bench.codec import Codebook, MessageCodec
+
+TIMEOUT_CYCLES = 3   # k-matrix.md: a message not seen for 3 x its cycle time is timed out
+
+FrameSink = Callable[[float, int, bytes, str, bool, str, "MessageCodec | None", "Mapping[str, float] | None"], None]
+
+
+@dataclass(slots=True)
+class MessageState:
+    """What the monitor knows of one message."""
+
+    codec: MessageCodec
+    latest: dict[str, float] | None = None
+    last_valid: float | None = None          # bench time of the last valid frame
+    last_seen: float | None = None           # bench time of the last frame, valid or not
+    counter: int | None = None               # AliveCounter of the last frame (None: resync)
+    last_invalid: bool = False
+    frames: int = 0
+    invalid: dict[str, int] = field(default_factory=dict)      # reason -> count
+    intervals: list[float] = field(default_factory=list)       # s between consecutive frames
+    timeouts: list[float] = field(default_factory=list)        # bench times a timeout began
+    timed_out_flag: bool = True
+    history_t: list[float] = field(default_factory=list)
+    history_v: list[tuple[float, ...]] = field(default_factory=list)
+
+    @property
+    def invalid_count(self) -> int:
+        return sum(self.invalid.values())
+
+
+@dataclass(slots=True)
+class InvalidFrame:
+    t: float
+    arbitration_id: int
+    message: str
+    reason: str
+
+
+class Monitor:
+    """Checks and remembers every frame; optional sink gets every frame with its verdict (the log)."""
+
+    def __init__(self, codebook: Codebook, *, keep_history: bool = False, sink: FrameSink | None = None) -> None:
+        self.codebook = codebook
+        self.keep_history = keep_history
+        self.sink = sink
+        self.states: dict[int, MessageState] = {cid: MessageState(c) for cid, c in codebook.by_id.items()}
+        self.by_name: dict[str, MessageState] = {s.codec.name: s for s in self.states.values()}
+        self.unknown_frames = 0
+        self.invalid_log: list[InvalidFrame] = []
+        self.frames = 0
+
+    # -- frames ------------------------------------------------------------------------------
+    def on_frame(self, t: float, arbitration_id: int, data: bytes, direction: str,
+                 is_extended: bool = False, is_error: bool = False) -> bool:
+        """Check one frame; apply it only when valid. Returns the verdict. Never raises on bus data."""
+        self.frames += 1
+        state = None if (is_extended or is_error) else self.states.get(arbitration_id)
+        if state is None:
+            self.unknown_frames += 1
+            reason = "error frame" if is_error else "unknown identifier"
+            if self.sink:
+                self.sink(t, arbitration_id, data, direction, False, reason, None, None)
+            return False
+        codec = state.codec
+        if state.last_seen is not None:
+            state.intervals.append(t - state.last_seen)
+        state.last_seen = t
+        state.frames += 1
+        kind = reason = ""
+        values = None
+        if len(data) != codec.length:
+            kind, reason = "length", f"length {len(data)}, DBC says {codec.length}"
+            state.counter = None
+        else:
+            counter = data[e2e.COUNTER_BYTE] & 0x0F
+            expected_counter = None if state.counter is None else (state.counter + 1) % e2e.COUNTER_MODULO
+            state.counter = counter
+            if data[e2e.CHECKSUM_BYTE] != e2e.checksum(arbitration_id, data):
+                kind = reason = "checksum"
+            elif expected_counter is not None and counter != expected_counter:
+                kind, reason = "counter", f"counter {counter}, expected {expected_counter}"
+            else:
+                values = codec.decode(data)
+                bad = codec.out_of_range(values)
+                if bad:
+                    kind, reason = "range", "range: " + ", ".join(f"{n}={values[n]:g}" for n in bad)
+        if reason:
+            state.invalid[kind] = state.invalid.get(kind, 0) + 1
+            state.last_invalid = True
+            self.invalid_log.append(InvalidFrame(t, arbitration_id, codec.name, reason))
+            if self.sink:
+                self.sink(t, arbitration_id, data, direction, False, reason, codec, None)
+            return False
+        assert values is not None
+        state.latest = values
+        state.last_valid = t
+        state.last_invalid = False
+        state.timed_out_flag = False
+        if self.keep_history:
+            state.history_t.append(t)
+            state.history_v.append(tuple(values.values()))
+        if self.sink:
+            self.sink(t, arbitration_id, data, direction, True, "", codec, values)
+        return True
+
+    # -- time ------------------------------------------------------------------------------------
+    def check_timeouts(self, now: float) -> None:
+        """Record the start of every timeout; a timed-out message resynchronises its counter."""
+        for state in self.states.values():
+            cycle = state.codec.cycle_time
+            if cycle is None or state.timed_out_flag or state.last_valid is None:
+                continue
+            if now - state.last_valid > TIMEOUT_CYCLES * cycle:
+                state.timed_out_flag = True
+                state.timeouts.append(state.last_valid + TIMEOUT_CYCLES * cycle)
+                state.counter = None
+
+    # -- queries ---------------------------------------------------------------------------------
+    def state(self, message: str) -> MessageState:
+        try:
+            return self.by_name[message]
+        except KeyError:
+            self.codebook[message]  # raises the clear error
+            raise
+
+    def latest(self, message: str, now: float) -> dict[str, float] | None:
+        state = self.state(message)
+        if self.timed_out(message, now):
+            return None
+        return state.latest
+
+    def timed_out(self, message: str, now: float) -> bool:
+        state = self.state(message)
+        cycle = state.codec.cycle_time or math.inf
+        return state.last_valid is None or now - state.last_valid > TIMEOUT_CYCLES * cycle
+
+    def invalid(self, message: str) -> bool:
+        return self.state(message).last_invalid
+
+    def history(self, message: str, signal: str, since: float = -math.inf) -> tuple[list[float], list[float]]:
+        state = self.state(message)
+        try:
+            index = state.codec.signal_names.index(signal)
+        except ValueError:
+            state.codec.physical(signal, 0.0)  # raises the clear error
+            raise
+        ts, vs = state.history_t, state.history_v
+        start = _first_at_or_after(ts, since)
+        return ts[start:], [v[index] for v in vs[start:]]
+
+    def clear_history(self) -> None:
+        for state in self.states.values():
+            state.history_t.clear()
+            state.history_v.clear()
+
+    @property
+    def invalid_frames(self) -> int:
+        return len(self.invalid_log) + self.unknown_frames
+
+
+def _first_at_or_after(ts: list[float], since: float) -> int:
+    return bisect_left(ts, since)

@@ -1,0 +1,104 @@
+"""pytest plugin (entry point `pytest11`): the `bench` fixture and the run's log and reports.
+
+A plain `pytest` on any folder of test cases works: options `--bench-interface`,
+`--bench-channel`, `--bench-external`, `--bench-out`, `--bench-config`. The run (bus, plant,
+MCAP log) starts at the first case that asks for the `bench` fixture; at the end of the session
+`report.html` and `junit.xml` are written next to `run.mcap`, marked aborted on Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from bench.case import Case
+from bench.config import RunSettings, load_config
+from bench.results import RunResult
+from bench.run import BenchRun, default_out_dir
+
+_RUN_KEY = pytest.StashKey["BenchRun | None"]()
+_CASE_KEY = pytest.StashKey[Case]()
+_last_finished: list[RunResult] = []
+
+
+def finished_run() -> RunResult | None:
+    """The result of the last run this process finished (for `bench run`)."""
+    return _last_finished[-1] if _last_finished else None
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("bench", "HIL CAN bench")
+    group.addoption("--bench-interface", default="virtual",
+                    help="python-can interface, or 'virtual' for the in-process virtual-time bus (default)")
+    group.addoption("--bench-channel", default=None, help="channel of the interface (e.g. vcan0)")
+    group.addoption("--bench-external", action="append", default=[], metavar="NODE",
+                    help="a node that is real (not simulated); 'all' = every node but the stimulus")
+    group.addoption("--bench-out", default=None, help="folder for report.html, run.mcap, junit.xml")
+    group.addoption("--bench-config", default=None, help="bench.toml of the project")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.stash[_RUN_KEY] = None
+
+
+def _run(config: pytest.Config) -> BenchRun:
+    run = config.stash[_RUN_KEY]
+    if run is None:
+        project = load_config(Path(config.getoption("--bench-config")) if config.getoption("--bench-config") else None)
+        settings = RunSettings(interface=config.getoption("--bench-interface"),
+                               channel=config.getoption("--bench-channel"),
+                               external=list(config.getoption("--bench-external")))
+        out = config.getoption("--bench-out")
+        out_dir = Path(out) if out else default_out_dir(project.reports)
+        run = BenchRun(project, settings, out_dir)
+        config.stash[_RUN_KEY] = run
+        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
+            signal.signal(signal.SIGTERM, _terminate)
+    return run
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+@pytest.fixture
+def bench(request: pytest.FixtureRequest) -> Iterator[Case]:
+    """The bench for one test case: set signals, run, wait, check and plot (see bench.case.Case)."""
+    run = _run(request.config)
+    case = run.begin_case(request.node.nodeid, request.node.name)
+    request.node.stash[_CASE_KEY] = case
+    yield case
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    outcome = yield
+    case = item.stash.get(_CASE_KEY, None)
+    if case is not None and outcome.excinfo is None and case.result.failed_steps:
+        lines = [f"{s.name}: measured {s.measured}, expected {s.expected} ({s.tolerance})"
+                 for s in case.result.failed_steps]
+        outcome.force_exception(AssertionError("failed steps:\n" + "\n".join(lines)))
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Iterator[None]:
+    outcome = yield
+    report: pytest.TestReport = outcome.get_result()
+    run = item.config.stash.get(_RUN_KEY, None)
+    if run is None or "bench" not in getattr(item, "fixturenames", ()):
+        return
+    run.record_report(item.nodeid, item.name, report, call)
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    run = session.config.stash.get(_RUN_KEY, None)
+    if run is None:
+        return
+    aborted = exitstatus == pytest.ExitCode.INTERRUPTED
+    _last_finished.append(run.finish(aborted=aborted))
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        reporter.write_line(f"bench: report in {run.out_dir}")

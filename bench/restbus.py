@@ -1,0 +1,85 @@
+"""Restbus simulation: every message of the simulated nodes, sent at its DBC cycle time.
+
+Values start at the DBC start values; code (a test case or a node's behaviour) sets them by name.
+AliveCounter and Checksum are filled here, per the contract, through `bench.e2e`.
+Values are checked when a frame is built (once per cycle), so a behaviour may set values every
+plant tick at no cost; a NaN or out-of-range value stops the sender with an error naming it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterator
+
+from bench import e2e
+from bench.codec import Codebook, MessageCodec
+from bench.errors import SignalError
+
+TICKS_PER_MS = 1  # the restbus is scheduled on the plant's 1 ms tick
+
+
+class _Periodic:
+    __slots__ = ("codec", "values", "period", "next_due", "counter", "enabled")
+
+    def __init__(self, codec: MessageCodec, period_ticks: int, phase: int) -> None:
+        self.codec = codec
+        self.values: dict[str, float | int | str] = dict(codec.start_values())
+        self.period = period_ticks
+        self.next_due = phase
+        self.counter = 0
+        self.enabled = True
+
+
+class Restbus:
+    """The periodic transmitter of one bus handle."""
+
+    def __init__(self, codebook: Codebook, nodes: Collection[str]) -> None:
+        self.codebook = codebook
+        self.nodes = frozenset(nodes)
+        self.periodic: dict[str, _Periodic] = {}
+        for codec in sorted(codebook.sent_by(self.nodes), key=lambda c: c.frame_id):
+            if codec.cycle_time is None:
+                continue
+            period = max(1, round(codec.cycle_time * 1000 * TICKS_PER_MS))
+            # Spread messages of equal cycle over the period so the bus load is even (deterministic).
+            self.periodic[codec.name] = _Periodic(codec, period, codec.frame_id % period)
+
+    def set(self, message: str, **signals: float | int | str) -> None:
+        """Set values of a message this restbus sends (checked now: for test code)."""
+        slot = self._slot(message)
+        for name, value in signals.items():
+            slot.codec.physical(name, value)
+        slot.values.update(signals)
+
+    def set_unchecked(self, message: str, signals: dict[str, float | int | str]) -> None:
+        """Set values without checking now (for behaviours stepping every tick); checked at send."""
+        self._slot(message).values.update(signals)
+
+    def reset_values(self, message: str) -> None:
+        slot = self._slot(message)
+        slot.values = dict(slot.codec.start_values())
+
+    def _slot(self, message: str) -> _Periodic:
+        slot = self.periodic.get(message)
+        if slot is None:
+            codec = self.codebook[message]
+            raise SignalError(f"{message} is sent by {', '.join(codec.senders)}, which this bus handle "
+                              f"does not simulate (simulated: {', '.join(sorted(self.nodes)) or 'none'})")
+        return slot
+
+    def due(self, tick: int) -> Iterator[tuple[int, bytes]]:
+        """The frames due at this tick, each with its counter and checksum."""
+        for slot in self.periodic.values():
+            if tick < slot.next_due or not slot.enabled:
+                continue
+            slot.next_due += slot.period
+            if slot.next_due <= tick:           # fell behind (real time): skip, do not burst
+                slot.next_due = tick + slot.period
+            yield slot.codec.frame_id, self.build(slot)
+
+    def build(self, slot: _Periodic) -> bytes:
+        codec = slot.codec
+        values = {name: codec.physical(name, value) for name, value in slot.values.items()}
+        data = codec.encode(values)
+        e2e.protect(codec.frame_id, data, slot.counter)
+        slot.counter = e2e.next_counter(slot.counter)
+        return bytes(data)

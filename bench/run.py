@@ -1,0 +1,139 @@
+"""A bench run: one session, its MCAP log, the record of its cases and, at the end, the reports."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from datetime import datetime
+from pathlib import Path
+
+import pytest
+
+from bench.case import Case
+from bench.checks import LOG_ERROR, LOG_INFO, StepLog
+from bench.codec import MessageCodec
+from bench.config import ProjectConfig, RunSettings
+from bench.results import CaseResult, RunResult, Step
+from bench.session import BenchSession
+
+MCAP_NAME, HTML_NAME, JUNIT_NAME = "run.mcap", "report.html", "junit.xml"
+
+
+def default_out_dir(reports: Path) -> Path:
+    """A new folder under reports/ named by the start time (never reuses one)."""
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    candidate, n = reports / stamp, 1
+    while candidate.exists():
+        n += 1
+        candidate = reports / f"{stamp}-{n}"
+    return candidate
+
+
+class BenchRun:
+    def __init__(self, project: ProjectConfig, settings: RunSettings, out_dir: Path,
+                 mcap_name: str = MCAP_NAME) -> None:
+        from bench.recorder import Recorder   # the log is only for runs
+
+        self.out_dir = out_dir
+        out_dir.mkdir(parents=True, exist_ok=True)
+        self.mcap_path = out_dir / mcap_name
+        self.started = datetime.now().astimezone().isoformat(timespec="seconds")
+        self._wall0 = time.monotonic()
+        self.settings = settings
+        self.cases: dict[str, CaseResult] = {}
+        self._case_wall0: dict[str, float] = {}
+        self.recorder = None
+        self.session = None
+        self.finished: RunResult | None = None
+        databases = [(p.name, p) for p in project.databases]
+        from bench.codec import load_dbc
+        self.recorder = Recorder(self.mcap_path, [load_dbc(p) for _, p in databases],
+                                 attachments=[p for _, p in databases])
+        label = f"{settings.interface}:{settings.channel or 'default'}"
+        recorder = self.recorder
+
+        def sink(t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
+                 codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
+            recorder.frame(t, arbitration_id, data, channel=label, direction=direction, valid=valid,
+                           error=reason)
+            if values is not None and codec is not None:
+                recorder.decoded(t, codec.name, values)
+
+        self.session = BenchSession(project, settings, sink=sink)
+        self.session.start()
+
+    # -- cases ---------------------------------------------------------------------------------------
+    def begin_case(self, nodeid: str, name: str) -> Case:
+        assert self.session is not None
+        # "aborted" until the call phase reports: a case cut short by Ctrl-C stays aborted.
+        result = CaseResult(nodeid=nodeid, name=name, outcome="aborted", sim_start=self.session.now(),
+                            message="the run was interrupted during this case")
+        self.cases[nodeid] = result
+        self._case_wall0[nodeid] = time.monotonic()
+        self._log(LOG_INFO, "case", f"start {nodeid}")
+        steps = StepLog(self.session.now, self._step_listener)
+        result.steps = steps.steps
+        return Case(self.session, result, steps)
+
+    def _step_listener(self, step: Step) -> None:
+        level = LOG_INFO if step.verdict == "pass" else LOG_ERROR
+        self._log(level, step.name, f"{step.verdict.upper()}: measured {step.measured}, expected "
+                                    f"{step.expected} ({step.tolerance}) {step.unit}".rstrip())
+
+    def _log(self, level: int, name: str, message: str) -> None:
+        if self.recorder is not None and self.session is not None:
+            self.recorder.step(self.session.now(), level, name, message)
+
+    def record_report(self, nodeid: str, name: str, report: pytest.TestReport, call: pytest.CallInfo) -> None:
+        result = self.cases.get(nodeid)
+        if result is None:   # skipped or errored before the fixture ran
+            now = self.session.now() if self.session else 0.0
+            result = self.cases[nodeid] = CaseResult(nodeid=nodeid, name=name, outcome="passed", sim_start=now)
+        if report.when == "call" and report.passed:
+            result.outcome, result.message = "passed", ""
+        elif report.skipped:
+            result.outcome = "skipped"
+            result.message = _longrepr(report)
+        elif report.failed:
+            result.outcome = "failed" if report.when == "call" else "error"
+            result.message = _longrepr(report)
+        if report.when in ("call", "teardown") and self.session is not None:
+            result.sim_time = self.session.now() - result.sim_start
+            result.wall_time = time.monotonic() - self._case_wall0.get(nodeid, time.monotonic())
+        if report.when == "teardown":
+            self._log(LOG_INFO if result.outcome in ("passed", "skipped") else LOG_ERROR, "case",
+                      f"{result.outcome} {nodeid}")
+
+    # -- end -----------------------------------------------------------------------------------------
+    def finish(self, aborted: bool = False) -> RunResult:
+        """Close the bus and the log, then write the reports; safe to call twice."""
+        if self.finished is not None:
+            return self.finished
+        from bench.report import write_html, write_junit
+
+        session = self.session
+        monitor = session.monitor if session else None
+        run = RunResult(
+            started=self.started, interface=self.settings.interface, channel=self.settings.channel or "",
+            time_mode="virtual" if self.settings.virtual_time else "real",
+            external=sorted(session.external) if session else [], cases=list(self.cases.values()),
+            mcap_path=MCAP_NAME if self.mcap_path.parent == self.out_dir else str(self.mcap_path),
+            aborted=aborted, wall_time=time.monotonic() - self._wall0,
+            sim_time=session.now() if session else 0.0,
+            frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0)
+        try:
+            if session is not None:
+                session.close()
+        finally:
+            if self.recorder is not None:
+                self.recorder.close()
+            write_html(run, self.out_dir / HTML_NAME)
+            write_junit(run, self.out_dir / JUNIT_NAME)
+            self.finished = run
+        return run
+
+
+def _longrepr(report: pytest.TestReport) -> str:
+    if report.skipped and isinstance(report.longrepr, tuple):
+        return str(report.longrepr[2])
+    return str(report.longreprtext or "")

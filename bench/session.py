@@ -1,0 +1,102 @@
+"""One bench: the databases, the bus handles, the stations, the clock and the log of a run.
+
+The test runner's station plays the stimulus nodes (bench.toml `stimulus`). Every other node is
+simulated by an in-process plant station unless declared external; with every node external
+(`--external all`), the plant is another process (`bench plant`) or real ECUs.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+
+from bench.bus import is_virtual, open_bus
+from bench.clock import Clock, Scheduler, VirtualClock, WallClock
+from bench.codec import Codebook, load_codebook
+from bench.config import ProjectConfig, RunSettings
+from bench.errors import BenchError, ConfigError
+from bench.monitor import FrameSink, Monitor
+from bench.plugins import load_plant
+from bench.restbus import Restbus
+from bench.station import Station
+
+ALL = "all"
+_virtual_channels = itertools.count(1)
+
+
+def resolve_external(codebook: Codebook, stimulus: Sequence[str], external: Sequence[str]) -> set[str]:
+    """The external nodes named on the command line, checked against the databases."""
+    nodes = codebook.nodes
+    names = set()
+    for item in external:
+        names.update(n for n in item.replace(",", " ").split() if n)
+    if ALL in names:
+        return set(nodes) - set(stimulus)
+    unknown = names - set(nodes)
+    if unknown:
+        raise ConfigError(f"--external: unknown node(s) {', '.join(sorted(unknown))} "
+                          f"(nodes: {', '.join(nodes)}, or 'all')")
+    return names
+
+
+class BenchSession:
+    """Everything one process needs to take part in a bench run."""
+
+    def __init__(self, project: ProjectConfig, settings: RunSettings, *, role: str = "runner",
+                 sink: FrameSink | None = None, keep_history: bool = True) -> None:
+        self.project = project
+        self.settings = settings
+        self.codebook = load_codebook(project.databases)
+        for node in project.stimulus:
+            if node not in self.codebook.nodes:
+                raise ConfigError(f"{project.path}: stimulus node {node!r} is in none of the databases")
+        self.external = resolve_external(self.codebook, project.stimulus, settings.external)
+        self.clock: Clock = VirtualClock() if settings.virtual_time else WallClock()
+        channel = settings.channel
+        if is_virtual(settings.interface) and not channel:
+            channel = f"bench-{next(_virtual_channels)}"   # sessions in one process never mix
+        self.channel = channel
+        self.stations: list[Station] = []
+        self.runner: Station | None = None
+        self.plant: Station | None = None
+        plant_nodes = set(self.codebook.nodes) - set(project.stimulus) - self.external
+        if role == "plant":
+            plant_nodes -= set(project.stimulus)
+        if plant_nodes:
+            factory = load_plant(project.plant)
+            behaviours = factory(self.external | set(project.stimulus), settings.vehicle)
+            self.plant = self._station("plant", plant_nodes, Monitor(self.codebook), behaviours)
+            self.stations.append(self.plant)
+        if role == "runner":
+            monitor = Monitor(self.codebook, keep_history=keep_history, sink=sink)
+            self.runner = self._station("runner", set(project.stimulus), monitor, ())
+            self.stations.append(self.runner)
+        if not self.stations:
+            raise ConfigError("nothing to simulate: every node is external")
+        self.scheduler = Scheduler(self.stations, self.clock)
+
+    def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence) -> Station:
+        bus = open_bus(self.settings.interface, self.channel)
+        return Station(name, bus, Restbus(self.codebook, nodes), monitor, self.now, behaviours)
+
+    def now(self) -> float:
+        return self.scheduler.now if not self.clock.realtime else self.clock.now()
+
+    @property
+    def monitor(self) -> Monitor:
+        station = self.runner or self.plant
+        assert station is not None
+        return station.monitor
+
+    def start(self) -> None:
+        self.clock.start()
+
+    def run_until(self, t_end: float, stop: Callable[[], bool] | None = None) -> bool:
+        return self.scheduler.run_until(t_end, stop)
+
+    def close(self) -> None:
+        for station in self.stations:
+            try:
+                station.bus.shutdown()
+            except Exception as exc:  # a bus that fails to close must not hide the run's result
+                raise BenchError(f"closing the {station.name} bus failed: {exc}") from None
