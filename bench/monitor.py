@@ -16,6 +16,7 @@ from bench import e2e
 from bench.codec import Codebook, MessageCodec
 
 TIMEOUT_CYCLES = 3   # k-matrix.md: a message not seen for 3 x its cycle time is timed out
+TIME_EPS = 1e-9      # s: bench times are sums of ticks; equal times must compare equal
 
 FrameSink = Callable[[float, int, bytes, str, bool, str, "MessageCodec | None", "Mapping[str, float] | None"], None]
 
@@ -125,7 +126,7 @@ class Monitor:
             cycle = state.codec.cycle_time
             if cycle is None or state.timed_out_flag or state.last_valid is None:
                 continue
-            if now - state.last_valid > TIMEOUT_CYCLES * cycle:
+            if now - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
                 state.timed_out_flag = True
                 state.timeouts.append(state.last_valid + TIMEOUT_CYCLES * cycle)
                 state.counter = None
@@ -147,7 +148,7 @@ class Monitor:
     def timed_out(self, message: str, now: float) -> bool:
         state = self.state(message)
         cycle = state.codec.cycle_time or math.inf
-        return state.last_valid is None or now - state.last_valid > TIMEOUT_CYCLES * cycle
+        return state.last_valid is None or now - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS
 
     def invalid(self, message: str) -> bool:
         return self.state(message).last_invalid

@@ -1,0 +1,81 @@
+"""The monitor: every contract check detects its fault, and arbitrary frames never make it raise."""
+
+from __future__ import annotations
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bench import e2e
+from bench.codec import Codebook
+from bench.monitor import Monitor
+from bench.restbus import Restbus
+
+
+def _frames(codebook: Codebook, message: str, count: int, **values: float) -> list[bytes]:
+    restbus = Restbus(codebook, codebook[message].senders)
+    if values:
+        restbus.set(message, **values)
+    slot = restbus.periodic[message]
+    return [restbus.build(slot) for _ in range(count)]
+
+
+def test_valid_sequence_is_applied(codebook: Codebook) -> None:
+    monitor = Monitor(codebook, keep_history=True)
+    frame_id = codebook["VCU_WheelCmd_FL"].frame_id
+    for i, data in enumerate(_frames(codebook, "VCU_WheelCmd_FL", 20, SteerAngleCmd=12.34)):
+        assert monitor.on_frame(i * 0.01, frame_id, data, "rx")
+    assert monitor.latest("VCU_WheelCmd_FL", 0.19)["SteerAngleCmd"] == 12.34
+    t, v = monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd")
+    assert len(t) == 20 and v[-1] == 12.34
+    assert monitor.invalid_frames == 0
+
+
+def test_each_fault_is_detected_and_not_applied(codebook: Codebook) -> None:
+    monitor = Monitor(codebook)
+    frame_id = codebook["VCU_WheelCmd_FL"].frame_id
+    good = _frames(codebook, "VCU_WheelCmd_FL", 6, SteerAngleCmd=5.0)
+    assert monitor.on_frame(0.00, frame_id, good[0], "rx")
+    bad_crc = bytearray(good[1])
+    bad_crc[7] ^= 0x01
+    assert not monitor.on_frame(0.01, frame_id, bytes(bad_crc), "rx")
+    assert not monitor.on_frame(0.02, frame_id, good[3], "rx")        # counter skipped 2 after 1
+    assert not monitor.on_frame(0.03, frame_id, good[4][:7], "rx")    # short frame
+    state = monitor.state("VCU_WheelCmd_FL")
+    assert state.invalid == {"checksum": 1, "counter": 1, "length": 1}
+    # out of range: a raw angle of +200 deg (the DBC range is +-90) with a valid counter and checksum
+    codec = codebook["VCU_WheelCmd_FL"]
+    values = dict(codec.start_values(), SteerAngleCmd=200.0)
+    data = codec.encode(values)
+    e2e.protect(frame_id, data, 0)
+    monitor2 = Monitor(codebook)
+    assert not monitor2.on_frame(0.0, frame_id, bytes(data), "rx")
+    assert monitor2.state("VCU_WheelCmd_FL").invalid == {"range": 1}
+    assert monitor2.latest("VCU_WheelCmd_FL", 0.0) is None
+
+
+def test_timeout_after_three_cycles(codebook: Codebook) -> None:
+    monitor = Monitor(codebook)
+    frame_id = codebook["VCU_WheelCmd_FL"].frame_id
+    monitor.on_frame(1.0, frame_id, _frames(codebook, "VCU_WheelCmd_FL", 1)[0], "rx")
+    assert not monitor.timed_out("VCU_WheelCmd_FL", 1.0 + 0.030)
+    assert monitor.timed_out("VCU_WheelCmd_FL", 1.0 + 0.0301)
+    monitor.check_timeouts(1.031)
+    assert monitor.state("VCU_WheelCmd_FL").timeouts == [1.03]
+
+
+@settings(max_examples=400, deadline=None)
+@given(frame_id=st.integers(0, 0x1FFFFFFF), data=st.binary(max_size=64), extended=st.booleans(),
+       error=st.booleans())
+def test_arbitrary_frames_never_raise(codebook: Codebook, frame_id: int, data: bytes, extended: bool,
+                                      error: bool) -> None:
+    monitor = Monitor(codebook, keep_history=True)
+    for t in (0.0, 0.01):
+        monitor.on_frame(t, frame_id, data, "rx", extended, error)
+    monitor.check_timeouts(1.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from(sorted(range(0x100, 0x170))), st.binary(min_size=8, max_size=8))
+def test_random_payloads_on_contract_ids_never_raise(codebook: Codebook, frame_id: int, data: bytes) -> None:
+    monitor = Monitor(codebook)
+    monitor.on_frame(0.0, frame_id, data, "rx")
