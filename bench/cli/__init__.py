@@ -8,6 +8,7 @@ import importlib
 import sys
 
 from rich.console import Console
+from rich.markup import escape
 
 from bench.errors import BenchError
 
@@ -28,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.handler(args))
     except BenchError as exc:
-        Console(stderr=True).print(f"[bold red]bench {args.command}: error:[/] {exc}", highlight=False)
+        Console(stderr=True).print(f"[bold red]bench {args.command}: error:[/] {escape(str(exc))}", highlight=False)
         return 2
     except KeyboardInterrupt:
         return 130
