@@ -1,0 +1,10 @@
+"""Reports of a run: a self-contained HTML page for people, JUnit XML for CI.
+
+Both read only :class:`bench.results.RunResult`, so they can be (re)written from a stored
+result without the bus or pytest.
+"""
+
+from bench.report.html import write_html
+from bench.report.junit import write_junit
+
+__all__ = ["write_html", "write_junit"]

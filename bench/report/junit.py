@@ -1,0 +1,117 @@
+"""JUnit XML of a run, for CI systems that show test results (GitLab, Jenkins, GitHub).
+
+Names follow pytest's own junitxml convention (classname from the module path) so the
+bench's results line up with plain pytest runs. Strings pass through :func:`xml_safe`
+because ECU texts and DBC comments may carry control characters that are illegal in
+XML 1.0 and would make the whole file unreadable for the CI.
+"""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from bench.results import CaseResult, RunResult, Step
+
+_ILLEGAL_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def xml_safe(text: object) -> str:
+    """``text`` as a string without characters XML 1.0 forbids."""
+    return _ILLEGAL_XML.sub("", "" if text is None else str(text))
+
+
+def split_nodeid(nodeid: str, fallback: str = "") -> tuple[str, str]:
+    """``testcases/test_x.py::TestA::test_y[p]`` → (``testcases.test_x.TestA``, ``test_y[p]``).
+
+    Parameters may contain "::" or "/", so only the part before "[" is split.
+    """
+    head, bracket, param = nodeid.partition("[")
+    parts = head.split("::")
+    if len(parts) < 2:
+        return "bench", (fallback or nodeid)
+    module = parts[0].removesuffix(".py").replace("\\", "/").strip("/").replace("/", ".")
+    classname = ".".join([module, *parts[1:-1]])
+    return classname, parts[-1] + bracket + param
+
+
+def _num(value: float | str | None) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def step_line(step: Step) -> str:
+    """One step as a line of text: verdict, name, measured vs expected with tolerance."""
+    unit = f" {step.unit}" if step.unit else ""
+    tol = f" ({step.tolerance})" if step.tolerance else ""
+    line = (f"{step.verdict.upper():4} {step.name}: measured {_num(step.measured)}{unit}, "
+            f"expected {_num(step.expected)}{unit}{tol} at t={step.time:.3f} s")
+    return line + (f" – {step.detail}" if step.detail else "")
+
+
+def _testcase(parent: ET.Element, case: CaseResult) -> None:
+    classname, name = split_nodeid(case.nodeid, case.name)
+    tc = ET.SubElement(parent, "testcase", classname=xml_safe(classname), name=xml_safe(name),
+                       time=f"{case.wall_time:.3f}")
+    failed = case.failed_steps
+    if case.outcome == "failed":
+        summary = "; ".join(
+            f"{s.name}: measured {_num(s.measured)}, expected {_num(s.expected)}"
+            + (f" ({s.tolerance})" if s.tolerance else "") for s in failed)
+        message = "; ".join(p for p in (summary, case.message.splitlines()[0] if case.message else "") if p)
+        body = "\n".join([*(step_line(s) for s in failed), *([case.message] if case.message else [])])
+        el = ET.SubElement(tc, "failure", message=xml_safe(message or "failed"), type="failure")
+        el.text = xml_safe(body)
+    elif case.outcome == "skipped":
+        ET.SubElement(tc, "skipped", message=xml_safe(case.message or "skipped"), type="skip")
+    elif case.outcome in ("error", "aborted"):
+        prefix = "aborted" if case.outcome == "aborted" else "error"
+        first = case.message.splitlines()[0] if case.message else ""
+        el = ET.SubElement(tc, "error", message=xml_safe(f"{prefix}: {first}" if first else prefix),
+                           type=prefix)
+        el.text = xml_safe("\n".join([*(step_line(s) for s in failed), case.message]))
+    lines = [step_line(s) for s in case.steps] + [f"NOTE {n}" for n in case.notes]
+    if lines:
+        ET.SubElement(tc, "system-out").text = xml_safe("\n".join(lines))
+
+
+def build_junit(run: RunResult) -> ET.ElementTree:
+    """The JUnit tree; an aborted run adds one erroring test case ``bench.run::aborted``."""
+    counts = run.counts
+    errors = counts["error"] + counts["aborted"] + (1 if run.aborted else 0)
+    attrs = {
+        "name": "bench",
+        "tests": str(len(run.cases) + (1 if run.aborted else 0)),
+        "failures": str(counts["failed"]),
+        "errors": str(errors),
+        "skipped": str(counts["skipped"]),
+        "time": f"{run.wall_time:.3f}",
+    }
+    root = ET.Element("testsuites", attrs)
+    suite = ET.SubElement(root, "testsuite", {**attrs, "timestamp": xml_safe(run.started)})
+    props = ET.SubElement(suite, "properties")
+    for key, value in (("interface", run.interface), ("channel", run.channel),
+                       ("time_mode", run.time_mode), ("external", ",".join(run.external)),
+                       ("mcap", run.mcap_path), ("bench_time", f"{run.sim_time:.3f}"),
+                       ("frames", str(run.frames)), ("invalid_frames", str(run.invalid_frames)),
+                       ("aborted", str(run.aborted).lower())):
+        ET.SubElement(props, "property", name=key, value=xml_safe(value))
+    for case in run.cases:
+        _testcase(suite, case)
+    if run.aborted:
+        tc = ET.SubElement(suite, "testcase", classname="bench.run", name="aborted", time="0.000")
+        ET.SubElement(tc, "error", message="run aborted: results are incomplete", type="aborted")
+    ET.indent(root)
+    return ET.ElementTree(root)
+
+
+def write_junit(run: RunResult, path: Path) -> Path:
+    """Write the JUnit XML of ``run`` to ``path`` (parent folders are created)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    build_junit(run).write(path, encoding="utf-8", xml_declaration=True)
+    return path

@@ -1,0 +1,165 @@
+"""The HTML report in a real browser (headless Chromium): it renders, logs no errors, and
+hostile strings stay text.
+
+The payloads would change ``document.title`` to "PWNED" and add a ``<pwned>`` element if
+they ever ran; the word is built at run time ('PW'+'NED') so it never appears in the
+escaped text. The report's CSP would block the scripts, so the DOM is also searched for
+injected elements and event attributes. A control test proves these checks fire when
+escaping is switched off.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+from jinja2 import Environment, PackageLoader
+
+import bench.report.html as report_html
+from bench.report import write_html
+from bench.results import CaseResult, Plot, RunResult, Series, Step
+
+JS = "document.title='PW'+'NED';document.body.appendChild(document.createElement('pw'+'ned'))"
+IMG = f'<img src=x onerror="{JS}">'
+SCRIPT = f"<script>{JS}</script>"
+TIMEOUT = 60  # s, per browser call
+
+
+def chromium() -> str:
+    """Path of Chromium; skipped locally when absent, a failure on CI (which installs it)."""
+    path = shutil.which("chromium") or shutil.which("chromium-browser")
+    if path is None:
+        if os.environ.get("CI"):
+            pytest.fail("chromium not found, but CI is set (CI installs chromium)")
+        pytest.skip("chromium not installed")
+    return path
+
+
+def run_browser(tmp_path: Path, *args: str) -> tuple[str, str]:
+    """Run headless Chromium; returns (stdout, stderr). Its whole process group dies on timeout."""
+    profile = tmp_path / "chromium-profile"
+    profile.mkdir(exist_ok=True)
+    cmd = [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+           "--no-first-run", "--disable-background-networking", "--disable-component-update",
+           "--disable-sync", f"--user-data-dir={profile}", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=TIMEOUT)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"chromium took longer than {TIMEOUT} s: {' '.join(args)}")
+    return out, err
+
+
+class _Dom(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__(convert_charrefs=True)
+        self.tags: list[tuple[str, dict[str, str | None]]] = []
+        self.title = ""
+        self.summary_rows = 0
+        self._where: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        a = dict(attrs)
+        self.tags.append((tag, a))
+        if tag == "title":
+            self._where.append("title")
+        if tag == "table" and a.get("id") == "summary":
+            self._where.append("summary")
+        if tag == "tr" and "summary" in self._where:
+            self.summary_rows += 1
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag in ("title", "table") and self._where:
+            self._where.pop()
+
+    def handle_data(self, data: str) -> None:
+        if self._where[-1:] == ["title"]:
+            self.title += data
+
+
+def problems(dom: str, stderr: str) -> list[str]:
+    """Everything that shows an injection happened or the page misbehaved."""
+    parsed = _Dom()
+    parsed.feed(dom)
+    found = [line for line in stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
+    if "PWNED" in parsed.title or "PWNED" in dom:
+        found.append(f"title changed by a script: {parsed.title!r}")
+    for tag, attrs in parsed.tags:
+        if tag in ("script", "img", "pwned", "iframe"):
+            found.append(f"injected element <{tag}>")
+        found += [f"event attribute {k} on <{tag}>" for k in attrs if k.startswith("on")]
+    return found
+
+
+def hostile_run() -> RunResult:
+    t = list(np.linspace(0, 3, 400))
+    case = CaseResult(
+        nodeid=f"testcases/test_x.py::test_a[{IMG}]", name=f"test_a[{IMG}]", outcome="failed",
+        steps=[Step(SCRIPT, 1.0, 2.0, "±0.1", "fail", 0.5, IMG)],
+        plots=[Plot(SCRIPT, f"t {SCRIPT}", f"v {IMG}",
+                    [Series(IMG, t, list(np.sin(t))), Series(SCRIPT, t, list(np.cos(t)))]),
+               Plot("top", "x", "y", [Series("p", list(np.cos(t)), list(np.sin(t)))], kind="xy")],
+        notes=[IMG], message=f"boom {SCRIPT}", wall_time=1.0, sim_time=3.0,
+    )
+    ok = CaseResult(nodeid="testcases/test_x.py::test_b", name="test_b", outcome="passed",
+                    steps=[Step("fine", 1.0, 1.0, "±0.1", "pass", 0.1)])
+    return RunResult(started="2025-03-01T10:00:00", interface="virtual", channel="vcan0",
+                     time_mode="virtual", external=[IMG], cases=[case, ok], frames=10,
+                     mcap_path=f'run" onmouseover="{JS}.mcap')
+
+
+def dump(tmp_path: Path, page: Path) -> tuple[str, str]:
+    return run_browser(tmp_path, "--enable-logging=stderr", "--v=0", "--dump-dom", page.as_uri())
+
+
+def test_report_in_browser(tmp_path: Path) -> None:
+    page = write_html(hostile_run(), tmp_path / "report.html")
+    dom, err = dump(tmp_path, page)
+    assert 'id="summary"' in dom and "test_b" in dom
+    assert problems(dom, err) == []
+    parsed = _Dom()
+    parsed.feed(dom)
+    assert parsed.title.startswith("Bench report FAIL") and parsed.summary_rows == 3
+    assert dom.count("<svg") == 2
+
+    shot = tmp_path / "shot.png"
+    run_browser(tmp_path, f"--screenshot={shot}", "--window-size=1280,1600", page.as_uri())
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = int.from_bytes(shot.read_bytes()[16:20]), int.from_bytes(shot.read_bytes()[20:24])
+    assert (width, height) == (1280, 1600)
+    import matplotlib.image
+
+    pixels = (matplotlib.image.imread(shot)[..., :3] * 255).round().astype(int)
+    colours = np.unique(pixels.reshape(-1, 3), axis=0)
+    assert len(colours) > 50, "screenshot looks blank"
+    red = np.all(np.abs(pixels - (0xCF, 0x22, 0x2E)) < 12, axis=-1)  # the FAIL badge
+    assert red.sum() > 200
+
+
+def _no_escape_env() -> Environment:
+    env = Environment(loader=PackageLoader("bench.report", "templates"), autoescape=False)
+    env.filters.update(num=report_html.fmt, dur=report_html.duration)
+    return env
+
+
+def test_checks_detect_an_escaping_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Control: with autoescape off the same run must be flagged, with and without the CSP."""
+    monkeypatch.setattr(report_html, "_env", _no_escape_env)
+    page = write_html(hostile_run(), tmp_path / "broken.html")
+    dom, err = dump(tmp_path, page)
+    assert any("injected element" in p for p in problems(dom, err))
+    no_csp = tmp_path / "broken-no-csp.html"
+    no_csp.write_text(re.sub(r'<meta http-equiv="Content-Security-Policy"[^>]*>', "",
+                             page.read_text(encoding="utf-8")), encoding="utf-8")
+    dom, err = dump(tmp_path, no_csp)
+    assert any("title changed" in p for p in problems(dom, err))
