@@ -64,7 +64,10 @@ class BenchSession:
             plant_nodes -= set(project.stimulus)
         if plant_nodes:
             factory = load_plant(project.plant)
-            behaviours = factory(self.external | set(project.stimulus), settings.vehicle)
+            try:
+                behaviours = factory(self.external | set(project.stimulus), settings.vehicle)
+            except ValueError as exc:
+                raise ConfigError(f"plant {project.plant!r}: {exc}") from None
             self.plant = self._station("plant", plant_nodes, Monitor(self.codebook), behaviours)
             self.stations.append(self.plant)
         if role == "runner":

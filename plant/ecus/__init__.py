@@ -1,0 +1,1 @@
+"""Reference ECUs: one module per DBC node (stand-ins until a real ECU is plugged in)."""

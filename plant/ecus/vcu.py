@@ -1,0 +1,275 @@
+"""Reference VCU (node VCU): the four drive modes of vehicles.md A as wheel commands (seed 000 §1.2, §2).
+
+Inputs: DRV_MotionRequest (DriveMode, PivotX, PivotY, TargetSpeed), DRV_Steering (HandWheelAngle, in
+NORMAL and ADAPTIVE only), WHL_Status_xx (faults and the VehicleSpeed estimate), IMU_Motion (yaw rate,
+handed to the ADAPTIVE high-speed hook). TargetSpeed is the signed centre speed v (k-matrix.md).
+
+Modes (every one a rotation about a point, seed 000 §1.2):
+- NORMAL: curvature angle X = HandWheelAngle / hand_wheel_ratio at the front-axle centre, centre on the
+  rear-axle line y = -L (seed 002, formulas.md §3), rear wheels 0; angles and speeds by formulas.md §2.
+- LATERAL: every wheel +90° (-90° for a negative TargetSpeed), equal speeds |v| (positive = to the right).
+- PIVOT: centre (PivotX, PivotY), §2 with v_o = TargetSpeed (positive clockwise).
+- ADAPTIVE: below adaptive_low_speed_limit (20 km/h) opposite-phase 4WS, the centre on y = 0 with the
+  front-axle curvature angle X = HandWheelAngle / ratio (seed 000 §3's U-turn). Above it the rear-axle
+  angle comes from `high_speed_law(X, |v|, measured yaw rate)` (the hook for seed 003's feedforward /
+  feedback laws) and all four wheels steer about the one centre of the two axle headings; without a
+  hook the low-speed law is kept at every speed.
+In NORMAL and ADAPTIVE a positive v drives forward: v_o = v * sign(x_centre) in §2's convention.
+
+Faults (VCU_VehicleState.VcuFault), checked in this order, the first found is sent:
+  5 REQUEST_TIMEOUT  DRV_MotionRequest (or DRV_Steering in NORMAL/ADAPTIVE) never received or timed out.
+  4 REQUEST_INVALID  its last frame failed E2E/range checks, a value is non-finite, the mode is unknown,
+                     or the request needs more than hub_motor_max_speed on a wheel or more than
+                     max_yaw_rate (e.g. a centre a few cm off the origin): never an out-of-range command.
+  1 CENTRE_AT_ORIGIN centre within 1 cm of the origin with v != 0 (v = 0 sets the spin-in-place angles).
+  2 CENTRE_ON_WHEEL  centre within 1 cm of a contact point.
+  3 ANGLE_OVER_90    "a wheel that would need more than 90°": in the car-like modes (NORMAL, ADAPTIVE)
+                     every wheel must roll forward when the vehicle drives forward; a centre strictly
+                     between the wheels of an axle (|x| < K, i.e. NORMAL |X| > atan(2L/K) = 78.6°,
+                     ADAPTIVE |X| > atan(L/K) = 68.1°), or |X| >= 90°, would need the inner wheels beyond
+                     ±90° (§2's fold would reverse them instead). In PIVOT §2's fold is legitimate and
+                     never a fault. With ratio 15 and the DBC's ±900° hand wheel (|X| <= 60°) the fault
+                     is unreachable from the bus; it guards other ratios and the hook.
+  6 WHEEL_FAULT      a WHL_Status_xx reports WheelFault != 0 or is silent (ignored for
+                     WHEEL_FAULT_GRACE_S after a reset: the wheels have not heard the VCU yet).
+On any fault: wheel speeds 0, wheel angles held at the last valid command (straight after a reset) so a
+wheel never swings on bad input; ActiveMode, CurvatureAngle and the centre stay those of that command,
+YawRateTarget is 0. Recovery is immediate on the next valid request. Never NaN, never an exception.
+
+Timing: the control task runs every TASK_PERIOD_S = 5 ms, like an ECU's cyclic task (the commands are
+10 ms frames); a request change reaches the wheel-command values within 5 ms.
+VCU_RotationCentre: the centre steered about, each coordinate clamped to ±CENTRE_AT_INFINITY_M; a
+translation (straight, crab, LATERAL) sends CENTRE_AT_INFINITY_M for both coordinates.
+VCU_VehicleState.VehicleSpeed: the centre speed estimated from the four WHL_Status (least-squares rigid
+fit), signed as TargetSpeed in the active mode; 0 unless all four are received.
+CurvatureAngle: X at the front-axle centre (deg, 0 straight; ±90° in LATERAL, like the wheels).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import IntEnum
+
+from bench.node import NodeIO
+from plant import limits
+from plant.body import VelocityFit
+from plant.kinematics import (CORNERS, centre_from_axle_angles, classify_centre, curvature_angle,
+                              rotation, translation, yaw_rate)
+from plant.vehicles import Ev4wisParams
+
+CENTRE_AT_INFINITY_M = 5000.0   # VCU_RotationCentre for "no finite centre" (inside the DBC's ±5242.87 m)
+WHEEL_FAULT_GRACE_S = 0.1       # wheel faults ignored this long after a reset
+TASK_PERIOD_S = 0.005           # the control task's period (an ECU's cyclic task; half the 10 ms command cycle)
+
+
+class DriveMode(IntEnum):
+    NORMAL = 0
+    LATERAL = 1
+    ADAPTIVE = 2
+    PIVOT = 3
+
+
+class VcuFault(IntEnum):
+    OK = 0
+    CENTRE_AT_ORIGIN = 1
+    CENTRE_ON_WHEEL = 2
+    ANGLE_OVER_90 = 3
+    REQUEST_INVALID = 4
+    REQUEST_TIMEOUT = 5
+    WHEEL_FAULT = 6
+
+
+#: ADAPTIVE rear-steering law: (front curvature angle X deg, speed m/s >= 0, measured yaw rate deg/s)
+#: -> rear-axle-centre angle deg (bus signs, formulas.md §1).
+RearSteerLaw = Callable[[float, float, float], float]
+
+
+def opposite_phase(front_deg: float, speed: float, yaw_rate_dps: float) -> float:
+    """Low-speed 4WS (seed 000 §3, seed 003 "at very low speed rear opposite to front 1:1"): centre on y = 0."""
+    return -front_deg
+
+
+@dataclass(frozen=True, slots=True)
+class Plan:
+    """One valid command set."""
+
+    mode: int
+    angles: tuple[float, ...]
+    rpm: tuple[float, ...]
+    centre: tuple[float, float] | None   # None: at infinity (translation)
+    curvature: float                     # deg
+    yaw_rate: float                      # deg/s, clockwise
+    direction: tuple[float, float]       # body-frame unit vector of positive v (for the speed sign)
+
+
+_STRAIGHT = Plan(DriveMode.NORMAL, (0.0,) * 4, (0.0,) * 4, None, 0.0, 0.0, (0.0, 1.0))
+_MODES = frozenset(int(m) for m in DriveMode)
+
+
+class Vcu:
+    """The reference VCU behaviour."""
+
+    nodes: tuple[str, ...] = ("VCU",)
+
+    def __init__(self, params: Ev4wisParams, high_speed_law: RearSteerLaw | None = None) -> None:
+        self.params = params
+        self.geometry = params.geometry
+        self.high_speed_law = high_speed_law
+        self._ratio = params.hand_wheel_ratio
+        self._low_speed = params.adaptive_low_speed_limit / 3.6
+        self._max_rpm = min(params.hub_motor_max_speed, limits.WHEEL_SPEED_CMD[1])
+        self._max_yaw = min(params.max_yaw_rate, limits.YAW_RATE_TARGET[1])
+        self._fit = VelocityFit(self.geometry)
+        self._status = tuple(f"WHL_Status_{c}" for c in CORNERS)
+        self._cmd = tuple(f"VCU_WheelCmd_{c}" for c in CORNERS)
+        self.reset()
+
+    def reset(self) -> None:
+        self.held: Plan = _STRAIGHT
+        self.fault = VcuFault.OK
+        self._t_start: float | None = None
+        self._cache: tuple[tuple[float, ...], tuple[VcuFault, Plan | None]] | None = None
+        self._next_task = -math.inf
+
+    # -- decision --------------------------------------------------------------------------------
+    def decide(self, io: NodeIO) -> tuple[VcuFault, Plan | None]:
+        """The fault and, when OK, the plan for the current request."""
+        req = io.latest("DRV_MotionRequest")
+        if req is None:
+            return VcuFault.REQUEST_TIMEOUT, None
+        if io.invalid("DRV_MotionRequest"):
+            return VcuFault.REQUEST_INVALID, None
+        mode = req.get("DriveMode", math.nan)
+        px, py = req.get("PivotX", math.nan), req.get("PivotY", math.nan)
+        v = req.get("TargetSpeed", math.nan)
+        if not limits.finite(mode, px, py, v) or mode not in _MODES:
+            return VcuFault.REQUEST_INVALID, None
+        mode = int(mode)
+        hw = rear = 0.0
+        if mode in (DriveMode.NORMAL, DriveMode.ADAPTIVE):
+            steering = io.latest("DRV_Steering")
+            if steering is None:
+                return VcuFault.REQUEST_TIMEOUT, None
+            hw = steering.get("HandWheelAngle", math.nan)
+            if io.invalid("DRV_Steering") or not limits.finite(hw):
+                return VcuFault.REQUEST_INVALID, None
+            if mode == DriveMode.ADAPTIVE:
+                rear = self._rear_angle(hw / self._ratio, abs(v), io)
+        key = (mode, px, py, v, hw, rear)
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
+        result = self._plan(mode, px, py, v, hw / self._ratio, rear)
+        self._cache = (key, result)
+        return result
+
+    def _rear_angle(self, front: float, speed: float, io: NodeIO) -> float:
+        if self.high_speed_law is None or speed < self._low_speed:
+            return opposite_phase(front, speed, 0.0)
+        imu = io.latest("IMU_Motion")
+        yaw = imu.get("YawRate", 0.0) if imu is not None else 0.0
+        try:
+            rear = float(self.high_speed_law(front, speed, yaw if limits.finite(yaw) else 0.0))
+        except Exception:       # a broken hook is a bad request, never a crash of the VCU
+            return math.nan
+        return rear
+
+    def _plan(self, mode: int, px: float, py: float, v: float, x_deg: float,
+              rear: float) -> tuple[VcuFault, Plan | None]:
+        g = self.geometry
+        if mode == DriveMode.LATERAL:
+            angle = 90.0 if v >= 0.0 else -90.0
+            angles, rpm = translation(angle, abs(v), g)
+            plan = Plan(mode, angles, rpm, None, angle, 0.0, (1.0, 0.0))
+        elif mode == DriveMode.PIVOT:
+            undefined = classify_centre(px, py, v, g)
+            if undefined is not None:
+                return VcuFault(undefined), None
+            angles, rpm = rotation(px, py, v, g)
+            r_o = math.hypot(px, py)
+            direction = (-py / r_o, px / r_o) if r_o > 0.0 else (0.0, 1.0)
+            plan = Plan(mode, angles, rpm, (px, py), curvature_angle(px, py, g), yaw_rate(px, py, v), direction)
+        else:  # NORMAL (rear 0) and ADAPTIVE (rear from the law)
+            if not limits.finite(rear):
+                return VcuFault.REQUEST_INVALID, None
+            if abs(x_deg) >= 90.0 or abs(rear) >= 90.0:
+                return VcuFault.ANGLE_OVER_90, None
+            centre = centre_from_axle_angles(x_deg, rear, g)
+            if centre is None:        # parallel headings: straight ahead or crab
+                angles, rpm = translation(x_deg, v, g)
+                plan = Plan(mode, angles, rpm, None, x_deg + 0.0, 0.0, (0.0, 1.0))
+            else:
+                cx, cy = centre
+                undefined = classify_centre(cx, cy, v, g, forward_only=True)
+                if undefined is not None:
+                    return VcuFault(undefined), None
+                v_o = v if cx > 0.0 else -v
+                angles, rpm = rotation(cx, cy, v_o, g)
+                plan = Plan(mode, angles, rpm, centre, x_deg + 0.0, yaw_rate(cx, cy, v_o), (0.0, 1.0))
+        if max(abs(n) for n in plan.rpm) > self._max_rpm or abs(plan.yaw_rate) > self._max_yaw:
+            return VcuFault.REQUEST_INVALID, None
+        return VcuFault.OK, plan
+
+    def _wheel_fault(self, io: NodeIO, t: float) -> bool:
+        in_grace = self._t_start is not None and t - self._t_start < WHEEL_FAULT_GRACE_S
+        for i, message in enumerate(self._status):
+            status = io.latest(message)
+            if status is None:
+                if not in_grace:
+                    return True
+                continue
+            code = status.get("WheelFault", 0.0)
+            if code != 0.0 and not (in_grace and code == 3.0):
+                return True
+        return False
+
+    def _speed_estimate(self, io: NodeIO, direction: tuple[float, float]) -> float:
+        angles, speeds = [], []
+        for message in self._status:
+            status = io.latest(message)
+            if status is None:
+                return 0.0
+            angles.append(status.get("SteerAngle", math.nan))
+            speeds.append(status.get("WheelSpeed", math.nan))
+        if not limits.finite(*angles, *speeds):
+            return 0.0
+        vx, vy, _ = self._fit(angles, speeds)
+        magnitude = math.hypot(vx, vy)
+        return magnitude if vx * direction[0] + vy * direction[1] >= 0.0 else -magnitude
+
+    # -- tick --------------------------------------------------------------------------------------
+    def step(self, io: NodeIO, t: float, dt: float) -> None:
+        """Runs the control task every TASK_PERIOD_S (between runs the last values stay on the bus)."""
+        if t < self._next_task:
+            return
+        self._next_task = t + TASK_PERIOD_S - 1e-9
+        if self._t_start is None:
+            self._t_start = t
+        try:
+            fault, plan = self.decide(io)
+        except (ArithmeticError, TypeError, ValueError):   # defensive: the checks above should catch it
+            fault, plan = VcuFault.REQUEST_INVALID, None
+        if fault == VcuFault.OK and self._wheel_fault(io, t):
+            fault = VcuFault.WHEEL_FAULT
+        self.fault = fault
+        if fault == VcuFault.OK and plan is not None:
+            self.held = plan
+            rpm, yaw = plan.rpm, plan.yaw_rate
+        else:
+            rpm, yaw = (0.0, 0.0, 0.0, 0.0), 0.0
+        held = self.held
+        clamp = limits.clamp
+        for message, angle, n in zip(self._cmd, held.angles, rpm):
+            io.send_values(message, SteerAngleCmd=clamp(angle, limits.STEER_ANGLE_CMD),
+                           WheelSpeedCmd=clamp(n, limits.WHEEL_SPEED_CMD))
+        io.send_values("VCU_VehicleState", ActiveMode=int(held.mode),
+                       VehicleSpeed=clamp(self._speed_estimate(io, held.direction), limits.VEHICLE_SPEED),
+                       YawRateTarget=clamp(yaw, limits.YAW_RATE_TARGET),
+                       CurvatureAngle=clamp(held.curvature, limits.CURVATURE_ANGLE), VcuFault=int(fault))
+        if held.centre is None:
+            cx = cy = CENTRE_AT_INFINITY_M
+        else:
+            bound = (-CENTRE_AT_INFINITY_M, CENTRE_AT_INFINITY_M)
+            cx, cy = clamp(held.centre[0], bound), clamp(held.centre[1], bound)
+        io.send_values("VCU_RotationCentre", RotationCentreX=cx, RotationCentreY=cy)

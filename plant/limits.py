@@ -1,0 +1,76 @@
+"""The DBC ranges of the signals the plant sends, mirrored here because `plant` must not load the DBC.
+
+Why: the restbus refuses (stops the sender on) a NaN or out-of-range value, so every behaviour clamps
+to these bounds before `send_values` and flags a fault where its message has one.
+`tests/test_plant_ev.py` checks these against dbc/chassis.dbc and dbc/bench.dbc, so they cannot drift.
+"""
+
+from __future__ import annotations
+
+import math
+
+# (minimum, maximum) per signal, physical units of the DBC.
+STEER_ANGLE_CMD = (-90.0, 90.0)             # VCU_WheelCmd_xx.SteerAngleCmd, deg
+WHEEL_SPEED_CMD = (-3000.0, 3000.0)         # VCU_WheelCmd_xx.WheelSpeedCmd, rpm
+STEER_ANGLE = (-100.0, 100.0)               # WHL_Status_xx.SteerAngle, deg
+WHEEL_SPEED = (-3000.0, 3000.0)             # WHL_Status_xx.WheelSpeed, rpm
+STEER_MOTOR_CURRENT = (-100.0, 100.0)       # WHL_Status_xx.SteerMotorCurrent, A
+VEHICLE_SPEED = (-80.0, 80.0)               # VCU_VehicleState.VehicleSpeed, m/s
+YAW_RATE_TARGET = (-300.0, 300.0)           # VCU_VehicleState.YawRateTarget, deg/s
+CURVATURE_ANGLE = (-90.0, 90.0)             # VCU_VehicleState.CurvatureAngle, deg
+ROTATION_CENTRE = (-5242.87, 5242.87)       # VCU_RotationCentre.RotationCentreX/Y, m
+IMU_YAW_RATE = (-300.0, 300.0)              # IMU_Motion.YawRate, deg/s
+IMU_ACCEL = (-30.0, 30.0)                   # IMU_Motion.LatAccel/LongAccel, m/s^2
+PLANT_POS = (-8388.608, 8388.607)           # PLANT_Position.PosX/PosY, m
+PLANT_HEADING = (-180.0, 180.0)             # PLANT_Motion.Heading, deg
+PLANT_SPEED = (-81.92, 81.9175)             # PLANT_Motion.Speed, m/s
+PLANT_YAW_RATE = (-327.68, 327.67)          # PLANT_Motion.YawRate, deg/s
+PLANT_SIDESLIP = (-180.0, 180.0)            # PLANT_Dynamics.Sideslip, deg
+PLANT_ACCEL = (-32.768, 32.767)             # PLANT_Dynamics.LatAccel/LongAccel, m/s^2
+PLANT_TIME = (0.0, 100000.0)                # PLANT_Status.PlantTime, s
+
+#: (message, signal) -> bounds, for the cross-check against the DBC.
+BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
+    **{(f"VCU_WheelCmd_{c}", "SteerAngleCmd"): STEER_ANGLE_CMD for c in ("FL", "FR", "RL", "RR")},
+    **{(f"VCU_WheelCmd_{c}", "WheelSpeedCmd"): WHEEL_SPEED_CMD for c in ("FL", "FR", "RL", "RR")},
+    **{(f"WHL_Status_{c}", "SteerAngle"): STEER_ANGLE for c in ("FL", "FR", "RL", "RR")},
+    **{(f"WHL_Status_{c}", "WheelSpeed"): WHEEL_SPEED for c in ("FL", "FR", "RL", "RR")},
+    **{(f"WHL_Status_{c}", "SteerMotorCurrent"): STEER_MOTOR_CURRENT for c in ("FL", "FR", "RL", "RR")},
+    ("VCU_VehicleState", "VehicleSpeed"): VEHICLE_SPEED,
+    ("VCU_VehicleState", "YawRateTarget"): YAW_RATE_TARGET,
+    ("VCU_VehicleState", "CurvatureAngle"): CURVATURE_ANGLE,
+    ("VCU_RotationCentre", "RotationCentreX"): ROTATION_CENTRE,
+    ("VCU_RotationCentre", "RotationCentreY"): ROTATION_CENTRE,
+    ("IMU_Motion", "YawRate"): IMU_YAW_RATE,
+    ("IMU_Motion", "LatAccel"): IMU_ACCEL,
+    ("IMU_Motion", "LongAccel"): IMU_ACCEL,
+    ("PLANT_Position", "PosX"): PLANT_POS,
+    ("PLANT_Position", "PosY"): PLANT_POS,
+    ("PLANT_Motion", "Heading"): PLANT_HEADING,
+    ("PLANT_Motion", "Speed"): PLANT_SPEED,
+    ("PLANT_Motion", "YawRate"): PLANT_YAW_RATE,
+    ("PLANT_Dynamics", "Sideslip"): PLANT_SIDESLIP,
+    ("PLANT_Dynamics", "LatAccel"): PLANT_ACCEL,
+    ("PLANT_Dynamics", "LongAccel"): PLANT_ACCEL,
+    ("PLANT_Status", "PlantTime"): PLANT_TIME,
+}
+
+
+def clamp(value: float, bounds: tuple[float, float]) -> float:
+    """value limited to bounds; a NaN (a bug upstream, never expected) becomes 0 so the bus never sees it."""
+    lo, hi = bounds
+    if value != value:
+        return 0.0
+    return lo if value < lo else hi if value > hi else value
+
+
+def finite(*values: float) -> bool:
+    """True when every value is a finite number."""
+    isfinite = math.isfinite
+    try:
+        for v in values:
+            if not isfinite(v):
+                return False
+    except TypeError:
+        return False
+    return True
