@@ -14,6 +14,7 @@ import numpy as np
 
 from bench.checks import StepLog, percentile, tolerance_text, within
 from bench.errors import BenchError
+from bench.monitor import InvalidFrame
 from bench.results import CaseResult, Plot, Series, Table
 from bench.session import BenchSession
 
@@ -35,7 +36,11 @@ class Case:
             raise BenchError("a test case needs the runner station")
         self._runner = runner
         self._monitor = runner.monitor
+        self._mark_counts()
+
+    def _mark_counts(self) -> None:
         self._interval_marks = {name: len(s.intervals) for name, s in self._monitor.by_name.items()}
+        self._invalid_mark = len(self._monitor.invalid_log)
 
     # -- time --------------------------------------------------------------------------------------
     @property
@@ -63,12 +68,20 @@ class Case:
         """Set signals of a stimulus message; sent from its next cycle on."""
         self._runner.restbus.set(message, **signals)
 
+    def stop_sending(self, message: str) -> None:
+        """Stop sending a stimulus message (receivers will time it out) until resume_sending."""
+        self._runner.restbus.enable(message, False)
+
+    def resume_sending(self, message: str) -> None:
+        self._runner.restbus.enable(message, True)
+
     def start_scenario(self, **control: float | int | str) -> None:
         """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`),
         reset every stimulus message to its start values, and wait for the plant's acknowledgement."""
         restbus = self._runner.restbus
         for name in restbus.periodic:
             restbus.reset_values(name)
+            restbus.enable(name, True)
         state = self._monitor.state(SCENARIO_ACK_MESSAGE)
         previous = int(state.latest[SCENARIO_ACK_SIGNAL]) if state.latest else 0
         scenario = previous % 255 + 1
@@ -82,7 +95,7 @@ class Case:
             raise BenchError(f"the plant did not acknowledge scenario {scenario} within "
                              f"{SCENARIO_ACK_TIMEOUT:g} s ({SCENARIO_ACK_MESSAGE}.{SCENARIO_ACK_SIGNAL})")
         self.start = self.now
-        self._interval_marks = {name: len(s.intervals) for name, s in self._monitor.by_name.items()}
+        self._mark_counts()
 
     # -- observation -------------------------------------------------------------------------------
     def value(self, message: str, signal: str) -> float:
@@ -102,8 +115,9 @@ class Case:
     def timed_out(self, message: str) -> bool:
         return self._monitor.timed_out(message, self.now)
 
-    def invalid_counts(self, message: str) -> dict[str, int]:
-        return dict(self._monitor.state(message).invalid)
+    def invalid_frames(self) -> list[InvalidFrame]:
+        """Every invalid frame (checksum, counter, length, range) since the case (or scenario) started."""
+        return self._monitor.invalid_log[self._invalid_mark:]
 
     # -- checks ------------------------------------------------------------------------------------
     def expect(self, name: str, measured: float, expected: float, *, abs_tol: float = 0.0,

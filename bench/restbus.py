@@ -58,6 +58,10 @@ class Restbus:
         slot = self._slot(message)
         slot.values = dict(slot.codec.start_values())
 
+    def enable(self, message: str, enabled: bool) -> None:
+        """Start or stop sending a message (its counter carries on where it stopped)."""
+        self._slot(message).enabled = enabled
+
     def _slot(self, message: str) -> _Periodic:
         slot = self.periodic.get(message)
         if slot is None:
