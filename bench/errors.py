@@ -17,3 +17,7 @@ class DatabaseError(BenchError):
 
 class SignalError(BenchError):
     """A signal value that cannot be encoded (unknown name, NaN, out of range)."""
+
+
+class LogError(BenchError):
+    """A run log (MCAP) that cannot be written or read: missing, not MCAP, or bad data given to the recorder."""

@@ -55,6 +55,7 @@ def _run(config: pytest.Config) -> BenchRun:
         out_dir = Path(out) if out else default_out_dir(project.reports)
         run = BenchRun(project, settings, out_dir)
         config.stash[_RUN_KEY] = run
+        run.start()
         if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
             signal.signal(signal.SIGTERM, _terminate)
     return run

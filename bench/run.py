@@ -59,7 +59,12 @@ class BenchRun:
             if values is not None and codec is not None:
                 recorder.decoded(t, codec.name, values)
 
-        self.session = BenchSession(project, settings, sink=sink)
+        self._project, self._sink = project, sink
+
+    def start(self) -> None:
+        """Open the bus and start the plant (separate from __init__ so that an interrupt during
+        start-up still finds the run and writes an aborted report)."""
+        self.session = BenchSession(self._project, self.settings, sink=self._sink)
         self.session.start()
 
     # -- cases ---------------------------------------------------------------------------------------
@@ -112,6 +117,10 @@ class BenchRun:
         from bench.report import write_html, write_junit
 
         session = self.session
+        for nodeid, result in self.cases.items():
+            if result.outcome == "aborted" and session is not None:
+                result.sim_time = session.now() - result.sim_start
+                result.wall_time = time.monotonic() - self._case_wall0.get(nodeid, time.monotonic())
         monitor = session.monitor if session else None
         run = RunResult(
             started=self.started, interface=self.settings.interface, channel=self.settings.channel or "",

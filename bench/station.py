@@ -7,6 +7,7 @@ default both run in one process on the virtual-time bus.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 
 import can
@@ -14,6 +15,11 @@ import can
 from bench.monitor import Monitor
 from bench.node import Behaviour
 from bench.restbus import Restbus
+
+
+ECHO_WINDOW = 4
+#: python-can buses that deliver a sender's own frames back to it, whatever receive_own_messages says.
+LOOPING_BUS_CLASSES = ("UdpMulticastBus",)
 
 
 class _StationIO:
@@ -50,17 +56,28 @@ class Station:
         self.monitor = monitor
         self.now = now
         self.behaviours = list(behaviours)
+        self.loops_back = type(bus).__name__ in LOOPING_BUS_CLASSES
         self.io = _StationIO(self)
         self.sent = 0
         self.send_errors = 0
+        # Frames sent but not yet seen again, per identifier, to drop echoes of interfaces that loop
+        # back a sender's own frames. A frame with our identifier and other data is a foreign sender:
+        # it reaches the monitor (which will flag its counter). Bounded: only the last few are kept.
+        self._echoes: dict[int, deque[bytes]] = {
+            p.codec.frame_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
 
     def poll(self, timeout: float = 0.0) -> None:
         """Receive every pending frame into the monitor (the first recv may wait up to timeout)."""
-        bus, monitor = self.bus, self.monitor
+        bus, monitor, echoes = self.bus, self.monitor, self._echoes
         msg = bus.recv(timeout)
         while msg is not None:
-            monitor.on_frame(self.now(), msg.arbitration_id, bytes(msg.data), "rx",
-                             msg.is_extended_id, msg.is_error_frame)
+            data = bytes(msg.data)
+            pending = echoes.get(msg.arbitration_id)
+            if pending and data in pending:
+                pending.remove(data)   # our own frame looped back (udp_multicast does): already logged as tx
+            else:
+                monitor.on_frame(self.now(), msg.arbitration_id, data, "rx", msg.is_extended_id,
+                                 msg.is_error_frame)
             msg = bus.recv(0.0)
 
     def tick(self, tick: int, t: float, dt: float) -> None:
@@ -80,6 +97,8 @@ class Station:
         except can.CanError:
             self.send_errors += 1   # a full queue or bus-off: counted, the frame is still logged as sent
         self.sent += 1
+        if self.loops_back:
+            self._echoes[frame_id].append(data)
         self.monitor.on_frame(t, frame_id, data, "tx")
 
     def reset_behaviours(self) -> None:

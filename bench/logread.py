@@ -1,0 +1,173 @@
+"""Reading run logs (MCAP, written by `bench.recorder`) back, including logs of killed runs.
+
+Why a streaming read for every file rather than the indexed reader: a run killed with
+SIGKILL leaves no footer and a cut last chunk, and the same code path must then give every
+message of the whole chunks before the cut; file order is also the order the bench wrote.
+mcap's `StreamReader` hands a short read on (a cut record then fails later as a `struct.error`
+or a zstd error, depending on where the cut is), so the file is wrapped to turn any short read
+into mcap's own `EndOfFile`: a cut at any byte ends the iteration quietly, at the last whole record.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Attachment, Channel, Footer, McapRecord, Message
+from mcap.stream_reader import StreamReader
+
+from bench.errors import LogError
+from bench.recorder import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+@dataclass
+class LoggedFrame:
+    """One frame of `/can/frames`; `data` without the padding, `t_ns` the exact log time."""
+
+    t: float
+    arbitration_id: int
+    data: bytes
+    channel: str
+    direction: str
+    is_extended: bool
+    is_error: bool
+    valid: bool
+    error: str
+    is_remote: bool = False
+    t_ns: int = 0
+
+
+@dataclass
+class LogSummary:
+    """What `bench log info` shows. `complete` is False for a log without footer (killed or cut run)."""
+
+    path: Path
+    channels: dict[str, int] = field(default_factory=dict)  # topic -> message count
+    start: float | None = None
+    end: float | None = None
+    frames: int = 0
+    invalid_frames: int = 0
+    attachments: list[str] = field(default_factory=list)
+    complete: bool = False
+
+
+class _WholeReads:
+    """A binary file whose short reads raise `EndOfFile`, so every cut looks alike to the reader."""
+
+    def __init__(self, file: IO[bytes]) -> None:
+        self._file = file
+
+    def read(self, size: int = -1) -> bytes:
+        data = self._file.read(size)
+        if size is not None and 0 < size and len(data) < size:
+            raise EndOfFile()
+        return data
+
+
+class _Scan:
+    """The records of a log in file order, ending quietly at a cut; `complete` once the footer and end magic are read."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.complete = False
+        self.topics: dict[int, str] = {}  # channel id -> topic
+        try:
+            with self.path.open("rb") as file:
+                head = file.read(len(MAGIC))
+        except OSError as exc:
+            raise LogError(f"{self.path}: cannot read run log: {exc.strerror}") from None
+        if not MAGIC.startswith(head):  # a log cut inside its magic is an empty log, not a foreign file
+            raise LogError(f"{self.path}: not an MCAP run log")
+
+    def __iter__(self) -> Iterator[McapRecord]:
+        footer = False
+        with self.path.open("rb") as file:
+            try:
+                for record in StreamReader(_WholeReads(file)).records:
+                    if isinstance(record, Channel):
+                        self.topics[record.id] = record.topic
+                    elif isinstance(record, Footer):
+                        footer = True
+                    yield record
+            except McapError:  # EndOfFile at a cut; a bad trailing magic or absurd record length likewise ends the log
+                return
+        self.complete = footer  # StreamReader stops after the footer's end magic
+
+
+def _messages(scan: _Scan, wanted: Any) -> Iterator[tuple[str, Message]]:
+    """(topic, message) of the messages whose topic satisfies `wanted(topic)`."""
+    ids: set[int] = set()
+    for record in scan:
+        if isinstance(record, Message):
+            if record.channel_id in ids:
+                yield scan.topics[record.channel_id], record
+        elif isinstance(record, Channel) and wanted(record.topic):
+            ids.add(record.id)
+
+
+def read_frames(path: str | Path) -> Iterator[LoggedFrame]:
+    """The raw frames of a log, in the order logged."""
+    for _, message in _messages(_Scan(path), FRAMES_TOPIC.__eq__):
+        d = json.loads(message.data)
+        channel = d.get("channel", d.get("header", {}).get("frame_id", ""))
+        yield LoggedFrame(
+            t=message.log_time / 1e9, arbitration_id=d["id"], data=bytes(d["data"][: d["dlc"]]), channel=channel,
+            direction=d.get("direction", "rx"), is_extended=d["is_extended"], is_error=d["is_error"],
+            valid=d.get("valid", True), error=d.get("error", ""), is_remote=d["is_rtr"], t_ns=message.log_time,
+        )
+
+
+def read_decoded(path: str | Path, message: str | None = None) -> Iterator[tuple[float, str, dict[str, Any]]]:
+    """(t, message name, signals) of the decoded messages, all or only `message`'s."""
+    if message is None:
+        wanted: Any = lambda topic: topic.startswith(DECODED_PREFIX)  # noqa: E731
+    else:
+        wanted = (DECODED_PREFIX + message).__eq__
+    for topic, record in _messages(_Scan(path), wanted):
+        yield record.log_time / 1e9, topic[len(DECODED_PREFIX):], json.loads(record.data)
+
+
+def read_steps(path: str | Path) -> Iterator[dict[str, Any]]:
+    """The test steps and verdicts, as the foxglove.Log dicts logged."""
+    for _, message in _messages(_Scan(path), STEPS_TOPIC.__eq__):
+        yield json.loads(message.data)
+
+
+def summarise(path: str | Path) -> LogSummary:
+    """Counts, time span and attachments of a log, and whether it is complete."""
+    scan = _Scan(path)
+    summary = LogSummary(path=scan.path)
+    start = end = None
+    for record in scan:
+        if isinstance(record, Message):
+            topic = scan.topics[record.channel_id]
+            summary.channels[topic] += 1
+            start = record.log_time if start is None else min(start, record.log_time)
+            end = record.log_time if end is None else max(end, record.log_time)
+            if topic == FRAMES_TOPIC:
+                summary.frames += 1
+                if not _valid(record.data):
+                    summary.invalid_frames += 1
+        elif isinstance(record, Channel):
+            summary.channels.setdefault(record.topic, 0)
+        elif isinstance(record, Attachment):
+            summary.attachments.append(record.name)
+    summary.start = None if start is None else start / 1e9
+    summary.end = None if end is None else end / 1e9
+    summary.complete = scan.complete
+    return summary
+
+
+def _valid(data: bytes) -> bool:
+    """A frame's `valid` flag, without parsing the JSON the recorder writes compactly."""
+    if b'"valid":true' in data:
+        return True
+    if b'"valid":false' in data:
+        return False
+    return bool(json.loads(data).get("valid", True))

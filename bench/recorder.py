@@ -1,0 +1,408 @@
+"""The run log: one MCAP file per run, openable as is in Foxglove.
+
+Why MCAP with JSON messages and JSON schemas: Foxglove shows them without plugins (Raw
+Messages, Plot, Log panels), and JSON keeps the recorder pure Python yet fast enough for a
+busy bus (>= 20 000 frames/s, each with its decoded message). Channels:
+
+- `/can/frames`: every raw frame (`bench.CanFrame`, ROS `can_msgs/Frame` fields plus bench fields);
+- `/can/decoded/<Message>`: the decoded signals of each DBC message (numbers; a non-finite value is null);
+- `/bench/steps`: test steps and verdicts as `foxglove.Log`.
+
+Chunks are zstd-compressed (mcap's default, and the best ratio for JSON) and finalised at least
+every `flush_interval` s of wall time (checked on every write) or when `chunk_size` bytes are
+pending; the file is flushed to the OS after each, so a run killed with SIGKILL leaves a log
+readable up to its last chunk (`bench.logread` reads such a file). The DBC files are attached
+at open, so even a log killed early says which databases it was recorded with.
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import math
+import mimetypes
+import platform
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from datetime import datetime, timezone
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from types import TracebackType
+from typing import IO, Any
+
+import cantools
+from cantools.database.namedsignalvalue import NamedSignalValue
+from mcap.writer import CompressionType, Writer
+
+from bench.errors import LogError
+
+FRAMES_TOPIC = "/can/frames"
+STEPS_TOPIC = "/bench/steps"
+DECODED_PREFIX = "/can/decoded/"
+FRAME_SCHEMA_NAME = "bench.CanFrame"
+LOG_SCHEMA_NAME = "foxglove.Log"
+COMPRESSION = CompressionType.ZSTD
+CHUNK_BYTES = 1 << 20
+MAX_DATA = 64  # CAN FD
+
+_MAX_T = 1.8e10  # s: log times are uint64 ns (~584 years)
+_RECORD_OVERHEAD = 31  # bytes of an MCAP Message record besides its data
+_DECIMAL = [str(i) for i in range(256)]
+_PAD = [bytes(8 - n) for n in range(8)]
+_FRAME_JSON = (
+    '{"header":{"stamp":{"sec":%d,"nsec":%d},"frame_id":%s},"id":%d,"is_rtr":%s,"is_extended":%s,'
+    '"is_error":%s,"dlc":%d,"data":[%s],"channel":%s,"direction":"%s","valid":%s,"error":%s}'
+)
+_ENCODER = json.JSONEncoder(allow_nan=False, separators=(",", ":"), default=lambda o: o.value)
+
+_TIME: dict[str, Any] = {
+    "type": "object",
+    "title": "Time",
+    "properties": {
+        "sec": {"type": "integer", "minimum": 0},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
+    },
+}
+_BOOL = {"type": "boolean"}
+FRAME_SCHEMA: dict[str, Any] = {
+    "title": FRAME_SCHEMA_NAME,
+    "description": "A raw CAN frame seen (rx) or sent (tx) by the bench: ROS can_msgs/Frame fields plus bench fields",
+    "type": "object",
+    "properties": {
+        "header": {
+            "type": "object",
+            "properties": {"stamp": _TIME, "frame_id": {"type": "string", "description": "Bus channel"}},
+        },
+        "id": {"type": "integer", "minimum": 0, "maximum": 0x1FFFFFFF, "description": "Arbitration id, no flag bits"},
+        "is_rtr": _BOOL,
+        "is_extended": _BOOL,
+        "is_error": _BOOL,
+        "dlc": {"type": "integer", "minimum": 0, "maximum": MAX_DATA, "description": "Number of data bytes"},
+        "data": {
+            "type": "array",
+            "items": {"type": "integer", "minimum": 0, "maximum": 255},
+            "minItems": 8,
+            "maxItems": MAX_DATA,
+            "description": "Payload, padded with zeros to 8 bytes",
+        },
+        "channel": {"type": "string", "description": "Bus channel"},
+        "direction": {"type": "string", "enum": ["rx", "tx"]},
+        "valid": {"type": "boolean", "description": "False when the bench rejected the frame"},
+        "error": {"type": "string", "description": "Why the frame is invalid; empty when valid"},
+    },
+    "required": ["header", "id", "is_rtr", "is_extended", "is_error", "dlc", "data", "channel", "direction", "valid", "error"],
+}
+# The shape of Foxglove's published foxglove.Log JSON schema, so the Log panel shows the steps.
+LOG_SCHEMA: dict[str, Any] = {
+    "title": LOG_SCHEMA_NAME,
+    "description": "A log message",
+    "type": "object",
+    "properties": {
+        "timestamp": {**_TIME, "description": "Timestamp of log message"},
+        "level": {
+            "title": "LogLevel: Log level",
+            "description": "Log level",
+            "oneOf": [
+                {"title": title, "const": value}
+                for value, title in enumerate(("UNKNOWN", "DEBUG", "INFO", "WARNING", "ERROR", "FATAL"))
+            ],
+        },
+        "message": {"type": "string", "description": "Log message"},
+        "name": {"type": "string", "description": "Process or node name"},
+        "file": {"type": "string", "description": "Filename"},
+        "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
+    },
+}
+
+
+def message_schema(message: cantools.database.can.Message) -> dict[str, Any]:
+    """The JSON schema of a decoded DBC message: one number per signal, described from the DBC."""
+    properties: dict[str, Any] = {}
+    for signal in message.signals:
+        parts = [signal.comment or signal.name]
+        if signal.unit:
+            parts.append(f"[{signal.unit}]")
+        if signal.choices:
+            parts.append("choices: " + ", ".join(f"{value} = {name}" for value, name in signal.choices.items()))
+        properties[signal.name] = {"type": "number", "description": " ".join(parts)}
+    about = f"{message.comment}; " if message.comment else ""
+    return {
+        "title": message.name,
+        "description": f"{about}CAN id 0x{message.frame_id:X}, decoded by the bench; null marks a non-finite value",
+        "type": "object",
+        "properties": properties,
+    }
+
+
+def _ns(t: float) -> int:
+    """Bench time (s) to integer ns, rounded: log_time is a uint64, so reject what does not fit."""
+    if not 0.0 <= t <= _MAX_T:  # also false for NaN
+        raise ValueError(f"time {t!r} s is not in [0, {_MAX_T:g}]")
+    return int(t * 1e9 + 0.5)
+
+
+def _number(value: object, choices: Mapping[str, int]) -> int | float | None:
+    """A signal value as a JSON number: choice names to their value, non-finite floats to None."""
+    if isinstance(value, NamedSignalValue):
+        value = value.value
+    elif isinstance(value, str):
+        if value not in choices:
+            raise ValueError(f"{value!r} is neither a number nor one of the signal's choices")
+        return choices[value]
+    if isinstance(value, int):
+        return int(value)  # also makes bools numbers
+    number = float(value)  # type: ignore[arg-type]  # TypeError/ValueError for non-numbers
+    return number if math.isfinite(number) else None
+
+
+def _finalise_chunk(writer: Writer, file: IO[bytes]) -> None:
+    """Write the open chunk and hand the file's buffer to the OS, so SIGKILL cannot lose it.
+
+    mcap >= 1.2 has the public `Writer.flush()`; older releases only have the private,
+    name-mangled `__finalize_chunk`, the one private call of the bench, kept here.
+    """
+    flush = getattr(writer, "flush", None)
+    if flush is not None:
+        flush()
+    else:  # pragma: no cover - old mcap
+        writer._Writer__finalize_chunk()  # type: ignore[attr-defined]
+    file.flush()
+
+
+class _Decoded:
+    """What `Recorder.decoded` needs of one message, looked up once per call."""
+
+    __slots__ = ("channel_id", "names", "choices", "schema")
+
+    def __init__(self, message: cantools.database.can.Message) -> None:
+        self.channel_id = 0
+        self.names = frozenset(signal.name for signal in message.signals)
+        self.choices = {
+            signal.name: {str(name): int(value) for value, name in (signal.choices or {}).items()}
+            for signal in message.signals
+        }
+        self.schema = json.dumps(message_schema(message), indent=1).encode()
+
+
+class Recorder:
+    """Writes one run's MCAP log. Thread-safe; `close()` is idempotent and may run from atexit or a signal handler."""
+
+    def __init__(
+        self,
+        path: Path,
+        databases: Sequence[cantools.database.can.Database],
+        attachments: Sequence[Path] = (),
+        *,
+        flush_interval: float = 0.5,
+        profile: str = "",
+        chunk_size: int = CHUNK_BYTES,
+    ) -> None:
+        if not flush_interval > 0:
+            raise LogError(f"run log {path}: flush interval must be > 0 s, not {flush_interval!r}")
+        self.path = Path(path)
+        self._interval = float(flush_interval)
+        self._chunk_bytes = int(chunk_size)
+        # Everything that can fail on bad input happens before the file exists.
+        self._decoded: dict[str, _Decoded] = {}
+        for database in databases:
+            for message in database.messages:
+                entry = _Decoded(message)
+                known = self._decoded.setdefault(message.name, entry)
+                if known.schema != entry.schema:
+                    raise LogError(f"run log {path}: message {message.name} differs between two databases")
+        blobs: list[tuple[Path, bytes, int]] = []
+        for attachment in map(Path, attachments):
+            try:
+                blobs.append((attachment, attachment.read_bytes(), attachment.stat().st_mtime_ns))
+            except OSError as exc:
+                raise LogError(f"run log {path}: cannot attach {attachment}: {exc.strerror}") from None
+        try:
+            self._file: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 - closed by close()
+        except OSError as exc:
+            raise LogError(f"run log {path}: cannot create: {exc.strerror}") from None
+
+        try:
+            self._start(blobs, profile)
+        except BaseException as exc:
+            self._file.close()
+            if isinstance(exc, OSError):
+                raise LogError(f"run log {path}: cannot write: {exc.strerror}") from None
+            raise
+
+        self._quoted: dict[str, str] = {}  # channel name -> its JSON string
+        self._lock = threading.RLock()
+        self._busy = False  # a write is under way on the thread holding the lock
+        self._broken = False  # a write was interrupted: the open chunk may be garbage, later writes are dropped
+        self._closed = False
+        self._close_pending = False
+        self._pending = 0
+        self._deadline = time.monotonic() + self._interval
+        atexit.register(self.close)
+
+    def frame(
+        self, t: float, arbitration_id: int, data: bytes, *, channel: str, direction: str,
+        is_extended: bool = False, is_error: bool = False, is_remote: bool = False, valid: bool = True, error: str = "",
+    ) -> None:
+        """Log one raw frame on `/can/frames` (bad input raises LogError and writes nothing)."""
+        try:
+            ns = _ns(t)
+            quoted = self._quoted.get(channel)
+            if quoted is None:
+                if not isinstance(channel, str):
+                    raise TypeError(f"channel must be a str, not {type(channel).__name__}")
+                quoted = self._quoted[channel] = json.dumps(channel)
+            if direction != "rx" and direction != "tx":
+                raise ValueError(f"direction must be 'rx' or 'tx', not {direction!r}")
+            if not isinstance(arbitration_id, int) or not 0 <= arbitration_id <= 0x1FFFFFFF:
+                raise ValueError(f"arbitration id {arbitration_id!r} is not an int in [0, 0x1FFFFFFF]")
+            data = bytes(data)
+            dlc = len(data)
+            if dlc < 8:
+                data += _PAD[dlc]
+            elif dlc > MAX_DATA:
+                raise ValueError(f"{dlc} data bytes, at most {MAX_DATA}")
+            payload = _FRAME_JSON % (
+                ns // 1_000_000_000, ns % 1_000_000_000, quoted, arbitration_id,
+                "true" if is_remote else "false", "true" if is_extended else "false", "true" if is_error else "false",
+                dlc, ",".join([_DECIMAL[b] for b in data]), quoted, direction,
+                "true" if valid else "false", json.dumps(str(error)) if error else '""',
+            )
+        except (TypeError, ValueError) as exc:
+            raise LogError(f"run log {self.path}: bad frame {arbitration_id!r} on {channel!r}: {exc}") from None
+        self._write(self._frames_id, ns, payload.encode())
+
+    def decoded(self, t: float, message: str, signals: Mapping[str, float | int | str]) -> None:
+        """Log one decoded message on `/can/decoded/<message>`: numbers, NaN/inf as null, choice names as their value."""
+        entry = self._decoded.get(message)
+        if entry is None:
+            raise LogError(f"run log {self.path}: unknown message {message!r}: it is in none of the recorder's databases")
+        try:
+            ns = _ns(t)
+            if not signals.keys() <= entry.names:
+                raise ValueError(f"no signal(s) {', '.join(sorted(signals.keys() - entry.names))} in the message")
+        except (TypeError, ValueError, AttributeError) as exc:
+            raise LogError(f"run log {self.path}: bad decoded {message}: {exc}") from None
+        try:
+            payload = _ENCODER.encode(signals)
+            if payload.count('"') != 2 * len(signals):  # a str value: needs a choice lookup
+                raise ValueError
+        except (TypeError, ValueError, AttributeError):  # non-finite, str or odd values: the slow, careful way
+            payload = self._clean(entry, message, signals)
+        self._write(entry.channel_id, ns, payload.encode())
+
+    def step(self, t: float, level: int, name: str, message: str, file: str = "", line: int = 0) -> None:
+        """Log a test step or verdict on `/bench/steps` (level 1 DEBUG .. 5 FATAL, as foxglove.Log)."""
+        try:
+            ns = _ns(t)
+            if level not in range(6) or not isinstance(line, int) or line < 0:
+                raise ValueError(f"level {level!r} not in 0..5 or line {line!r} not an int >= 0")
+            payload = json.dumps({
+                "timestamp": {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}, "level": int(level),
+                "message": str(message), "name": str(name), "file": str(file), "line": line,
+            }, separators=(",", ":"))
+        except (TypeError, ValueError) as exc:
+            raise LogError(f"run log {self.path}: bad step {name!r}: {exc}") from None
+        self._write(self._steps_id, ns, payload.encode())
+
+    def flush(self) -> None:
+        """Finalise the open chunk now (e.g. after a verdict) rather than at the next interval."""
+        with self._lock:
+            if not (self._closed or self._busy or self._broken):
+                self._broken = True
+                self._finish_chunk()
+                self._broken = False
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file. Idempotent; safe from atexit and signal handlers.
+
+        From a signal handler that interrupted a write on this thread, the close is deferred
+        to the end of that write, so the open chunk is never written half-built.
+        """
+        with self._lock:
+            if self._busy:
+                self._close_pending = True
+            else:
+                self._close_locked()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        self.close()
+
+    def _start(self, blobs: list[tuple[Path, bytes, int]], profile: str) -> None:
+        """Header, attachments and metadata straight to disk; schemas and channels into the first chunk."""
+        self._writer = Writer(self._file, chunk_size=4 * self._chunk_bytes, compression=COMPRESSION)
+        self._writer.start(profile="", library=f"chassis-hil-bench/{_bench_version()}")
+        for attachment, data, mtime_ns in blobs:
+            media = "application/x-dbc" if attachment.suffix.lower() == ".dbc" else mimetypes.guess_type(attachment.name)[0]
+            self._writer.add_attachment(mtime_ns, 0, attachment.name, media or "application/octet-stream", data)
+        self._writer.add_metadata("bench", {
+            "profile": profile,
+            "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "host": platform.node(),
+            "python": platform.python_version(),
+            "bench": _bench_version(),
+            "attachments": ", ".join(attachment.name for attachment, _, _ in blobs),
+            "compression": COMPRESSION.name.lower(),
+        })
+        _finalise_chunk(self._writer, self._file)  # header, attachments and metadata on disk now
+
+        frame_schema = self._writer.register_schema(FRAME_SCHEMA_NAME, "jsonschema", json.dumps(FRAME_SCHEMA).encode())
+        self._frames_id = self._writer.register_channel(FRAMES_TOPIC, "json", frame_schema)
+        log_schema = self._writer.register_schema(LOG_SCHEMA_NAME, "jsonschema", json.dumps(LOG_SCHEMA).encode())
+        self._steps_id = self._writer.register_channel(STEPS_TOPIC, "json", log_schema)
+        for name, entry in self._decoded.items():
+            if not entry.channel_id:
+                schema = self._writer.register_schema(name, "jsonschema", entry.schema)
+                entry.channel_id = self._writer.register_channel(DECODED_PREFIX + name, "json", schema)
+
+    def _write(self, channel_id: int, ns: int, payload: bytes) -> None:
+        with self._lock:
+            self._busy = True
+            try:
+                if self._closed or self._broken:  # a late frame from a receive thread after close(): dropped
+                    return
+                self._broken = True  # until the writer's state is whole again (KeyboardInterrupt, disk full)
+                self._writer.add_message(channel_id, ns, payload, ns)
+                self._pending += len(payload) + _RECORD_OVERHEAD
+                if self._pending >= self._chunk_bytes or time.monotonic() >= self._deadline:
+                    self._finish_chunk()
+                self._broken = False
+            finally:
+                self._busy = False
+                if self._close_pending:
+                    self._close_locked()
+
+    def _finish_chunk(self) -> None:
+        _finalise_chunk(self._writer, self._file)
+        self._pending = 0
+        self._deadline = time.monotonic() + self._interval
+
+    def _close_locked(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        atexit.unregister(self.close)
+        try:
+            if not self._broken:  # else leave the file ending at its last whole chunk: still readable
+                self._writer.finish()
+        finally:
+            self._file.close()
+
+    def _clean(self, entry: _Decoded, message: str, signals: Mapping[str, object]) -> str:
+        clean: dict[str, int | float | None] = {}
+        for name, value in signals.items():
+            try:
+                clean[name] = _number(value, entry.choices[name])
+            except (TypeError, ValueError) as exc:
+                raise LogError(f"run log {self.path}: bad value of {message}.{name}: {exc}") from None
+        return json.dumps(clean, separators=(",", ":"), allow_nan=False)
+
+
+def _bench_version() -> str:
+    try:
+        return version("chassis-hil-bench")
+    except PackageNotFoundError:  # pragma: no cover - not installed
+        return "0"
