@@ -79,8 +79,8 @@ class Case:
         """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`),
         reset every stimulus message to its start values, and wait for the plant's acknowledgement."""
         restbus = self._runner.restbus
+        restbus.reset_all()
         for name in restbus.periodic:
-            restbus.reset_values(name)
             restbus.enable(name, True)
         state = self._monitor.state(SCENARIO_ACK_MESSAGE)
         previous = int(state.latest[SCENARIO_ACK_SIGNAL]) if state.latest else 0

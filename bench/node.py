@@ -22,6 +22,9 @@ class NodeIO(Protocol):
         """Set signal values of a message this node sends; sent from its next cycle on.
         Enumerations may be given by their value-table name or number."""
 
+    def reset_outputs(self) -> None:
+        """Every message this station sends back to its DBC start values (a plant switching vehicle)."""
+
     def latest(self, message: str) -> Mapping[str, float] | None:
         """The latest valid values of a message (enumerations as numbers); None when never
         received or timed out (3 x cycle time)."""

@@ -58,6 +58,10 @@ class Restbus:
         slot = self._slot(message)
         slot.values = dict(slot.codec.start_values())
 
+    def reset_all(self) -> None:
+        for name in self.periodic:
+            self.reset_values(name)
+
     def enable(self, message: str, enabled: bool) -> None:
         """Start or stop sending a message (its counter carries on where it stopped)."""
         self._slot(message).enabled = enabled

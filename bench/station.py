@@ -37,6 +37,9 @@ class _StationIO:
     def send_values(self, message: str, **signals: float) -> None:
         self._station.restbus.set_unchecked(message, signals)
 
+    def reset_outputs(self) -> None:
+        self._station.restbus.reset_all()
+
     def latest(self, message: str) -> Mapping[str, float] | None:
         return self._station.monitor.latest(message, self._station.now())
 

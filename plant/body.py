@@ -20,13 +20,12 @@ from typing import Protocol
 from bench.node import Behaviour, NodeIO
 from plant import limits
 from plant.kinematics import CORNERS, Geometry
+from plant.vehicles import VEHICLE_CODES
 
 _DEG = 180.0 / math.pi
 _RAD = math.pi / 180.0
 _SNAP_DEG = 1e-6   # rounding noise must not flip the sign of a sideways Speed
 
-#: PLANT_Status.Vehicle / BENCH_Control.Vehicle value table (dbc/bench.dbc).
-VEHICLE_CODES = {"EV4WIS": 0, "ACLASS": 1}
 
 
 class VelocityFit:

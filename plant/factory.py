@@ -1,62 +1,63 @@
-"""The plant's entry point (`bench.plants: chassis = plant.factory:build`): behaviours per vehicle.
+"""The plant's entry point (`bench.plants: chassis = plant.factory:build`).
 
-Step order within a tick: the returned list IS the order and must be stepped front to back:
-VCU, WHL_FL, WHL_FR, WHL_RL, WHL_RR, PLANT, IMU. The VCU and the wheels talk over the bus (their
-frames carry the latency a real network has); the body then reads the wheels' true states of this very
-tick, and the IMU the body's motion of this very tick, through direct references (no bus latency
-between physics and its sensors). Nodes named in `external` are left out: an external wheel's state
-reaches the body through WHL_Status_xx, an external PLANT's motion reaches the IMU through PLANT_*.
+The bench asks for the plant once; the plant then becomes whichever vehicle `BENCH_Control.Vehicle`
+asks for (a test campaign mixes vehicles), through a host behaviour that builds that vehicle's
+behaviours (plant/assemblies/) and steps them in their order.
 """
 
 from __future__ import annotations
 
-from collections.abc import Collection
+import importlib
+from collections.abc import Callable, Collection
 
-from bench.node import Behaviour
-from plant.body import BodyNode, BusWheel, WheelSource
-from plant.ecus.imu import Imu
-from plant.ecus.vcu import Vcu
-from plant.ecus.wheel import WheelEcu
-from plant.kinematics import CORNERS
-from plant.vehicles import load_vehicle
+from bench.node import Behaviour, NodeIO
+from plant.vehicles import VEHICLE_CODES
 
 DEFAULT_VEHICLE = "EV4WIS"
 
+#: vehicle name (BENCH_Control.Vehicle value table) -> module in plant/assemblies with build(external)
+ASSEMBLIES = {"EV4WIS": "plant.assemblies.ev4wis"}
+
+_BY_CODE = {code: name for name, code in VEHICLE_CODES.items()}
+
+
+def assemble(vehicle: str, external: Collection[str]) -> list[Behaviour]:
+    """The behaviours of one vehicle; ValueError naming the vehicle when there is no such plant."""
+    module = ASSEMBLIES.get(vehicle.upper())
+    if module is None:
+        raise ValueError(f"no plant for vehicle {vehicle!r} (available: {', '.join(sorted(ASSEMBLIES))})")
+    builder: Callable[[Collection[str]], list[Behaviour]] = importlib.import_module(module).build
+    return builder(frozenset(external))
+
+
+class PlantHost:
+    """Plays the plant's nodes as the vehicle BENCH_Control.Vehicle names (default at start)."""
+
+    def __init__(self, external: Collection[str], vehicle: str) -> None:
+        self.external = frozenset(external)
+        self.vehicle = vehicle.upper()
+        self.inner = assemble(self.vehicle, self.external)
+        self.nodes = tuple(dict.fromkeys(n for b in self.inner for n in b.nodes))
+        self.unavailable: str | None = None   # a vehicle asked for that has no plant
+
+    def reset(self) -> None:
+        for behaviour in self.inner:
+            behaviour.reset()
+
+    def step(self, io: NodeIO, t: float, dt: float) -> None:
+        control = io.latest("BENCH_Control")
+        if control is not None:
+            wanted = _BY_CODE.get(int(control["Vehicle"]))
+            if wanted is not None and wanted != self.vehicle and wanted in ASSEMBLIES:
+                self.vehicle = wanted
+                self.inner = assemble(wanted, self.external)
+                io.reset_outputs()          # nothing of the previous vehicle stays on the bus
+            self.unavailable = wanted if wanted not in ASSEMBLIES else None
+        for behaviour in self.inner:
+            behaviour.step(io, t, dt)
+
 
 def build(external: Collection[str] = (), vehicle: str | None = None) -> list[Behaviour]:
-    """Behaviours for every node of `vehicle` not in `external` (node names as in the DBC); the
-    signature of the entry-point group bench.plants (bench/plugins.py).
-
-    vehicle None means DEFAULT_VEHICLE. Names in `external` that are not nodes of this vehicle
-    (DRIVER, TESTER, SBW, ...) are ignored.
-    """
-    name = (vehicle or DEFAULT_VEHICLE).upper()
-    outside = frozenset(external or ())
-    if name == "EV4WIS":
-        return _ev4wis(outside)
-    raise ValueError(f"plant.factory: no plant for vehicle {vehicle!r} (available: EV4WIS)")
-
-
-def _ev4wis(external: frozenset[str]) -> list[Behaviour]:
-    params = load_vehicle("EV4WIS")
-    behaviours: list[Behaviour] = []
-    if "VCU" not in external:
-        behaviours.append(Vcu(params))
-    sources: dict[str, WheelSource] = {}
-    for corner in CORNERS:
-        if f"WHL_{corner}" in external:
-            sources[corner] = BusWheel(corner)
-        else:
-            wheel = WheelEcu(corner, params)
-            behaviours.append(wheel)
-            sources[corner] = wheel
-    body_node = None
-    if "PLANT" not in external:
-        body_node = BodyNode(params.geometry, sources, vehicle="EV4WIS", linked=list(behaviours))
-        behaviours.append(body_node)
-    if "IMU" not in external:
-        imu = Imu(body_node.body if body_node is not None else None)
-        behaviours.append(imu)
-        if body_node is not None:
-            body_node.linked = (*body_node.linked, imu)
-    return behaviours
+    """The signature of the entry-point group bench.plants (bench/plugins.py): every plant node not
+    in `external`, starting as `vehicle` (None: DEFAULT_VEHICLE)."""
+    return [PlantHost(external, vehicle or DEFAULT_VEHICLE)]

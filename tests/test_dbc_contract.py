@@ -96,8 +96,8 @@ BENCH: list[tuple[int, str, str, int, dict[str, str | None]]] = [
     (0x693, "PLANT_Dynamics", "PLANT", 10, {"Sideslip": "deg", "LatAccel": "m/s^2", "LongAccel": "m/s^2"}),
 ]
 BENCH_ENUMS = {
-    ("BENCH_Control", "Vehicle"): {0: "EV4WIS", 1: "ACLASS"},
-    ("PLANT_Status", "Vehicle"): {0: "EV4WIS", 1: "ACLASS"},
+    ("BENCH_Control", "Vehicle"): {0: "EV4WIS", 1: "ACLASS", 2: "ACLASS_ABS"},
+    ("PLANT_Status", "Vehicle"): {0: "EV4WIS", 1: "ACLASS", 2: "ACLASS_ABS"},
     ("BENCH_SteeringRobot", "RobotMode"): {0: "OFF", 1: "ANGLE", 2: "TORQUE"},
 }
 

@@ -16,7 +16,7 @@ from plant.body import BodyNode, BusWheel
 from plant.ecus.imu import Imu
 from plant.ecus.vcu import CENTRE_AT_INFINITY_M, Vcu, VcuFault
 from plant.ecus.wheel import WheelEcu, WheelFault
-from plant.factory import build
+from plant.factory import assemble, build
 from plant.vehicles import Ev4wisParams, load_file, load_vehicle
 
 DT = 1e-3
@@ -65,7 +65,7 @@ class Rig:
 
     def __init__(self, external: tuple[str, ...] = (), vcu: Vcu | None = None) -> None:
         self.io = FakeIO()
-        self.behaviours = build(external, "EV4WIS")
+        self.behaviours = assemble("EV4WIS", external)
         if vcu is not None:
             self.behaviours[0] = vcu
         self.tick = 0
@@ -418,13 +418,15 @@ def test_imu_reads_the_bus_when_plant_is_external():
 # -- factory and vehicle file ------------------------------------------------------------------------------
 
 def test_factory_order_and_vehicles():
-    behaviours = build((), "EV4WIS")
+    behaviours = assemble("EV4WIS", ())
     assert all(isinstance(b, Behaviour) for b in behaviours)
     nodes = [b.nodes for b in behaviours]
     assert nodes == [("VCU",), ("WHL_FL",), ("WHL_FR",), ("WHL_RL",), ("WHL_RR",), ("PLANT",), ("IMU",)]
-    assert [b.nodes for b in build({"VCU", "IMU"}, None)] == nodes[1:6]      # None: the default vehicle
-    with pytest.raises(ValueError, match="ACLASS"):
-        build((), "ACLASS")
+    assert [b.nodes for b in assemble("EV4WIS", {"VCU", "IMU"})] == nodes[1:6]
+    with pytest.raises(ValueError, match="NOPE"):
+        assemble("NOPE", ())
+    (host,) = build((), None)                                                  # None: the default vehicle
+    assert host.vehicle == "EV4WIS" and [b.nodes for b in host.inner] == nodes
 
 
 def test_vehicle_file_values_and_sources():

@@ -24,6 +24,9 @@ from plant.kinematics import Geometry
 
 HERE = Path(__file__).resolve().parent
 
+#: BENCH_Control.Vehicle / PLANT_Status.Vehicle value table (dbc/bench.dbc).
+VEHICLE_CODES = {"EV4WIS": 0, "ACLASS": 1, "ACLASS_ABS": 2}
+
 
 def _p(unit: str) -> Any:
     """A parameter field: its unit is checked against the file's."""
@@ -68,11 +71,34 @@ class Ev4wisParams:
         return Geometry(self.track / 2.0, self.wheelbase / 2.0, self.wheel_radius)
 
 
+@dataclass(frozen=True)
+class AclassParams:
+    """vehicles.md B: the A-class car of seeds 001 and 004 (SI units unless the name says so)."""
+
+    mass: float = _p("kg")
+    yaw_inertia: float = _p("kg*m^2")
+    cog_to_front_axle: float = _p("m")
+    cog_to_rear_axle: float = _p("m")
+    cornering_stiffness_front: float = _p("N/rad")
+    cornering_stiffness_rear: float = _p("N/rad")
+    track: float = _p("m")
+    wheel_radius: float = _p("m")
+    hand_wheel_ratio: float = _p("1")
+    cog_height: float = _p("m")
+    sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def wheelbase(self) -> float:
+        """L = a + b (formulas.md §5)."""
+        return self.cog_to_front_axle + self.cog_to_rear_axle
+
+
 P = TypeVar("P")
 
 #: vehicle name (as on the bus, BENCH_Control.Vehicle) -> (file, parameter class)
 VEHICLES: dict[str, tuple[str, type]] = {
     "EV4WIS": ("ev4wis.toml", Ev4wisParams),
+    "ACLASS": ("aclass.toml", AclassParams),
 }
 
 

@@ -1,0 +1,46 @@
+"""The 4WIS steer-by-wire EV (vehicles.md A) as bus nodes.
+
+Step order within a tick: the returned list IS the order and must be stepped front to back:
+VCU, WHL_FL, WHL_FR, WHL_RL, WHL_RR, PLANT, IMU. The VCU and the wheels talk over the bus (their
+frames carry the latency a real network has); the body then reads the wheels' true states of this very
+tick, and the IMU the body's motion of this very tick, through direct references (no bus latency
+between physics and its sensors). Nodes named in `external` are left out: an external wheel's state
+reaches the body through WHL_Status_xx, an external PLANT's motion reaches the IMU through PLANT_*.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+
+from bench.node import Behaviour
+from plant.body import BodyNode, BusWheel, WheelSource
+from plant.ecus.imu import Imu
+from plant.ecus.vcu import Vcu
+from plant.ecus.wheel import WheelEcu
+from plant.kinematics import CORNERS
+from plant.vehicles import load_vehicle
+
+
+def build(external: Collection[str]) -> list[Behaviour]:
+    params = load_vehicle("EV4WIS")
+    behaviours: list[Behaviour] = []
+    if "VCU" not in external:
+        behaviours.append(Vcu(params))
+    sources: dict[str, WheelSource] = {}
+    for corner in CORNERS:
+        if f"WHL_{corner}" in external:
+            sources[corner] = BusWheel(corner)
+        else:
+            wheel = WheelEcu(corner, params)
+            behaviours.append(wheel)
+            sources[corner] = wheel
+    body_node = None
+    if "PLANT" not in external:
+        body_node = BodyNode(params.geometry, sources, vehicle="EV4WIS", linked=list(behaviours))
+        behaviours.append(body_node)
+    if "IMU" not in external:
+        imu = Imu(body_node.body if body_node is not None else None)
+        behaviours.append(imu)
+        if body_node is not None:
+            body_node.linked = (*body_node.linked, imu)
+    return behaviours
