@@ -14,6 +14,7 @@ import numpy as np
 
 from bench.checks import StepLog, percentile, tolerance_text, within
 from bench.errors import BenchError
+from bench.faults import KINDS, Fault
 from bench.monitor import InvalidFrame
 from bench.results import CaseResult, Plot, Series, Table
 from bench.session import BenchSession
@@ -96,6 +97,25 @@ class Case:
                              f"{SCENARIO_ACK_TIMEOUT:g} s ({SCENARIO_ACK_MESSAGE}.{SCENARIO_ACK_SIGNAL})")
         self.start = self.now
         self._mark_counts()
+
+    def inject(self, kind: str, target: str, *, after: float = 0.0, duration: float = math.inf,
+               param: float = 0.0) -> Fault:
+        """Inject a fault (bench.faults: drop, delay, duplicate, bitflip, counter_freeze, counter_jump,
+        checksum_value/freeze/random/offset, silence, bus_off, flood, error_frame) starting `after` s
+        from now and lasting `duration` s. Returns it; its window is in bench time."""
+        start = self.now + after
+        fault = Fault(kind, target, start, start + duration, param)
+        if kind not in KINDS:
+            raise BenchError(f"unknown fault kind {kind!r} (kinds: {', '.join(KINDS)})")
+        return self.session.faults.add(fault)
+
+    def detections(self, message: str, since: float | None = None) -> list[tuple[float, str]]:
+        """When the bench's monitor flagged a message since `since` (default: case start): every
+        invalid frame (reason) and every timeout ("timeout"), in time order."""
+        since = self.start if since is None else since
+        found = [(f.t, f.reason) for f in self._monitor.invalid_log if f.message == message and f.t >= since]
+        found += [(t, "timeout") for t in self._monitor.state(message).timeouts if t >= since]
+        return sorted(found)
 
     # -- observation -------------------------------------------------------------------------------
     def value(self, message: str, signal: str) -> float:

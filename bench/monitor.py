@@ -119,6 +119,12 @@ class Monitor:
             self.sink(t, arbitration_id, data, direction, True, "", codec, values)
         return True
 
+    def note_send_failure(self, t: float, arbitration_id: int, reason: str) -> None:
+        """A frame this station could not send (queue full, bus-off): logged as invalid, never applied."""
+        state = self.states.get(arbitration_id)
+        name = state.codec.name if state else f"0x{arbitration_id:X}"
+        self.invalid_log.append(InvalidFrame(t, arbitration_id, name, f"send failed: {reason}"))
+
     # -- time ------------------------------------------------------------------------------------
     def check_timeouts(self, now: float) -> None:
         """Record the start of every timeout; a timed-out message resynchronises its counter."""

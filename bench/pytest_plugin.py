@@ -16,6 +16,7 @@ import pytest
 
 from bench.case import Case
 from bench.config import RunSettings, load_config
+from bench.faults import parse_fault
 from bench.results import RunResult
 from bench.run import BenchRun, default_out_dir
 
@@ -36,6 +37,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--bench-channel", default=None, help="channel of the interface (e.g. vcan0)")
     group.addoption("--bench-external", action="append", default=[], metavar="NODE",
                     help="a node that is real (not simulated); 'all' = every node but the stimulus")
+    group.addoption("--bench-fault", action="append", default=[], metavar="SPEC",
+                    help="inject a fault for the whole run: KIND:TARGET[:PARAM]@START[-END] (bench.faults)")
     group.addoption("--bench-out", default=None, help="folder for report.html, run.mcap, junit.xml")
     group.addoption("--bench-config", default=None, help="bench.toml of the project")
 
@@ -53,9 +56,11 @@ def _run(config: pytest.Config) -> BenchRun:
                                external=list(config.getoption("--bench-external")))
         out = config.getoption("--bench-out")
         out_dir = Path(out) if out else default_out_dir(project.reports)
+        faults = [parse_fault(spec) for spec in config.getoption("--bench-fault")]
         run = BenchRun(project, settings, out_dir)
         config.stash[_RUN_KEY] = run
         run.start()
+        run.session.faults.extend(faults)
         if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
             signal.signal(signal.SIGTERM, _terminate)
     return run

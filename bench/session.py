@@ -15,6 +15,7 @@ from bench.clock import Clock, Scheduler, VirtualClock, WallClock
 from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig, RunSettings
 from bench.errors import BenchError, ConfigError
+from bench.faults import FaultPlan
 from bench.monitor import FrameSink, Monitor
 from bench.plugins import load_plant
 from bench.restbus import Restbus
@@ -76,6 +77,10 @@ class BenchSession:
             self.stations.append(self.runner)
         if not self.stations:
             raise ConfigError("nothing to simulate: every node is external")
+        self.faults = FaultPlan(self.codebook)
+        for station in self.stations:
+            station.faults = self.faults
+        self.stations[-1].babbles = True
         self.scheduler = Scheduler(self.stations, self.clock)
 
     def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence) -> Station:

@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import can
 
+from bench.faults import FaultPlan
 from bench.monitor import Monitor
 from bench.node import Behaviour
 from bench.restbus import Restbus
@@ -63,6 +64,9 @@ class Station:
         self.io = _StationIO(self)
         self.sent = 0
         self.send_errors = 0
+        self.faults: FaultPlan | None = None     # set by the session: the run's fault plan
+        self.babbles = False                     # this station plays the babbling node of flood faults
+        self._delayed: list[tuple[float, int, bytes]] = []
         # Frames sent but not yet seen again, per identifier, to drop echoes of interfaces that loop
         # back a sender's own frames. A frame with our identifier and other data is a foreign sender:
         # it reaches the monitor (which will flag its counter). Bounded: only the last few are kept.
@@ -88,21 +92,48 @@ class Station:
         io = self.io
         for behaviour in self.behaviours:
             behaviour.step(io, t, dt)
+        faults = self.faults
+        if faults is not None and (faults.any or self._delayed):
+            self._tick_faults(faults, t, dt)
         for frame_id, data in self.restbus.due(tick):
             self.send(t, frame_id, data)
         self.monitor.check_timeouts(t)
 
     def send(self, t: float, frame_id: int, data: bytes) -> None:
+        """Send one frame of the restbus, through the fault plan when there is one."""
+        faults = self.faults
+        if faults is None or not faults.any:
+            self._transmit(t, frame_id, data)
+            return
+        for delay, frame in faults.apply(t, frame_id, data):
+            if delay > 0:
+                self._delayed.append((t + delay, frame_id, frame))
+            else:
+                self._transmit(t, frame_id, frame)
+
+    def _tick_faults(self, faults: FaultPlan, t: float, dt: float) -> None:
+        if self._delayed:
+            ready = [d for d in self._delayed if d[0] <= t + 1e-9]
+            self._delayed = [d for d in self._delayed if d[0] > t + 1e-9]
+            for _, frame_id, frame in ready:
+                self._transmit(t, frame_id, frame)
+        if self.babbles:
+            for frame_id, data, is_error in faults.babble(t, dt):
+                self._transmit(t, frame_id, data, is_error)
+
+    def _transmit(self, t: float, frame_id: int, data: bytes, is_error: bool = False) -> None:
         msg = can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
-                          is_fd=False)
+                          is_fd=False, is_error_frame=is_error)
         try:
             self.bus.send(msg)
-        except can.CanError:
-            self.send_errors += 1   # a full queue or bus-off: counted, the frame is still logged as sent
+        except can.CanError as exc:
+            self.send_errors += 1   # a full queue or bus-off: the frame never reached the bus
+            self.monitor.note_send_failure(t, frame_id, str(exc))
+            return
         self.sent += 1
         if self.loops_back:
             self._echoes[frame_id].append(data)
-        self.monitor.on_frame(t, frame_id, data, "tx")
+        self.monitor.on_frame(t, frame_id, data, "tx", False, is_error)
 
     def reset_behaviours(self) -> None:
         for behaviour in self.behaviours:

@@ -17,6 +17,7 @@ from bench.bus import is_virtual
 from bench.cli.common import add_bus_options
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError
+from bench.faults import parse_fault
 from bench.session import BenchSession
 
 STATUS_PERIOD = 5.0   # s between status lines
@@ -42,7 +43,9 @@ def run(args: argparse.Namespace) -> int:
     project = load_config(Path(args.config) if args.config else None)
     settings = RunSettings(interface=args.interface, channel=args.channel, external=args.external,
                            vehicle=args.vehicle)
+    faults = [parse_fault(spec) for spec in args.fault]
     session = BenchSession(project, settings, role="plant")
+    session.faults.extend(faults)
     stop = {"now": False}
 
     def request_stop(signum: int, frame: object) -> None:

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from bench.cli.common import add_bus_options
 from bench.config import load_config
+from bench.faults import parse_fault
 from bench.run import default_out_dir
 
 OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "skipped": "yellow",
@@ -71,6 +72,9 @@ def run(args: argparse.Namespace) -> int:
         pytest_args += ["--bench-channel", args.channel]
     for node in args.external:
         pytest_args += ["--bench-external", node]
+    for spec in args.fault:
+        parse_fault(spec)                      # a bad spec is a clear error before pytest starts
+        pytest_args += ["--bench-fault", spec]
     if args.keyword:
         pytest_args += ["-k", args.keyword]
     progress = _Progress(console)

@@ -1,0 +1,100 @@
+"""Fault injection: each kind changes the frames as specified, and the monitor notices it."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from bench import e2e
+from bench.codec import Codebook
+from bench.errors import ConfigError
+from bench.faults import KINDS, Fault, FaultPlan, parse_fault
+from bench.restbus import Restbus
+
+MSG = "VCU_WheelCmd_FL"
+
+
+def _frame(codebook: Codebook, counter: int = 5) -> tuple[int, bytes]:
+    restbus = Restbus(codebook, ["VCU"])
+    slot = restbus.periodic[MSG]
+    slot.counter = counter
+    restbus.set(MSG, SteerAngleCmd=12.5)
+    return slot.codec.frame_id, restbus.build(slot)
+
+
+def _apply(codebook: Codebook, fault: Fault, t: float = 1.0) -> list[tuple[float, bytes]]:
+    plan = FaultPlan(codebook)
+    plan.add(fault)
+    frame_id, data = _frame(codebook)
+    return plan.apply(t, frame_id, data)
+
+
+def test_parse_round_trip_and_errors() -> None:
+    fault = parse_fault("checksum_offset:IMU_Motion:1@2-4")
+    assert (fault.kind, fault.target, fault.param, fault.start, fault.end) == ("checksum_offset", "IMU_Motion", 1, 2, 4)
+    assert parse_fault("silence:WHL_FR@1.5-").end == math.inf
+    for bad in ("nope:X@1", "drop:VCU_WheelCmd_FL", "drop:VCU_WheelCmd_FL@3-2", "drop:X:a@1"):
+        with pytest.raises(ConfigError, match="--fault"):
+            parse_fault(bad)
+
+
+def test_window_and_target(codebook: Codebook) -> None:
+    frame_id, data = _frame(codebook)
+    plan = FaultPlan(codebook)
+    plan.add(Fault("drop", MSG, 1.0, 2.0))
+    assert plan.apply(0.99, frame_id, data) == [(0.0, data)]
+    assert plan.apply(1.0, frame_id, data) == []
+    assert plan.apply(2.0, frame_id, data) == [(0.0, data)]
+    other = codebook["VCU_WheelCmd_FR"].frame_id
+    assert plan.apply(1.5, other, data) == [(0.0, data)]
+
+
+def test_each_frame_fault(codebook: Codebook) -> None:
+    frame_id, data = _frame(codebook)
+    assert _apply(codebook, Fault("delay", MSG, 0, 9, 0.05)) == [(0.05, data)]
+    assert _apply(codebook, Fault("duplicate", MSG, 0, 9)) == [(0.0, data), (0.0, data)]
+    (_, flipped), = _apply(codebook, Fault("bitflip", MSG, 0, 9, 3))
+    assert flipped[0] == data[0] ^ 0x08 and flipped[1:] == data[1:]
+    (_, jumped), = _apply(codebook, Fault("counter_jump", MSG, 0, 9, 3))
+    assert e2e.counter_of(jumped) == 8 and jumped[7] == e2e.checksum(frame_id, jumped)
+    (_, value), = _apply(codebook, Fault("checksum_value", MSG, 0, 9, 0xAB))
+    assert value[7] == 0xAB and value[:7] == data[:7]
+    (_, offset), = _apply(codebook, Fault("checksum_offset", MSG, 0, 9, 1))
+    assert offset[7] == (data[7] + 1) & 0xFF
+
+
+def test_freezes_hold_the_value_at_the_fault_start(codebook: Codebook) -> None:
+    plan = FaultPlan(codebook)
+    counter_fault = plan.add(Fault("counter_freeze", MSG, 0, 9))
+    restbus = Restbus(codebook, ["VCU"])
+    slot = restbus.periodic[MSG]
+    frame_id = slot.codec.frame_id
+    counters = []
+    for _ in range(3):
+        (_, frame), = plan.apply(1.0, frame_id, restbus.build(slot))
+        counters.append(e2e.counter_of(frame))
+        assert frame[7] == e2e.checksum(frame_id, frame)
+    assert counters == [0, 0, 0] and counter_fault.frozen == 0
+
+
+def test_node_and_bus_faults(codebook: Codebook) -> None:
+    frame_id, data = _frame(codebook)
+    assert _apply(codebook, Fault("silence", "VCU", 0, 9)) == []
+    assert _apply(codebook, Fault("silence", "WHL_FL", 0, 9)) == [(0.0, data)]
+    assert _apply(codebook, Fault("flood", "0x000", 0, 9, 8)) == []          # saturating: 0x110 loses
+    assert _apply(codebook, Fault("flood", "0x000", 0, 9, 1)) == [(0.0, data)]  # below saturation
+    plan = FaultPlan(codebook)
+    plan.add(Fault("flood", "0x000", 0, 9, 8))
+    plan.add(Fault("error_frame", "bus", 0, 9))
+    frames = plan.babble(1.0, 0.001)
+    assert sum(1 for f in frames if f[0] == 0 and not f[2]) == 8 and sum(f[2] for f in frames) == 1
+
+
+def test_unknown_targets_are_clear_errors(codebook: Codebook) -> None:
+    plan = FaultPlan(codebook)
+    with pytest.raises(Exception, match="NOPE"):
+        plan.add(Fault("drop", "NOPE", 0, 1))
+    with pytest.raises(ConfigError, match="unknown node"):
+        plan.add(Fault("silence", "NOPE", 0, 1))
+    assert set(KINDS) >= {"drop", "delay", "duplicate", "bitflip", "silence", "flood", "error_frame"}
