@@ -111,10 +111,13 @@ class Case:
 
     def detections(self, message: str, since: float | None = None) -> list[tuple[float, str]]:
         """When the bench's monitor flagged a message since `since` (default: case start): every
-        invalid frame (reason) and every timeout ("timeout"), in time order."""
+        invalid frame (reason) and every timeout ("timeout"), in time order. `message` may also be
+        "error frame" or an unknown identifier as "0x7FF"."""
         since = self.start if since is None else since
         found = [(f.t, f.reason) for f in self._monitor.invalid_log if f.message == message and f.t >= since]
-        found += [(t, "timeout") for t in self._monitor.state(message).timeouts if t >= since]
+        state = self._monitor.by_name.get(message)   # None for "error frame" and unknown identifiers
+        if state is not None:
+            found += [(t, "timeout") for t in state.timeouts if t >= since]
         return sorted(found)
 
     # -- observation -------------------------------------------------------------------------------

@@ -74,6 +74,8 @@ class Monitor:
         if state is None:
             self.unknown_frames += 1
             reason = "error frame" if is_error else "unknown identifier"
+            self.invalid_log.append(InvalidFrame(t, arbitration_id, "error frame" if is_error else
+                                                 f"0x{arbitration_id:X}", reason))
             if self.sink:
                 self.sink(t, arbitration_id, data, direction, False, reason, None, None)
             return False
@@ -177,7 +179,8 @@ class Monitor:
 
     @property
     def invalid_frames(self) -> int:
-        return len(self.invalid_log) + self.unknown_frames
+        """Frames that failed a check, unknown identifiers and error frames, and failed sends."""
+        return len(self.invalid_log)
 
 
 def _first_at_or_after(ts: list[float], since: float) -> int:

@@ -1,0 +1,123 @@
+"""Fault injection into the restbus: the bench's monitor detects every fault within its bound, and the
+reference ECUs react safely (issue "Reliability and bad input").
+
+Bounds (k-matrix.md "End-to-end protection"): a timeout is declared 3 cycles after the last valid frame,
+so a fault that silences a message is detected within 3 cycles + 1 cycle of its start (the last frame
+before the fault may have left up to one cycle earlier); an end-to-end fault (checksum, counter) is
+detected at the first or second affected frame: within 2 cycles + one 1 ms tick.
+Safe reactions are the documented ones of plant/README.md: the VCU sets VcuFault (4 REQUEST_INVALID,
+5 REQUEST_TIMEOUT, 6 WHEEL_FAULT) and commands zero wheel speeds; a wheel ECU whose command times out sets
+WheelFault 3 (CMD_TIMEOUT).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pytest
+
+from bench.case import Case
+
+TICK = 0.001
+CYCLE = {"DRV_MotionRequest": 0.020, "VCU_WheelCmd_FL": 0.010, "WHL_Status_FR": 0.010, "DRV_Steering": 0.010}
+REQUEST_INVALID, REQUEST_TIMEOUT, WHEEL_FAULT, CMD_TIMEOUT = 4, 5, 6, 3
+REACTION_S = 0.2   # s the ECUs get to show their reaction on the bus (task period + message cycle + timeout)
+
+
+@dataclass(frozen=True)
+class FaultCase:
+    kind: str
+    target: str
+    watched: str         # message the monitor must flag
+    param: float = 0.0
+    duration: float = 0.3
+    timeout_fault: bool = False   # detected as a timeout (else as an end-to-end error)
+    reaction: str = "vcu_request"  # which safe reaction to check
+    after_window: bool = False     # the reaction can only be seen once the bus is free again (flood)
+
+    @property
+    def bound(self) -> float:
+        cycle = CYCLE[self.watched]
+        return (3 * cycle + cycle if self.timeout_fault else 2 * cycle) + TICK
+
+
+CASES = [
+    FaultCase("drop", "VCU_WheelCmd_FL", "VCU_WheelCmd_FL", timeout_fault=True, reaction="wheel_timeout"),
+    FaultCase("delay", "DRV_MotionRequest", "DRV_MotionRequest", param=0.1, timeout_fault=True,
+              reaction="vcu_timeout"),
+    FaultCase("duplicate", "DRV_MotionRequest", "DRV_MotionRequest"),
+    FaultCase("bitflip", "DRV_MotionRequest", "DRV_MotionRequest", param=5),
+    FaultCase("counter_freeze", "DRV_MotionRequest", "DRV_MotionRequest"),
+    FaultCase("counter_jump", "DRV_MotionRequest", "DRV_MotionRequest", param=3),
+    FaultCase("checksum_value", "DRV_MotionRequest", "DRV_MotionRequest", param=0x00),
+    FaultCase("checksum_freeze", "DRV_MotionRequest", "DRV_MotionRequest"),
+    FaultCase("checksum_random", "DRV_MotionRequest", "DRV_MotionRequest"),
+    FaultCase("checksum_offset", "DRV_MotionRequest", "DRV_MotionRequest", param=1),
+    FaultCase("silence", "VCU", "VCU_WheelCmd_FL", timeout_fault=True, reaction="wheel_timeout"),
+    FaultCase("bus_off", "WHL_FR", "WHL_Status_FR", timeout_fault=True, reaction="vcu_wheel"),
+    # A saturating babbling node starves every other frame: no ECU can report anything during the flood,
+    # so the reaction is the VCU's state at its first frame after the flood (its request timed out).
+    FaultCase("flood", "0x000", "DRV_Steering", param=8, timeout_fault=True, reaction="vcu_timeout",
+              after_window=True),
+]
+
+
+def _drive(bench: Case) -> None:
+    bench.start_scenario(Vehicle="EV4WIS")
+    bench.set("DRV_MotionRequest", DriveMode="PIVOT", PivotX=6.0, PivotY=-1.38, TargetSpeed=1.0)
+    bench.run(1.5)   # wheels at their angles and speeds, no fault
+    bench.expect("no fault before the injection", bench.value("VCU_VehicleState", "VcuFault"), 0)
+
+
+def _reaction(bench: Case, case: FaultCase) -> None:
+    vcu = lambda: bench.value("VCU_VehicleState", "VcuFault")  # noqa: E731
+    speeds_zero = lambda: all(bench.value(f"VCU_WheelCmd_{c}", "WheelSpeedCmd") == 0.0  # noqa: E731
+                              for c in ("FL", "FR", "RL", "RR"))
+    if case.reaction == "vcu_request":
+        bench.eventually("VCU flags REQUEST_INVALID", lambda: vcu() == REQUEST_INVALID, REACTION_S)
+        bench.eventually("VCU commands zero wheel speeds", speeds_zero, REACTION_S)
+    elif case.reaction == "vcu_timeout":
+        bench.eventually("VCU flags REQUEST_TIMEOUT", lambda: vcu() == REQUEST_TIMEOUT, REACTION_S)
+        bench.eventually("VCU commands zero wheel speeds", speeds_zero, REACTION_S)
+    elif case.reaction == "vcu_wheel":
+        bench.eventually("VCU flags WHEEL_FAULT", lambda: vcu() == WHEEL_FAULT, REACTION_S)
+        bench.eventually("VCU commands zero wheel speeds", speeds_zero, REACTION_S)
+    elif case.reaction == "wheel_timeout":
+        bench.eventually("WHL_FL flags CMD_TIMEOUT", lambda: bench.value("WHL_Status_FL", "WheelFault") == CMD_TIMEOUT,
+                         REACTION_S)
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c.kind}:{c.target}")
+def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
+    _drive(bench)
+    fault = bench.inject(case.kind, case.target, after=0.0, duration=case.duration, param=case.param)
+    if case.after_window:
+        bench.run(fault.end - bench.now)
+        bench.wait_until(lambda: not bench.timed_out("VCU_VehicleState"), 0.05)
+    _reaction(bench, case)
+    bench.run(max(0.0, fault.end - bench.now) + 0.3)    # past the window: the bus recovers
+    found = bench.detections(case.watched, since=fault.start)
+    expected_kind = "timeout" if case.timeout_fault else "invalid frame"
+    relevant = [(t, r) for t, r in found if (r == "timeout") == case.timeout_fault]
+    latency = relevant[0][0] - fault.start if relevant else float("nan")
+    bench.expect_true(f"monitor flags {case.watched} ({expected_kind})", bool(relevant),
+                      measured=relevant[0][1] if relevant else "nothing", expected=expected_kind)
+    bench.expect_between("detection latency", latency * 1000, 0.0, case.bound * 1000, unit="ms",
+                         detail=f"fault {fault.describe()}")
+    bench.table("fault", ["fault", "watched message", "detected as", "latency [ms]", "bound [ms]"],
+                [[fault.describe(), case.watched, relevant[0][1] if relevant else "–", latency * 1000,
+                  case.bound * 1000]])
+    bench.eventually("no fault once the window is over", lambda: bench.value("VCU_VehicleState", "VcuFault") == 0,
+                     1.0)
+    bench.plot("VCU fault and FL wheel", [("VCU_VehicleState", "VcuFault"), ("WHL_Status_FL", "WheelFault"),
+                                          ("VCU_WheelCmd_FL", "WheelSpeedCmd")])
+
+
+def test_error_frames_are_counted(bench: Case) -> None:
+    _drive(bench)
+    fault = bench.inject("error_frame", "bus", duration=0.05)
+    bench.run(0.1)
+    found = bench.detections("error frame", since=fault.start)
+    bench.expect("error frames seen", len(found), 50, abs_tol=1)   # one per 1 ms tick for 50 ms
+    bench.expect_between("detection latency", (found[0][0] - fault.start) * 1000 if found else float("nan"),
+                         0.0, TICK * 1000, unit="ms")
