@@ -114,6 +114,7 @@ class Case:
         invalid frame (reason) and every timeout ("timeout"), in time order. `message` may also be
         "error frame" or an unknown identifier as "0x7FF"."""
         since = self.start if since is None else since
+        self._monitor.check_timeouts(self.now)
         found = [(f.t, f.reason) for f in self._monitor.invalid_log if f.message == message and f.t >= since]
         state = self._monitor.by_name.get(message)   # None for "error frame" and unknown identifiers
         if state is not None:

@@ -80,6 +80,9 @@ class Monitor:
                 self.sink(t, arbitration_id, data, direction, False, reason, None, None)
             return False
         codec = state.codec
+        if state.last_valid is not None and not state.timed_out_flag and codec.cycle_time is not None \
+                and t - state.last_valid > TIMEOUT_CYCLES * codec.cycle_time + TIME_EPS:
+            self._time_out(state)   # the gap before this frame was a timeout: record it, resync the counter
         if state.last_seen is not None:
             state.intervals.append(t - state.last_seen)
         state.last_seen = t
@@ -129,15 +132,22 @@ class Monitor:
 
     # -- time ------------------------------------------------------------------------------------
     def check_timeouts(self, now: float) -> None:
-        """Record the start of every timeout; a timed-out message resynchronises its counter."""
+        """Record every timeout that has begun by `now`. Not needed per tick: a timeout is also recorded
+        when the next frame ends it, and its start time is exact either way; queries call this."""
         for state in self.states.values():
             cycle = state.codec.cycle_time
             if cycle is None or state.timed_out_flag or state.last_valid is None:
                 continue
             if now - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
-                state.timed_out_flag = True
-                state.timeouts.append(state.last_valid + TIMEOUT_CYCLES * cycle)
-                state.counter = None
+                self._time_out(state)
+
+    @staticmethod
+    def _time_out(state: MessageState) -> None:
+        cycle = state.codec.cycle_time
+        assert cycle is not None and state.last_valid is not None
+        state.timed_out_flag = True
+        state.timeouts.append(state.last_valid + TIMEOUT_CYCLES * cycle)
+        state.counter = None   # a receiver resynchronises on the first frame after a timeout
 
     # -- queries ---------------------------------------------------------------------------------
     def state(self, message: str) -> MessageState:

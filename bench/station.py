@@ -97,7 +97,6 @@ class Station:
             self._tick_faults(faults, t, dt)
         for frame_id, data in self.restbus.due(tick):
             self.send(t, frame_id, data)
-        self.monitor.check_timeouts(t)
 
     def send(self, t: float, frame_id: int, data: bytes) -> None:
         """Send one frame of the restbus, through the fault plan when there is one."""
