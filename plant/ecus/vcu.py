@@ -38,8 +38,10 @@ YawRateTarget is 0. Recovery is immediate on the next valid request. Never NaN, 
 
 Timing: the control task runs every TASK_PERIOD_S = 5 ms, like an ECU's cyclic task (the commands are
 10 ms frames); a request change reaches the wheel-command values within 5 ms.
-VCU_RotationCentre: the centre steered about, each coordinate clamped to ±CENTRE_AT_INFINITY_M; a
-translation (straight, crab, LATERAL) sends CENTRE_AT_INFINITY_M for both coordinates.
+VCU_RotationCentre: the centre steered about, each coordinate clamped to ±CENTRE_AT_INFINITY_M (the
+DBC's range end, which means "at infinity"). A translation (straight, crab, LATERAL) has its centre at
+infinity to the right of the wheels' common heading θ: the direction (cos θ, −sin θ) scaled until one
+coordinate reaches the range end (straight: (+5242.87, 0); LATERAL at +90°: (0, −5242.87)).
 VCU_VehicleState.VehicleSpeed: the centre speed estimated from the four WHL_Status (least-squares rigid
 fit), signed as TargetSpeed in the active mode; 0 unless all four are received.
 CurvatureAngle: X at the front-axle centre (deg, 0 straight; ±90° in LATERAL, like the wheels).
@@ -59,7 +61,7 @@ from plant.kinematics import (CORNERS, centre_from_axle_angles, classify_centre,
                               rotation, translation, yaw_rate)
 from plant.vehicles import Ev4wisParams
 
-CENTRE_AT_INFINITY_M = 5000.0   # VCU_RotationCentre for "no finite centre" (inside the DBC's ±5242.87 m)
+CENTRE_AT_INFINITY_M = 5242.87  # VCU_RotationCentre range end = centre at infinity (dbc/chassis.dbc comment)
 WHEEL_FAULT_GRACE_S = 0.1       # wheel faults ignored this long after a reset
 TASK_PERIOD_S = 0.005           # the control task's period (an ECU's cyclic task; half the 10 ms command cycle)
 
@@ -268,7 +270,10 @@ class Vcu:
                        YawRateTarget=clamp(yaw, limits.YAW_RATE_TARGET),
                        CurvatureAngle=clamp(held.curvature, limits.CURVATURE_ANGLE), VcuFault=int(fault))
         if held.centre is None:
-            cx = cy = CENTRE_AT_INFINITY_M
+            theta = math.radians(held.angles[0])
+            right = (math.cos(theta), -math.sin(theta))
+            scale = CENTRE_AT_INFINITY_M / max(abs(right[0]), abs(right[1]))
+            cx, cy = right[0] * scale, right[1] * scale
         else:
             bound = (-CENTRE_AT_INFINITY_M, CENTRE_AT_INFINITY_M)
             cx, cy = clamp(held.centre[0], bound), clamp(held.centre[1], bound)
