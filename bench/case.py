@@ -37,6 +37,7 @@ class Case:
             raise BenchError("a test case needs the runner station")
         self._runner = runner
         self._monitor = runner.monitor
+        self._timers: list[_Timer] = []
         self._mark_counts()
 
     def _mark_counts(self) -> None:
@@ -63,6 +64,29 @@ class Case:
         if predicate():
             return True
         return self.session.run_until(self.now + timeout, predicate)
+
+    def every(self, period: float, callback: Callable[[float], None]) -> Callable[[], None]:
+        """Call callback(now) every `period` s of bench time while the bench runs (a test node's timer,
+        e.g. a closed-loop driver model that sets the stimulus from what it reads). Returns a cancel
+        function; every timer of a case ends with the case."""
+        if not period > 0:
+            raise BenchError(f"timer period must be > 0 s, not {period!r}")
+        timer = _Timer(self.now + period, period, callback)
+        self._runner.behaviours.append(timer)
+        self._timers.append(timer)
+
+        def cancel() -> None:
+            if timer in self._runner.behaviours:
+                self._runner.behaviours.remove(timer)
+
+        return cancel
+
+    def close(self) -> None:
+        """End of the case: its timers stop."""
+        for timer in self._timers:
+            if timer in self._runner.behaviours:
+                self._runner.behaviours.remove(timer)
+        self._timers.clear()
 
     # -- stimulus ----------------------------------------------------------------------------------
     def set(self, message: str, **signals: float | int | str) -> None:
@@ -223,6 +247,25 @@ class Case:
 
     def note(self, text: str) -> None:
         self.result.notes.append(text)
+
+
+class _Timer:
+    """A behaviour of the runner station that calls a test's callback periodically."""
+
+    nodes: tuple[str, ...] = ()
+
+    def __init__(self, first: float, period: float, callback: Callable[[float], None]) -> None:
+        self.next = first
+        self.period = period
+        self.callback = callback
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, io: object, t: float, dt: float) -> None:
+        if t + 1e-9 >= self.next:
+            self.next += self.period
+            self.callback(t)
 
 
 def _cell(value: object) -> str:

@@ -77,6 +77,7 @@ def bench(request: pytest.FixtureRequest) -> Iterator[Case]:
     case = run.begin_case(request.node.nodeid, request.node.name)
     request.node.stash[_CASE_KEY] = case
     yield case
+    case.close()
 
 
 @pytest.hookimpl(hookwrapper=True)
