@@ -41,8 +41,9 @@ class Case:
         self._mark_counts()
 
     def _mark_counts(self) -> None:
-        self._interval_marks = {name: len(s.intervals) for name, s in self._monitor.by_name.items()}
-        self._invalid_mark = len(self._monitor.invalid_log)
+        # absolute counts (kept + dropped), so that trimming the monitor's lists never shifts a mark
+        self._interval_marks = {name: s.intervals_dropped + len(s.intervals) for name, s in self._monitor.by_name.items()}
+        self._invalid_mark = self._monitor.invalid_dropped + len(self._monitor.invalid_log)
 
     # -- time --------------------------------------------------------------------------------------
     @property
@@ -165,7 +166,8 @@ class Case:
 
     def invalid_frames(self) -> list[InvalidFrame]:
         """Every invalid frame (checksum, counter, length, range) since the case (or scenario) started."""
-        return self._monitor.invalid_log[self._invalid_mark:]
+        monitor = self._monitor
+        return monitor.invalid_log[max(0, self._invalid_mark - monitor.invalid_dropped):]
 
     # -- checks ------------------------------------------------------------------------------------
     def expect(self, name: str, measured: float, expected: float, *, abs_tol: float = 0.0,
@@ -212,7 +214,7 @@ class Case:
         for name in names:
             state = self._monitor.state(name)
             cycle = state.codec.cycle_time
-            intervals = state.intervals[self._interval_marks.get(name, 0):]
+            intervals = state.intervals[max(0, self._interval_marks.get(name, 0) - state.intervals_dropped):]
             if cycle is None or len(intervals) < min_frames:
                 ok_all &= self._steps.record(f"cycle time {name}", False, f"{len(intervals)} intervals",
                                              f"≥ {min_frames}", "", "s")

@@ -14,9 +14,15 @@ from dataclasses import dataclass, field
 
 from bench import e2e
 from bench.codec import Codebook, MessageCodec
+from bench.errors import BenchError
 
 TIMEOUT_CYCLES = 3   # k-matrix.md: a message not seen for 3 x its cycle time is timed out
 TIME_EPS = 1e-9      # s: bench times are sums of ticks; equal times must compare equal
+# Memory stays flat in long runs: each list keeps at most its cap (trimmed in halves, amortised), and
+# counts what it dropped so that queries reaching before the retained data fail loudly, never silently.
+HISTORY_CAP = 6000       # frames of decoded history per message (60 s at a 10 ms cycle)
+INTERVALS_CAP = 20000    # frame intervals per message for cycle-time statistics (200 s at 10 ms)
+INVALID_CAP = 20000      # invalid-frame records
 
 FrameSink = Callable[[float, int, bytes, str, bool, str, "MessageCodec | None", "Mapping[str, float] | None"], None]
 
@@ -38,6 +44,8 @@ class MessageState:
     timed_out_flag: bool = True
     history_t: list[float] = field(default_factory=list)
     history_v: list[tuple[float, ...]] = field(default_factory=list)
+    intervals_dropped: int = 0
+    history_dropped: int = 0
 
     @property
     def invalid_count(self) -> int:
@@ -63,6 +71,7 @@ class Monitor:
         self.by_name: dict[str, MessageState] = {s.codec.name: s for s in self.states.values()}
         self.unknown_frames = 0
         self.invalid_log: list[InvalidFrame] = []
+        self.invalid_dropped = 0
         self.frames = 0
 
     # -- frames ------------------------------------------------------------------------------
@@ -74,8 +83,8 @@ class Monitor:
         if state is None:
             self.unknown_frames += 1
             reason = "error frame" if is_error else "unknown identifier"
-            self.invalid_log.append(InvalidFrame(t, arbitration_id, "error frame" if is_error else
-                                                 f"0x{arbitration_id:X}", reason))
+            self._invalid(InvalidFrame(t, arbitration_id, "error frame" if is_error else
+                                       f"0x{arbitration_id:X}", reason))
             if self.sink:
                 self.sink(t, arbitration_id, data, direction, False, reason, None, None)
             return False
@@ -85,6 +94,8 @@ class Monitor:
             self._time_out(state)   # the gap before this frame was a timeout: record it, resync the counter
         if state.last_seen is not None:
             state.intervals.append(t - state.last_seen)
+            if len(state.intervals) > 2 * INTERVALS_CAP:
+                state.intervals_dropped += _trim(state.intervals, INTERVALS_CAP)
         state.last_seen = t
         state.frames += 1
         kind = reason = ""
@@ -108,7 +119,7 @@ class Monitor:
         if reason:
             state.invalid[kind] = state.invalid.get(kind, 0) + 1
             state.last_invalid = True
-            self.invalid_log.append(InvalidFrame(t, arbitration_id, codec.name, reason))
+            self._invalid(InvalidFrame(t, arbitration_id, codec.name, reason))
             if self.sink:
                 self.sink(t, arbitration_id, data, direction, False, reason, codec, None)
             return False
@@ -120,6 +131,9 @@ class Monitor:
         if self.keep_history:
             state.history_t.append(t)
             state.history_v.append(tuple(values.values()))
+            if len(state.history_t) > 2 * HISTORY_CAP:
+                _trim(state.history_v, HISTORY_CAP)
+                state.history_dropped += _trim(state.history_t, HISTORY_CAP)
         if self.sink:
             self.sink(t, arbitration_id, data, direction, True, "", codec, values)
         return True
@@ -128,7 +142,12 @@ class Monitor:
         """A frame this station could not send (queue full, bus-off): logged as invalid, never applied."""
         state = self.states.get(arbitration_id)
         name = state.codec.name if state else f"0x{arbitration_id:X}"
-        self.invalid_log.append(InvalidFrame(t, arbitration_id, name, f"send failed: {reason}"))
+        self._invalid(InvalidFrame(t, arbitration_id, name, f"send failed: {reason}"))
+
+    def _invalid(self, record: InvalidFrame) -> None:
+        self.invalid_log.append(record)
+        if len(self.invalid_log) > 2 * INVALID_CAP:
+            self.invalid_dropped += _trim(self.invalid_log, INVALID_CAP)
 
     # -- time ------------------------------------------------------------------------------------
     def check_timeouts(self, now: float) -> None:
@@ -179,6 +198,9 @@ class Monitor:
             state.codec.physical(signal, 0.0)  # raises the clear error
             raise
         ts, vs = state.history_t, state.history_v
+        if state.history_dropped and ts and since < ts[0]:
+            raise BenchError(f"history of {message} since {since:.3f} s was asked, but only the last "
+                             f"{HISTORY_CAP}-{2 * HISTORY_CAP} frames are kept (from {ts[0]:.3f} s): ask for less")
         start = _first_at_or_after(ts, since)
         return ts[start:], [v[index] for v in vs[start:]]
 
@@ -190,7 +212,15 @@ class Monitor:
     @property
     def invalid_frames(self) -> int:
         """Frames that failed a check, unknown identifiers and error frames, and failed sends."""
-        return len(self.invalid_log)
+        return self.invalid_dropped + len(self.invalid_log)
+
+
+def _trim(items: list, keep: int) -> int:
+    """Drop all but the last `keep` items in place; returns how many were dropped."""
+    dropped = len(items) - keep
+    if dropped > 0:
+        del items[:dropped]
+    return max(dropped, 0)
 
 
 def _first_at_or_after(ts: list[float], since: float) -> int:

@@ -79,3 +79,23 @@ def test_arbitrary_frames_never_raise(codebook: Codebook, frame_id: int, data: b
 def test_random_payloads_on_contract_ids_never_raise(codebook: Codebook, frame_id: int, data: bytes) -> None:
     monitor = Monitor(codebook)
     monitor.on_frame(0.0, frame_id, data, "rx")
+
+
+def test_long_runs_keep_memory_bounded_and_say_so(codebook: Codebook, monkeypatch) -> None:
+    import bench.monitor as monitor_module
+    monkeypatch.setattr(monitor_module, "HISTORY_CAP", 50)
+    monkeypatch.setattr(monitor_module, "INTERVALS_CAP", 50)
+    monitor = Monitor(codebook, keep_history=True)
+    frame_id = codebook["VCU_WheelCmd_FL"].frame_id
+    for i, data in enumerate(_frames(codebook, "VCU_WheelCmd_FL", 500)):
+        monitor.on_frame(i * 0.01, frame_id, data, "rx")
+    state = monitor.state("VCU_WheelCmd_FL")
+    assert len(state.history_t) <= 100 and len(state.intervals) <= 100
+    assert state.history_dropped + len(state.history_t) == 500
+    assert state.intervals_dropped + len(state.intervals) == 499
+    t, _ = monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd", since=4.5)
+    assert t[0] == 4.5
+    import pytest
+    from bench.errors import BenchError
+    with pytest.raises(BenchError, match="only the last"):
+        monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd", since=0.0)
