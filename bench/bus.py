@@ -8,6 +8,7 @@ gives the same frame sequence on every run.
 
 from __future__ import annotations
 
+import socket
 from collections import deque
 from typing import Any
 
@@ -52,6 +53,21 @@ class VirtualTimeBus(can.BusABC):
         super().shutdown()
 
 
+#: Bytes of socket receive buffer for udp_multicast: every frame is one datagram (about 1 KiB of kernel
+#: memory each), so the default ~200 KiB holds only ~200 frames, a tenth of a second of a loaded bus; a
+#: receiver that pauses longer (garbage collection, a busy core) would lose frames. The kernel caps the
+#: request at net.core.rmem_max.
+UDP_RECEIVE_BUFFER = 8 * 1024 * 1024
+
+
+def _enlarge_receive_buffer(bus: can.BusABC) -> None:
+    """python-can's UdpMulticastBus has no option for it: set SO_RCVBUF on its socket (private attribute,
+    isolated here; without it the bus works, with the default buffer)."""
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is not None:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RECEIVE_BUFFER)
+
+
 def is_virtual(interface: str) -> bool:
     return interface in (VIRTUAL, "bench_virtual")
 
@@ -69,7 +85,10 @@ def open_bus(interface: str, channel: str | None) -> can.BusABC:
     if not channel:
         raise ConfigError(f"interface {interface!r} needs a channel (--channel)")
     try:
-        return can.Bus(interface=interface, channel=channel, **kwargs)
+        bus = can.Bus(interface=interface, channel=channel, **kwargs)
+        if interface == "udp_multicast":
+            _enlarge_receive_buffer(bus)
+        return bus
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         raise ConfigError(f"cannot open interface {interface!r} channel {channel!r}: {exc}") from None
     except KeyError:
