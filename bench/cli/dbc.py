@@ -1,5 +1,11 @@
 """`bench dbc [FILE ...]`: list what a DBC carries (ids, senders, cycle times, signals with units),
-so an engineer can check a database against k-matrix.md at a glance without opening an editor."""
+so an engineer can check a database against k-matrix.md at a glance without opening an editor.
+
+`bench dbc check [FILE ...]`: check databases against the bench's needs (`bench.dbccheck`) and print
+every finding with its file and line. Exit 0 when no file has an error (warnings allowed), 1 when one
+has, 2 when a file cannot be read. `check` is recognised as the first word, so a file named "check"
+is listed with `bench dbc ./check`.
+"""
 
 from __future__ import annotations
 
@@ -12,25 +18,58 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from bench import paths
+from bench import dbccheck, paths
 from bench.codec import load_dbc
+from bench.errors import ConfigError, DatabaseError
+
+CHECK = "check"
+E2E_HELP = ("check only: the end-to-end layout (AliveCounter, Checksum) is an error (required), a warning "
+            "(optional), or required when the file declares either signal (auto, the default)")
 
 
 def register(subparsers: Any) -> None:
     """Add the `dbc` parser (called by `bench.cli.build_parser`)."""
     parser = subparsers.add_parser(
         "dbc",
-        help="list the messages and signals of DBC files",
-        description="List id, name, senders, cycle time and signals of every message. "
+        help="list the messages and signals of DBC files, or check them (bench dbc check FILE...)",
+        usage="bench dbc [FILE ...]\n       bench dbc check [--e2e {auto,required,optional}] [FILE ...]",
+        description="List id, name, senders, cycle time and signals of every message; "
+        "'bench dbc check FILE...' checks them against the bench's needs instead (cycle and send types, "
+        "layout, ranges, start values, end-to-end layout, value tables) and prints every finding with its line. "
         "Without FILE: the contract (chassis.dbc) and the bench's own database (bench.dbc).",
     )
-    parser.add_argument("files", nargs="*", type=Path, metavar="FILE", help="DBC file(s) to list")
+    # REMAINDER, parsed again in `run`: so that options may follow the words (`check --e2e required FILE`)
+    parser.add_argument("files", nargs=argparse.REMAINDER, metavar="[check] FILE",
+                        help="DBC file(s); a first word 'check' checks them instead of listing them")
+    parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
     parser.set_defaults(handler=run)
+
+
+class _WordsParser(argparse.ArgumentParser):
+    """Parses the words after `bench dbc`; a mistake is a ConfigError (one line, exit 2), not an exit."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise ConfigError(message)
+
+
+def _words(prog: str, words: list[str], with_e2e: bool) -> argparse.Namespace:
+    parser = _WordsParser(prog=prog, add_help=prog.endswith("check"))
+    parser.add_argument("files", nargs="*", metavar="FILE")
+    if with_e2e:
+        parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
+    return parser.parse_intermixed_args(words)
 
 
 def run(args: argparse.Namespace) -> int:
     """Load every file first (strict), so a bad file fails before anything is printed."""
-    files: list[Path] = list(args.files) or [paths.CHASSIS_DBC, paths.BENCH_DBC]
+    words: list[str] = list(args.files)
+    if words and words[0] == CHECK:
+        checked = _words("bench dbc check", words[1:], with_e2e=True)
+        return check([Path(f) for f in checked.files], checked.e2e or args.e2e or "auto")
+    if args.e2e is not None:
+        raise ConfigError("--e2e: only for 'bench dbc check FILE...'")
+    listed = _words("bench dbc", words, with_e2e=False)
+    files: list[Path] = [Path(f) for f in listed.files] or [paths.CHASSIS_DBC, paths.BENCH_DBC]
     databases = [(path, load_dbc(path)) for path in files]  # raises DatabaseError naming the file
     console = Console()
     for path, database in databases:
@@ -68,3 +107,25 @@ def _signals(message: Message) -> Text:
     """Text, not markup: '[deg]' would otherwise be read as a rich style tag."""
     lines = [f"{s.name} [{s.unit or '-'}]" for s in sorted(message.signals, key=lambda s: s.start)]
     return Text("\n".join(lines))
+
+
+def check(files: list[Path], e2e_mode: str) -> int:
+    """Print every finding as FILE:LINE, then one summary line per file (compiler style, so editors jump to it)."""
+    files = files or [paths.CHASSIS_DBC, paths.BENCH_DBC]
+    out = Console(soft_wrap=True, highlight=False)
+    err = Console(stderr=True, soft_wrap=True, highlight=False)
+    unreadable = rejected = 0
+    for outcome in dbccheck.check_files(files, e2e_mode):
+        if isinstance(outcome, DatabaseError):
+            unreadable += 1
+            err.print(Text.assemble(("bench dbc check: error: ", "bold red"), str(outcome)))
+            continue
+        for finding in outcome.findings:
+            style = "red" if finding.severity == dbccheck.ERROR else "yellow"
+            out.print(Text(dbccheck.format_finding(outcome, finding), style=style))
+        rejected += not outcome.accepted
+        out.print(Text(dbccheck.summary_line(outcome), style="bold green" if outcome.accepted else "bold red"))
+    if len(files) > 1:
+        out.print(Text(f"{len(files)} files: {len(files) - rejected - unreadable} accepted, {rejected} rejected, "
+                       f"{unreadable} unreadable"))
+    return 2 if unreadable else (1 if rejected else 0)

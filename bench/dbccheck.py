@@ -1,0 +1,591 @@
+"""`bench dbc check`: does a DBC meet the bench's needs? Every finding names its line in the file.
+
+Why a checker of its own rather than cantools' strict load: strict loading stops at the first problem
+and knows nothing of what the bench relies on — the restbus sends only messages with a cycle time,
+encodes with a mask (a range wider than the raw field wraps silently), starts every signal at its
+`GenSigStartValue` (a start value outside the range stops the run at the first send), writes the
+end-to-end bytes 6-7 of every message and its monitor checks them (k-matrix.md "End-to-end protection").
+
+cantools gives no line numbers for parsed objects, so the text is scanned for `BO_ <id> <name>`,
+the ` SG_ <name> ` lines of that message's block, and the `BA_`/`VAL_` lines naming them.
+
+Severities: an *error* is something the bench would get wrong or refuse (a database with errors is
+rejected); a *warning* is something the contract asks for (k-matrix.md: cycle time, send type, unit,
+range, start value and comment on everything; value tables for enumerations) whose absence the bench
+survives.
+
+End-to-end layout (`--e2e`): `required` makes a missing or misplaced AliveCounter (4 bits at bit 48,
+Intel, unsigned) or Checksum (8 bits at bit 56) an error, `optional` a warning; `auto` (the default)
+is `required` when the file declares a signal named AliveCounter or Checksum anywhere (it means to
+follow the contract) and `optional` otherwise (a foreign database, e.g. a customer's k-matrix).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cantools
+from cantools.database.can import Database, Message, Signal
+
+from bench import e2e
+from bench.codec import RANGE_SLACK
+from bench.errors import DatabaseError
+
+ERROR, WARNING = "error", "warning"
+E2E_MODES = ("auto", "required", "optional")
+FRAME_LENGTH = 8                     # k-matrix.md: classical CAN, 8-byte frames
+COUNTER_NAME, CHECKSUM_NAME = "AliveCounter", "Checksum"
+COUNTER_START, COUNTER_LENGTH = e2e.COUNTER_BYTE * 8, 4
+CHECKSUM_START, CHECKSUM_LENGTH = e2e.CHECKSUM_BYTE * 8, 8
+MAX_QUOTE = 160                      # characters of a parser message kept in a finding
+MAX_SIGNAL_BITS = 64                 # the longest integer or float signal a CAN database can mean
+MAX_FRAME_BYTES = 64                 # CAN FD; cantools' loader is slow in larger numbers (quadratic in the start bit)
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One problem: `kind` is a short stable code (tests and scripts match on it), `text` says what is wrong."""
+
+    severity: str
+    kind: str
+    text: str
+    line: int | None = None
+    message: str | None = None
+    signal: str | None = None
+
+    def where(self) -> str:
+        if self.message and self.signal:
+            return f"{self.message}.{self.signal}"
+        return self.message or ""
+
+
+@dataclass
+class CheckResult:
+    """The findings of one file, sorted by line; `accepted` when none is an error."""
+
+    path: Path
+    findings: list[Finding] = field(default_factory=list)
+    messages: int = 0
+    signals: int = 0
+    encoding: str = "utf-8"
+    e2e: str = "optional"
+
+    @property
+    def errors(self) -> list[Finding]:
+        return [f for f in self.findings if f.severity == ERROR]
+
+    @property
+    def warnings(self) -> list[Finding]:
+        return [f for f in self.findings if f.severity == WARNING]
+
+    @property
+    def accepted(self) -> bool:
+        return not self.errors
+
+
+_Add = Callable[..., None]   # add(severity, kind, text, line=None): a finding about the current object
+
+
+# -- reading -----------------------------------------------------------------------------------------
+def read_text(path: Path) -> tuple[str, str]:
+    """(text, encoding): UTF-8 when the bytes are valid UTF-8, else cp1252 (what DBC editors write,
+    and cantools' default); bytes undefined in cp1252 become U+FFFD rather than failing."""
+    try:
+        raw = path.read_bytes()
+    except IsADirectoryError:
+        raise DatabaseError(f"{path}: is a folder, not a DBC file") from None
+    except OSError as exc:
+        raise DatabaseError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    try:
+        return raw.decode("utf-8"), "utf-8"
+    except UnicodeDecodeError:
+        return raw.decode("cp1252", errors="replace"), "cp1252"
+
+
+# -- where things are in the text --------------------------------------------------------------------
+_BO = re.compile(r"^\s*BO_\s+(\d+)\s+([A-Za-z0-9_]+)\s*:(?:\s*(\d+))?")
+_SG = re.compile(r"^\s*SG_\s+([A-Za-z0-9_]+)(?:[^:]*:\s*(\d+)\s*\|\s*(\d+))?")
+_KEYWORD = re.compile(r"^\s*([A-Z][A-Z0-9_]*)")
+_BA_MSG = re.compile(r'^\s*BA_\s+"([A-Za-z0-9_]+)"\s+BO_\s+(\d+)\s')
+_BA_SIG = re.compile(r'^\s*BA_\s+"([A-Za-z0-9_]+)"\s+SG_\s+(\d+)\s+([A-Za-z0-9_]+)')
+_VAL = re.compile(r"^\s*VAL_\s+(\d+)\s+([A-Za-z0-9_]+)(.*)$")
+_PAIR = re.compile(r'(-?\d+)\s+"((?:[^"\\]|\\.)*)"')
+_SYNTAX_LINE = re.compile(r"\bline (\d+)")
+_IN_MESSAGE = re.compile(r"in message ([A-Za-z0-9_]+)")
+
+
+@dataclass
+class _ValueTableText:
+    line: int
+    pairs: list[tuple[int, str]]
+
+
+class _Lines:
+    """Line numbers (1-based, counted on '\\n' as cantools' parser does) of the definitions in the text."""
+
+    def __init__(self, text: str) -> None:
+        self.message: dict[str, int] = {}
+        self.block: dict[tuple[int, str], int] = {}      # (DBC id, name) of a BO_ line -> line
+        self.message_by_id: dict[int, int] = {}
+        self.name_by_id: dict[int, str] = {}
+        self.signal: dict[tuple[str, str], int] = {}
+        self.message_attr: dict[tuple[int, str], int] = {}
+        self.signal_attr: dict[tuple[int, str, str], int] = {}
+        self.value_tables: dict[tuple[int, str], _ValueTableText] = {}
+        self.absurd: list[Finding] = []   # numbers no CAN frame can have (cantools would take minutes on them)
+        current: str | None = None
+        for number, line in enumerate(text.split("\n"), start=1):
+            if (m := _BO.match(line)) is not None:
+                current = m.group(2)
+                if m.group(3) is not None and int(m.group(3)) > MAX_FRAME_BYTES:
+                    self.absurd.append(Finding(ERROR, "frame-length", f"length {m.group(3)} bytes: a CAN frame has at "
+                                               f"most {MAX_FRAME_BYTES}", number, current))
+                self.message.setdefault(current, number)
+                self.block.setdefault((int(m.group(1)), current), number)
+                self.message_by_id.setdefault(int(m.group(1)), number)
+                self.name_by_id.setdefault(int(m.group(1)), current)
+            elif (m := _SG.match(line)) is not None:
+                if current is not None:
+                    self.signal.setdefault((current, m.group(1)), number)
+                if m.group(2) is not None and max(int(m.group(2)), int(m.group(3))) >= 8 * MAX_FRAME_BYTES:
+                    self.absurd.append(Finding(ERROR, "fit", f"{m.group(3)} bits from bit {m.group(2)}: beyond any "
+                                               f"CAN frame ({8 * MAX_FRAME_BYTES} bits)", number, current,
+                                               m.group(1)))
+            elif (m := _KEYWORD.match(line)) is not None:
+                current = None   # any other statement ends the message block
+                if (a := _BA_MSG.match(line)) is not None:
+                    self.message_attr.setdefault((int(a.group(2)), a.group(1)), number)
+                elif (a := _BA_SIG.match(line)) is not None:
+                    self.signal_attr.setdefault((int(a.group(2)), a.group(3), a.group(1)), number)
+                elif (v := _VAL.match(line)) is not None:
+                    pairs = [(int(raw), name) for raw, name in _PAIR.findall(v.group(3))]
+                    self.value_tables.setdefault((int(v.group(1)), v.group(2)), _ValueTableText(number, pairs))
+
+    def of_message(self, message: Message) -> int | None:
+        """By id and name (two messages may share either), else by id (cantools may show a long name)."""
+        dbc_id = _dbc_id(message)
+        line = self.block.get((dbc_id, message.name))
+        if line is None:
+            line = self.message_by_id.get(dbc_id)
+        return line if line is not None else self.message.get(message.name)
+
+    def of_signal(self, message: Message, signal: Signal) -> int | None:
+        name = self._block_name(message)
+        line = self.signal.get((name, signal.name))
+        return line if line is not None else self.of_message(message)
+
+    def _block_name(self, message: Message) -> str:
+        """The name in the BO_ line (cantools may show a long name from SystemMessageLongSymbol)."""
+        if (_dbc_id(message), message.name) in self.block:
+            return message.name
+        return self.name_by_id.get(_dbc_id(message), message.name)
+
+
+def _dbc_id(message: Message) -> int:
+    return message.frame_id | (0x80000000 if message.is_extended_frame else 0)
+
+
+# -- the check ---------------------------------------------------------------------------------------
+def check_file(path: Path | str, e2e_mode: str = "auto") -> CheckResult:
+    """Check one DBC file; DatabaseError only when the file cannot be read at all."""
+    path = Path(path)
+    text, encoding = read_text(path)
+    result = check_text(text, path, e2e_mode)
+    result.encoding = encoding
+    return result
+
+
+def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = "auto") -> CheckResult:
+    """Check DBC text; never raises on any text (every problem is a finding)."""
+    if e2e_mode not in E2E_MODES:
+        raise ValueError(f"e2e mode must be one of {', '.join(E2E_MODES)}, got {e2e_mode!r}")
+    result = CheckResult(path=Path(path))
+    lines = _Lines(text)
+    findings = result.findings
+    if lines.absurd:   # reported alone: loading such a file can take cantools minutes
+        findings.extend(lines.absurd)
+        return _sorted(result)
+    database, strict_error = _load(text, findings)
+    if database is None:
+        return _sorted(result)
+    messages = list(database.messages)
+    result.messages = len(messages)
+    result.signals = sum(len(m.signals) for m in messages)
+    declares_e2e = any(s.name in (COUNTER_NAME, CHECKSUM_NAME) for m in messages for s in m.signals)
+    required = e2e_mode == "required" or (e2e_mode == "auto" and declares_e2e)
+    result.e2e = "required" if required else "optional"
+    if not messages:
+        findings.append(Finding(WARNING, "empty", "no messages: nothing for the bench to send or check", 1))
+    _check_duplicates(messages, lines, findings)
+    attribute_defaults = _attribute_defaults(database)
+    for message in messages:
+        _check_message(message, lines, attribute_defaults, required, findings)
+    if messages and not required and not declares_e2e:
+        findings.append(Finding(
+            WARNING, "e2e", "no message carries the contract's end-to-end layout (AliveCounter 4 bits at bit 48, "
+            "Checksum 8 bits at bit 56): the bench writes bytes 6-7 of every frame it sends and judges a "
+            "received frame invalid unless byte 7 is the contract's CRC-8", 1))
+    if strict_error is not None:
+        _add_strict_error(strict_error, lines, findings)
+    return _sorted(result)
+
+
+def _sorted(result: CheckResult) -> CheckResult:
+    result.findings.sort(key=lambda f: (f.line or 0, f.severity != ERROR, f.kind))
+    return result
+
+
+def _load(text: str, findings: list[Finding]) -> tuple[Database | None, Exception | None]:
+    """Strict first (what the bench does); when that fails, non-strict to check the rest."""
+    strict_error: Exception | None = None
+    try:
+        database = cantools.database.load_string(text, database_format="dbc", strict=True)
+        if isinstance(database, Database):
+            return database, None
+    except Exception as exc:  # noqa: BLE001 - cantools raises many types; each is a finding
+        strict_error = exc
+    try:
+        database = cantools.database.load_string(text, database_format="dbc", strict=False)
+    except Exception as exc:  # noqa: BLE001
+        findings.append(_parse_finding(exc, text))
+        return None, None
+    if not isinstance(database, Database):
+        findings.append(Finding(ERROR, "load", "not a CAN database", 1))
+        return None, None
+    return database, strict_error
+
+
+def _clean(exc: BaseException) -> str:
+    """cantools wraps parser errors as 'DBC: "..."'; keep the inner text, shortened, on one line."""
+    text = str(exc) or type(exc).__name__
+    if text.startswith('DBC: "') and text.endswith('"'):
+        text = text[6:-1]
+    text = " ".join(text.split())
+    return text if len(text) <= MAX_QUOTE else text[: MAX_QUOTE - 1] + "…"
+
+
+def _parse_finding(exc: BaseException, text: str) -> Finding:
+    message = _clean(exc)
+    match = _SYNTAX_LINE.search(message)
+    line = int(match.group(1)) if match else None
+    if line is None:
+        named = _IN_MESSAGE.search(message)
+        if named is not None:
+            line = _Lines(text).message.get(named.group(1))
+    kind = "syntax" if "syntax" in message.lower() else "load"
+    return Finding(ERROR, kind, f"cannot load: {message}", line)
+
+
+def _add_strict_error(exc: Exception, lines: _Lines, findings: list[Finding]) -> None:
+    """Report cantools' strict-load error unless one of our own errors on that message says the same."""
+    message = _clean(exc)
+    named = _IN_MESSAGE.search(message)
+    name = named.group(1) if named else None
+    covered = {"overlap", "fit", "signal-length", "frame-id"}
+    if name and any(f.severity == ERROR and f.message == name and f.kind in covered for f in findings):
+        return
+    findings.append(Finding(ERROR, "load", f"cantools' strict load fails: {message}",
+                            lines.message.get(name) if name else None, name))
+
+
+def _attribute_defaults(database: Database) -> dict[str, object]:
+    specifics = getattr(database, "dbc", None)
+    definitions = getattr(specifics, "attribute_definitions", None) or {}
+    return {name: d.default_value for name, d in definitions.items()}
+
+
+def _check_duplicates(messages: list[Message], lines: _Lines, findings: list[Finding]) -> None:
+    seen_id: dict[tuple[int, bool], str] = {}
+    seen_name: set[str] = set()
+    for message in messages:
+        key = (message.frame_id, message.is_extended_frame)
+        if key in seen_id:
+            findings.append(Finding(ERROR, "duplicate-id", f"identifier 0x{message.frame_id:X} is also "
+                                    f"message {seen_id[key]}", lines.of_message(message), message.name))
+        seen_id.setdefault(key, message.name)
+        if message.name in seen_name:
+            findings.append(Finding(ERROR, "duplicate-name", "a second message of this name",
+                                    lines.of_message(message), message.name))
+        seen_name.add(message.name)
+
+
+# -- one message -------------------------------------------------------------------------------------
+def _check_message(message: Message, lines: _Lines, defaults: dict[str, object], e2e_required: bool,
+                   findings: list[Finding]) -> None:
+    line = lines.of_message(message)
+    name = message.name
+
+    def add(severity: str, kind: str, text: str, at: int | None = None) -> None:
+        findings.append(Finding(severity, kind, text, at or line, name))
+
+    if message.is_extended_frame:
+        add(ERROR, "frame-id", f"extended (29-bit) identifier 0x{message.frame_id:X}: the bench sends and "
+            "monitors 11-bit identifiers only")
+    if message.length != FRAME_LENGTH:
+        add(ERROR, "frame-length", f"length {message.length} byte{'s' * (message.length != 1)}: the bench sends "
+            "classical 8-byte frames and writes the AliveCounter and Checksum into bytes 6 and 7 of every message")
+    if message.is_multiplexed():
+        add(ERROR, "multiplex", "multiplexed message: the bench's codec and monitor need every signal in "
+            "every frame")
+    if not message.senders:
+        add(WARNING, "sender", "no sender node: no node of the bench will simulate it")
+    if not message.comment:
+        add(WARNING, "comment", "no comment")
+    _check_timing(message, lines, defaults, add)
+    _check_layout(message, lines, findings)
+    for signal in message.signals:
+        _check_signal(message, signal, lines, findings)
+    _check_e2e(message, lines, e2e_required, findings)
+
+
+def _attribute(message: Message, name: str, defaults: dict[str, object]) -> tuple[object, bool]:
+    """(value, explicit): the message's own attribute, else the definition's default."""
+    attributes = message.dbc.attributes if message.dbc is not None else {}
+    if name in attributes:
+        return attributes[name].value, True
+    return defaults.get(name), False
+
+
+def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], add: _Add) -> None:
+    dbc_id = _dbc_id(message)
+    cycle, explicit = _attribute(message, "GenMsgCycleTime", defaults)
+    at = lines.message_attr.get((dbc_id, "GenMsgCycleTime"))
+    if cycle is None:
+        add(ERROR, "cycle-time", "no GenMsgCycleTime: the restbus cannot send it periodically")
+    elif not isinstance(cycle, (int, float)) or not math.isfinite(cycle) or cycle <= 0:
+        origin = "" if explicit else " (the attribute's default; the message sets none)"
+        add(ERROR, "cycle-time", f"GenMsgCycleTime {cycle!r}{origin} is not a positive number of ms: "
+            "the restbus would never send it", at)
+    send_type = message.send_type
+    at = lines.message_attr.get((dbc_id, "GenMsgSendType"))
+    if send_type is None:
+        add(ERROR, "send-type", "no GenMsgSendType")
+    elif "cyclic" not in str(send_type).lower():
+        add(WARNING, "send-type", f"GenMsgSendType {send_type!r} is not cyclic: the restbus sends every "
+            "message at its cycle time", at)
+
+
+def _bits(signal: Signal) -> list[int]:
+    """Absolute bit numbers (byte * 8 + bit in byte) the signal occupies; Motorola counts down the sawtooth."""
+    if signal.byte_order == "little_endian":
+        return list(range(signal.start, signal.start + signal.length))
+    bits, position = [], signal.start
+    for _ in range(signal.length):
+        bits.append(position)
+        position = position + 15 if position % 8 == 0 else position - 1
+    return bits
+
+
+def _exclusive(a: Signal, b: Signal) -> bool:
+    """Two signals that are never in the same frame (different values of one multiplexer) may share bits."""
+    if a.multiplexer_signal is None or b.multiplexer_signal is None:
+        return False
+    if a.multiplexer_signal != b.multiplexer_signal:
+        return True  # cascaded multiplexing: not judged here (the message is reported as multiplexed)
+    return not set(a.multiplexer_ids or ()) & set(b.multiplexer_ids or ())
+
+
+def _check_layout(message: Message, lines: _Lines, findings: list[Finding]) -> None:
+    frame_bits = message.length * 8
+    owner: dict[int, Signal] = {}
+    reported: set[tuple[str, str]] = set()
+    for signal in message.signals:
+        line = lines.of_signal(message, signal)
+        if not 0 < signal.length <= MAX_SIGNAL_BITS:
+            findings.append(Finding(ERROR, "signal-length", f"length {signal.length} bits: a signal has 1 to "
+                                    f"{MAX_SIGNAL_BITS}", line, message.name, signal.name))
+            continue
+        bits = _bits(signal)
+        outside = [b for b in bits if not 0 <= b < frame_bits]
+        if outside:
+            findings.append(Finding(ERROR, "fit", f"{signal.length} bits from bit {signal.start} "
+                                    f"({signal.byte_order.replace('_', '-')}) do not fit in the "
+                                    f"{message.length}-byte frame", line, message.name, signal.name))
+        for bit in bits:
+            other = owner.get(bit)
+            if other is None:
+                owner[bit] = signal
+            elif not _exclusive(signal, other) and (other.name, signal.name) not in reported:
+                reported.add((other.name, signal.name))
+                shared = sorted(set(bits) & set(_bits(other)))
+                findings.append(Finding(ERROR, "overlap", f"overlaps {other.name} in bit(s) "
+                                        f"{_ranges(shared)}", line, message.name, signal.name))
+
+
+def _ranges(bits: list[int]) -> str:
+    parts, start = [], None
+    for i, bit in enumerate(bits):
+        if start is None:
+            start = bit
+        if i + 1 == len(bits) or bits[i + 1] != bit + 1:
+            parts.append(str(start) if start == bit else f"{start}-{bit}")
+            start = None
+    return ", ".join(parts)
+
+
+# -- one signal --------------------------------------------------------------------------------------
+def _raw_limits(signal: Signal) -> tuple[int, int]:
+    if signal.is_signed:
+        return -(1 << (signal.length - 1)), (1 << (signal.length - 1)) - 1
+    return 0, (1 << signal.length) - 1
+
+
+def _g(value: float) -> str:
+    return f"{value:.10g}"
+
+
+def _check_signal(message: Message, signal: Signal, lines: _Lines, findings: list[Finding]) -> None:
+    line = lines.of_signal(message, signal)
+    dbc_id = _dbc_id(message)
+
+    def add(severity: str, kind: str, text: str, at: int | None = None) -> None:
+        findings.append(Finding(severity, kind, text, at or line, message.name, signal.name))
+
+    if not signal.unit:
+        add(WARNING, "unit", "no unit")
+    if not signal.comment:
+        add(WARNING, "comment", "no comment")
+    if not 0 < signal.length <= MAX_SIGNAL_BITS:
+        return  # reported by the layout check; nothing below is meaningful
+    scale, offset = float(signal.scale), float(signal.offset)
+    if signal.is_float and signal.length not in (32, 64):
+        add(ERROR, "float", f"a float signal must be 32 or 64 bits, not {signal.length}")
+    if scale == 0 or not math.isfinite(scale) or not math.isfinite(offset):
+        add(ERROR, "scale", f"scale {_g(scale)} / offset {_g(offset)}: every raw value would decode alike"
+            if scale == 0 else f"scale {_g(scale)} / offset {_g(offset)} is not a finite number")
+        return
+    slack = RANGE_SLACK * abs(scale)
+    minimum, maximum = signal.minimum, signal.maximum
+    if minimum is None or maximum is None:
+        add(WARNING, "range", "no range ([0|0]): the monitor cannot judge its values")
+    elif minimum > maximum:
+        add(ERROR, "range-order", f"range [{_g(minimum)}|{_g(maximum)}]: minimum above maximum")
+    elif not signal.is_float:
+        raw_lo, raw_hi = _raw_limits(signal)
+        lo, hi = sorted((raw_lo * scale + offset, raw_hi * scale + offset))
+        tol = slack + 1e-9 * max(1.0, abs(lo), abs(hi))
+        if minimum < lo - tol or maximum > hi + tol:
+            kind = "signed" if signal.is_signed else "unsigned"
+            add(ERROR, "range-raw", f"range [{_g(minimum)}|{_g(maximum)}] is wider than the {signal.length}-bit "
+                f"{kind} raw field can carry at scale {_g(scale)}, offset {_g(offset)}: [{_g(lo)}|{_g(hi)}]")
+        if maximum > minimum and maximum - minimum < abs(scale) * (1 - 1e-9):
+            add(WARNING, "resolution", f"range [{_g(minimum)}|{_g(maximum)}] is narrower than one step "
+                f"({_g(scale)})")
+    _check_start_value(message, signal, scale, offset, slack, lines.signal_attr.get(
+        (dbc_id, signal.name, "GenSigStartValue")), add)
+    _check_value_table(message, signal, lines, add)
+
+
+def _check_start_value(message: Message, signal: Signal, scale: float, offset: float, slack: float,
+                       at: int | None, add: _Add) -> None:
+    """The restbus starts at raw GenSigStartValue (raw 0 when absent), checked against the range at send."""
+    raw = signal.raw_initial
+    if raw is None:
+        add(WARNING, "start-value", "no GenSigStartValue: the bench starts it at raw 0")
+        raw, origin = 0, "raw 0 (no GenSigStartValue)"
+    else:
+        origin = f"GenSigStartValue {raw}"
+    if not isinstance(raw, (int, float)) or not math.isfinite(raw):
+        add(ERROR, "start-value", f"{origin} is not a finite number", at)
+        return
+    if not signal.is_float:
+        raw_lo, raw_hi = _raw_limits(signal)
+        if not raw_lo <= raw <= raw_hi:
+            add(ERROR, "start-value", f"{origin} does not fit the {signal.length}-bit raw field "
+                f"[{raw_lo}|{raw_hi}]", at)
+            return
+    value = raw * scale + offset
+    minimum, maximum = signal.minimum, signal.maximum
+    if (minimum is not None and value < minimum - slack) or (maximum is not None and value > maximum + slack):
+        unit = f" {signal.unit}" if signal.unit else ""
+        add(ERROR, "start-value", f"{origin} is {_g(value)}{unit}, outside the range "
+            f"[{_g(minimum if minimum is not None else -math.inf)}|"
+            f"{_g(maximum if maximum is not None else math.inf)}]: the first frame would stop the run", at)
+
+
+def _check_value_table(message: Message, signal: Signal, lines: _Lines, add: _Add) -> None:
+    table_text = lines.value_tables.get((_dbc_id(message), signal.name))
+    at = table_text.line if table_text else None
+    if table_text is not None and not table_text.pairs:
+        add(WARNING, "value-table", "empty value table (VAL_ without entries)", at)
+        return
+    if table_text is not None:
+        raws = [raw for raw, _ in table_text.pairs]
+        repeated = sorted({r for r in raws if raws.count(r) > 1})
+        if repeated:
+            add(WARNING, "value-table", f"value(s) {', '.join(map(str, repeated))} named twice: the last "
+                "name wins", at)
+    choices = signal.choices or {}
+    if not choices:
+        return
+    names = [str(n) for n in choices.values()]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        add(WARNING, "value-table", f"name(s) {', '.join(twice)} stand for more than one value: setting "
+            "it by name is ambiguous", at)
+    if not signal.is_float:
+        raw_lo, raw_hi = _raw_limits(signal)
+        outside = [int(raw) for raw in choices if not raw_lo <= int(raw) <= raw_hi]
+        if outside:
+            add(WARNING, "value-table", f"value(s) {', '.join(map(str, outside))} do not fit the "
+                f"{signal.length}-bit raw field [{raw_lo}|{raw_hi}]", at)
+    if float(signal.scale) != 1 or float(signal.offset) != 0:
+        add(WARNING, "value-table", f"value table on a scaled signal (scale {_g(float(signal.scale))}, offset "
+            f"{_g(float(signal.offset))}): the bench sets a name's number as the physical value", at)
+
+
+# -- end-to-end layout -------------------------------------------------------------------------------
+def _check_e2e(message: Message, lines: _Lines, required: bool, findings: list[Finding]) -> None:
+    severity = ERROR if required else WARNING
+    by_name = {s.name: s for s in message.signals}
+    for name, start, length in ((COUNTER_NAME, COUNTER_START, COUNTER_LENGTH),
+                                (CHECKSUM_NAME, CHECKSUM_START, CHECKSUM_LENGTH)):
+        signal = by_name.get(name)
+        if signal is None:
+            if required:
+                findings.append(Finding(severity, "e2e", f"no {name} signal ({length} bits at bit {start}, "
+                                        "k-matrix.md end-to-end protection)", lines.of_message(message),
+                                        message.name))
+            continue
+        wrong = []
+        if signal.start != start or signal.length != length:
+            wrong.append(f"is {signal.length} bits at bit {signal.start}")
+        if signal.byte_order != "little_endian":
+            wrong.append("is big-endian")
+        if signal.is_signed or signal.is_float:
+            wrong.append("is signed" if signal.is_signed else "is a float")
+        if float(signal.scale) != 1 or float(signal.offset) != 0:
+            wrong.append(f"has scale {_g(float(signal.scale))}, offset {_g(float(signal.offset))}")
+        if wrong:
+            findings.append(Finding(severity, "e2e", f"{'; '.join(wrong)}: the contract puts it as {length} "
+                                    f"unsigned Intel bits at bit {start}, scale 1", lines.of_signal(message, signal),
+                                    message.name, signal.name))
+
+
+def summary_line(result: CheckResult) -> str:
+    errors, warnings = len(result.errors), len(result.warnings)
+    verdict = "accepted" if result.accepted else "rejected"
+    return (f"{result.path}: {verdict}: {errors} error{'s' * (errors != 1)}, {warnings} "
+            f"warning{'s' * (warnings != 1)} ({result.messages} messages, {result.signals} signals, "
+            f"end-to-end {result.e2e})")
+
+
+def format_finding(result: CheckResult, finding: Finding) -> str:
+    where = f"{result.path}:{finding.line}" if finding.line else f"{result.path}"
+    subject = f" {finding.where()}:" if finding.where() else ""
+    return f"{where}: {finding.severity} [{finding.kind}]{subject} {finding.text}"
+
+
+def check_files(paths: Iterable[Path | str], e2e_mode: str = "auto") -> list[CheckResult | DatabaseError]:
+    """Each file's result, or the DatabaseError of a file that cannot be read."""
+    out: list[CheckResult | DatabaseError] = []
+    for path in paths:
+        try:
+            out.append(check_file(path, e2e_mode))
+        except DatabaseError as exc:
+            out.append(exc)
+    return out
