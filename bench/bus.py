@@ -76,6 +76,9 @@ def open_bus(interface: str, channel: str | None) -> can.BusABC:
     """Open a bus by python-can interface name; errors name the interface and channel."""
     if is_virtual(interface):
         return VirtualTimeBus(channel=channel or "bench")
+    if interface not in can.interfaces.VALID_INTERFACES:
+        raise ConfigError(f"unknown python-can interface {interface!r} "
+                          f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
     kwargs: dict[str, Any] = {}
     if interface == "udp_multicast":
         kwargs["hop_limit"] = UDP_MULTICAST_HOP_LIMIT
@@ -91,6 +94,3 @@ def open_bus(interface: str, channel: str | None) -> can.BusABC:
         return bus
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         raise ConfigError(f"cannot open interface {interface!r} channel {channel!r}: {exc}") from None
-    except KeyError:
-        raise ConfigError(f"unknown python-can interface {interface!r} "
-                          f"(known: {', '.join(sorted(can.interfaces.VALID_INTERFACES))})") from None

@@ -17,7 +17,12 @@ from pathlib import Path
 import cantools
 from cantools.database.can import Database, Message
 
+from bench import e2e
 from bench.errors import DatabaseError, SignalError
+
+
+class DecodeError(ValueError):
+    """A payload the database cannot decode (e.g. an unknown multiplexer value)."""
 
 #: A decoded value may exceed the DBC range by this fraction of the scale (rounding) and still be valid.
 RANGE_SLACK = 0.5
@@ -41,6 +46,8 @@ class SignalCodec:
         return (1 << self.length) - 1
 
     def in_range(self, value: float) -> bool:
+        if value != value:   # NaN (a float signal) is never in range
+            return False
         slack = RANGE_SLACK * abs(self.scale)
         if self.minimum is not None and value < self.minimum - slack:
             return False
@@ -74,6 +81,11 @@ class MessageCodec:
         )
         self.by_name: dict[str, SignalCodec] = {s.name: s for s in self.signals}
         self.signal_names: tuple[str, ...] = tuple(s.name for s in self.signals)
+        # The contract's end-to-end layout (k-matrix.md): only messages that carry it are checked for it.
+        layout = {s.name: (s.start, s.length, s.byte_order) for s in message.signals}
+        self.e2e = (message.length == 8
+                    and layout.get("AliveCounter") == (e2e.COUNTER_BYTE * 8, 4, "little_endian")
+                    and layout.get("Checksum") == (e2e.CHECKSUM_BYTE * 8, 8, "little_endian"))
         self.fast = (
             not message.is_multiplexed()
             and all(s.byte_order == "little_endian" and not s.is_float for s in message.signals)
@@ -130,8 +142,11 @@ class MessageCodec:
     def decode(self, data: bytes | bytearray) -> dict[str, float]:
         """Physical values of every signal (enumerations as numbers)."""
         if not self.fast:
-            return {k: float(v) for k, v in self.message.decode(
-                bytes(data), decode_choices=False, scaling=True).items()}
+            try:
+                decoded = self.message.decode(bytes(data), decode_choices=False, scaling=True)
+            except Exception as exc:   # cantools' DecodeError and friends: bus data never raises here
+                raise DecodeError(f"{self.name}: {exc}") from None
+            return {k: float(v) for k, v in decoded.items()}
         word = int.from_bytes(data, "little")
         out: dict[str, float] = {}
         for name, start, mask, sign_bit, span, scale, offset in self._unpack:

@@ -11,6 +11,7 @@ into mcap's own `EndOfFile`: a cut at any byte ends the iteration quietly, at th
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,8 +63,11 @@ class _WholeReads:
 
     def __init__(self, file: IO[bytes]) -> None:
         self._file = file
+        self._size = os.fstat(file.fileno()).st_size
 
     def read(self, size: int = -1) -> bytes:
+        if size is not None and size > self._size - self._file.tell():
+            raise EndOfFile()   # a length beyond the end: a cut (or a damaged length), never a huge read
         data = self._file.read(size)
         if size is not None and 0 < size and len(data) < size:
             raise EndOfFile()
@@ -97,6 +101,9 @@ class _Scan:
                     yield record
             except McapError:  # EndOfFile at a cut; a bad trailing magic or absurd record length likewise ends the log
                 return
+            except Exception as exc:  # damaged bytes inside a record (compression, structure): a clear error
+                raise LogError(f"{self.path}: damaged run log at byte {file.tell()}: "
+                               f"{type(exc).__name__}: {exc}") from None
         self.complete = footer  # StreamReader stops after the footer's end magic
 
 
@@ -106,7 +113,7 @@ def _messages(scan: _Scan, wanted: Any) -> Iterator[tuple[str, Message]]:
     for record in scan:
         if isinstance(record, Message):
             if record.channel_id in ids:
-                yield scan.topics[record.channel_id], record
+                yield scan.topics.get(record.channel_id, ""), record
         elif isinstance(record, Channel) and wanted(record.topic):
             ids.add(record.id)
 
@@ -114,13 +121,24 @@ def _messages(scan: _Scan, wanted: Any) -> Iterator[tuple[str, Message]]:
 def read_frames(path: str | Path) -> Iterator[LoggedFrame]:
     """The raw frames of a log, in the order logged."""
     for _, message in _messages(_Scan(path), FRAMES_TOPIC.__eq__):
-        d = json.loads(message.data)
-        channel = d.get("channel", d.get("header", {}).get("frame_id", ""))
-        yield LoggedFrame(
-            t=message.log_time / 1e9, arbitration_id=d["id"], data=bytes(d["data"][: d["dlc"]]), channel=channel,
-            direction=d.get("direction", "rx"), is_extended=d["is_extended"], is_error=d["is_error"],
-            valid=d.get("valid", True), error=d.get("error", ""), is_remote=d["is_rtr"], t_ns=message.log_time,
-        )
+        try:
+            d = json.loads(message.data)
+            channel = d.get("channel", d.get("header", {}).get("frame_id", ""))
+            frame = LoggedFrame(
+                t=message.log_time / 1e9, arbitration_id=int(d["id"]), data=bytes(d["data"][: d["dlc"]]),
+                channel=str(channel), direction=d.get("direction", "rx"), is_extended=bool(d["is_extended"]),
+                is_error=bool(d["is_error"]), valid=bool(d.get("valid", True)), error=str(d.get("error", "")),
+                is_remote=bool(d["is_rtr"]), t_ns=message.log_time)
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise LogError(f"{path}: damaged frame record at {message.log_time} ns: {type(exc).__name__}: {exc}") from None
+        yield frame
+
+
+def _json(path: str | Path, record: Message) -> Any:
+    try:
+        return json.loads(record.data)
+    except ValueError as exc:   # JSONDecodeError and UnicodeDecodeError
+        raise LogError(f"{path}: damaged record at {record.log_time} ns: {exc}") from None
 
 
 def read_decoded(path: str | Path, message: str | None = None) -> Iterator[tuple[float, str, dict[str, Any]]]:
@@ -130,13 +148,13 @@ def read_decoded(path: str | Path, message: str | None = None) -> Iterator[tuple
     else:
         wanted = (DECODED_PREFIX + message).__eq__
     for topic, record in _messages(_Scan(path), wanted):
-        yield record.log_time / 1e9, topic[len(DECODED_PREFIX):], json.loads(record.data)
+        yield record.log_time / 1e9, topic[len(DECODED_PREFIX):], _json(path, record)
 
 
 def read_steps(path: str | Path) -> Iterator[dict[str, Any]]:
     """The test steps and verdicts, as the foxglove.Log dicts logged."""
     for _, message in _messages(_Scan(path), STEPS_TOPIC.__eq__):
-        yield json.loads(message.data)
+        yield _json(path, message)
 
 
 def summarise(path: str | Path) -> LogSummary:
@@ -146,8 +164,8 @@ def summarise(path: str | Path) -> LogSummary:
     start = end = None
     for record in scan:
         if isinstance(record, Message):
-            topic = scan.topics[record.channel_id]
-            summary.channels[topic] += 1
+            topic = scan.topics.get(record.channel_id, f"(channel {record.channel_id})")
+            summary.channels[topic] = summary.channels.get(topic, 0) + 1
             start = record.log_time if start is None else min(start, record.log_time)
             end = record.log_time if end is None else max(end, record.log_time)
             if topic == FRAMES_TOPIC:
@@ -170,4 +188,7 @@ def _valid(data: bytes) -> bool:
         return True
     if b'"valid":false' in data:
         return False
-    return bool(json.loads(data).get("valid", True))
+    try:
+        return bool(json.loads(data).get("valid", True))
+    except (ValueError, AttributeError):
+        return False   # a damaged frame record counts as invalid

@@ -13,7 +13,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from bench import e2e
-from bench.codec import Codebook, MessageCodec
+from bench.codec import Codebook, DecodeError, MessageCodec
 from bench.errors import BenchError
 
 TIMEOUT_CYCLES = 3   # k-matrix.md: a message not seen for 3 x its cycle time is timed out
@@ -104,18 +104,23 @@ class Monitor:
             kind, reason = "length", f"length {len(data)}, DBC says {codec.length}"
             state.counter = None
         else:
-            counter = data[e2e.COUNTER_BYTE] & 0x0F
-            expected_counter = None if state.counter is None else (state.counter + 1) % e2e.COUNTER_MODULO
-            state.counter = counter
-            if data[e2e.CHECKSUM_BYTE] != e2e.checksum(arbitration_id, data):
-                kind = reason = "checksum"
-            elif expected_counter is not None and counter != expected_counter:
-                kind, reason = "counter", f"counter {counter}, expected {expected_counter}"
-            else:
-                values = codec.decode(data)
-                bad = codec.out_of_range(values)
-                if bad:
-                    kind, reason = "range", "range: " + ", ".join(f"{n}={values[n]:g}" for n in bad)
+            if codec.e2e:
+                counter = data[e2e.COUNTER_BYTE] & 0x0F
+                expected_counter = None if state.counter is None else (state.counter + 1) % e2e.COUNTER_MODULO
+                state.counter = counter
+                if data[e2e.CHECKSUM_BYTE] != e2e.checksum(arbitration_id, data):
+                    kind = reason = "checksum"
+                elif expected_counter is not None and counter != expected_counter:
+                    kind, reason = "counter", f"counter {counter}, expected {expected_counter}"
+            if not kind:
+                try:
+                    values = codec.decode(data)
+                except DecodeError as exc:
+                    kind, reason = "decode", f"decode: {exc}"
+                else:
+                    bad = codec.out_of_range(values)
+                    if bad:
+                        kind, reason = "range", "range: " + ", ".join(f"{n}={values[n]:g}" for n in bad)
         if reason:
             state.invalid[kind] = state.invalid.get(kind, 0) + 1
             state.last_invalid = True

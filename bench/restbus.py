@@ -88,6 +88,7 @@ class Restbus:
         codec = slot.codec
         values = {name: codec.physical(name, value) for name, value in slot.values.items()}
         data = codec.encode(values)
-        e2e.protect(codec.frame_id, data, slot.counter)
-        slot.counter = e2e.next_counter(slot.counter)
+        if codec.e2e:
+            e2e.protect(codec.frame_id, data, slot.counter)
+            slot.counter = e2e.next_counter(slot.counter)
         return bytes(data)

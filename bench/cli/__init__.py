@@ -12,7 +12,7 @@ from rich.markup import escape
 
 from bench.errors import BenchError
 
-SUBCOMMANDS = ("run", "plant", "dbc", "log")
+SUBCOMMANDS = ("run", "plant", "dbc", "log", "monitor", "replay")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,7 +29,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.handler(args))
     except BenchError as exc:
-        Console(stderr=True).print(f"[bold red]bench {args.command}: error:[/] {escape(str(exc))}", highlight=False)
+        Console(stderr=True, soft_wrap=True).print(f"[bold red]bench {args.command}: error:[/] {escape(str(exc))}",
+                                                  highlight=False)
         return 2
     except KeyboardInterrupt:
         return 130

@@ -5,14 +5,19 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import can
 import pytest
 from rich.console import Console
 from rich.table import Table
 
+from bench.bus import is_virtual
 from bench.cli.common import add_bus_options
-from bench.config import load_config
+from bench.codec import load_codebook
+from bench.config import ProjectConfig, load_config
+from bench.errors import ConfigError
 from bench.faults import parse_fault
 from bench.run import default_out_dir
+from bench.session import resolve_external
 
 OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "skipped": "yellow",
                  "aborted": "bold magenta"}
@@ -59,6 +64,16 @@ class _Progress:
                 self.console.print(report.longreprtext, highlight=False, markup=False)
 
 
+def _check_before_running(project: ProjectConfig, args: argparse.Namespace) -> None:
+    """What the bench needs before any case starts: databases that load, known nodes and interface.
+    A mistake here is one clear error (exit 2), not an error in every case."""
+    codebook = load_codebook(project.databases)
+    resolve_external(codebook, project.stimulus, args.external)
+    if not is_virtual(args.interface) and args.interface not in can.interfaces.VALID_INTERFACES:
+        raise ConfigError(f"--interface: unknown python-can interface {args.interface!r} "
+                          f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
+
+
 def run(args: argparse.Namespace) -> int:
     from bench.pytest_plugin import finished_run
 
@@ -77,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         pytest_args += ["--bench-fault", spec]
     if args.keyword:
         pytest_args += ["-k", args.keyword]
+    _check_before_running(project, args)
     progress = _Progress(console)
     code = pytest.main(pytest_args, plugins=[progress])
     result = finished_run()

@@ -1,0 +1,291 @@
+"""Bad configuration files and command-line values: a one-line error naming the file and the key (exit 2),
+never a traceback; hypothesis feeds the config loader random text and random structures."""
+
+from __future__ import annotations
+
+import atexit
+import json
+import math
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from bench.cli import main
+from bench.config import ProjectConfig, load_config
+from bench.errors import ConfigError
+from bench.paths import BENCH_DBC, CHASSIS_DBC, ROOT
+
+BENCH = [sys.executable, "-m", "bench"]
+MINI_CASES = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"
+GOOD = {
+    "databases": [str(CHASSIS_DBC), str(BENCH_DBC)],
+    "stimulus": ["DRIVER", "TESTER"],
+    "plant": "chassis",
+    "testcases": "testcases",
+    "reports": "reports",
+}
+
+
+def toml_value(value: Any) -> str:
+    """A TOML literal (JSON's string escapes are TOML's; inline tables for dicts)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf") if math.isinf(value) else repr(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {toml_value(v)}" for k, v in value.items()) + "}"
+    raise TypeError(value)
+
+
+def toml(tables: dict[str, dict[str, Any]]) -> str:
+    return "".join(f"[{name}]\n" + "".join(f"{json.dumps(k)} = {toml_value(v)}\n" for k, v in body.items())
+                   for name, body in tables.items())
+
+
+def write(tmp_path: Path, text: str | bytes, name: str = "bench.toml") -> Path:
+    path = tmp_path / name
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.fixture(autouse=True)
+def _wide_console(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rich folds at 80 columns when not on a terminal; widen it so that one line stays one line."""
+    monkeypatch.setenv("COLUMNS", "1000")
+
+
+def one_line_error(path: Path, capsys: pytest.CaptureFixture[str], *argv: str) -> str:
+    """Run `bench ARGV --config PATH` in-process: exit 2 and one line of error without a traceback."""
+    assert main([*argv, "--config", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.out + captured.err
+    err = captured.err.strip()
+    assert "\n" not in err and err.count("error:") == 1 and str(path) in err, err
+    return err
+
+
+# -- the loader ----------------------------------------------------------------------------------------------
+def test_good_config(tmp_path: Path) -> None:
+    project = load_config(write(tmp_path, toml({"bench": GOOD})))
+    assert project.databases == (CHASSIS_DBC, BENCH_DBC)
+    assert project.stimulus == ("DRIVER", "TESTER") and project.plant == "chassis"
+    assert project.testcases == tmp_path / "testcases" and project.reports == tmp_path / "reports"
+
+
+def test_repository_config_loads() -> None:
+    assert isinstance(load_config(ROOT / "bench.toml"), ProjectConfig)
+
+
+@pytest.mark.parametrize("body, words", [
+    ('[bench]\ndatabases = ["a.dbc"\n', ["Unclosed array"]),
+    ("[bench\n", ["line 1"]),
+    ("[bench]\nplant = chassis\n", ["line 2"]),                          # bare word
+    ('[bench]\nplant = "a"\nplant = "b"\n', ["line 3"]),                 # key twice
+], ids=["unclosed-array", "unclosed-table", "bare-word", "duplicate-key"])
+def test_malformed_toml(tmp_path: Path, body: str, words: list[str]) -> None:
+    path = write(tmp_path, body)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert str(path) in str(info.value) and all(w in str(info.value) for w in words)
+
+
+def test_missing_table(tmp_path: Path) -> None:
+    path = write(tmp_path, toml({"bnech": GOOD}))
+    with pytest.raises(ConfigError, match=r"missing table \[bench\]"):
+        load_config(path)
+
+
+@pytest.mark.parametrize("key, value", [
+    ("databases", "dbc/chassis.dbc"), ("databases", []), ("databases", [1]), ("stimulus", [""]),
+    ("stimulus", "DRIVER"), ("plant", 3), ("plant", ""), ("testcases", ["testcases"]), ("reports", True),
+])
+def test_wrong_types_name_the_key(tmp_path: Path, key: str, value: Any) -> None:
+    path = write(tmp_path, toml({"bench": {**GOOD, key: value}}))
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert f"[bench] {key}" in str(info.value) and str(path) in str(info.value)
+
+
+@pytest.mark.parametrize("key", ["databases", "stimulus", "plant", "testcases", "reports"])
+def test_missing_key_names_it(tmp_path: Path, key: str) -> None:
+    body = {k: v for k, v in GOOD.items() if k != key}
+    with pytest.raises(ConfigError, match=rf"\[bench\] {key} must be"):
+        load_config(write(tmp_path, toml({"bench": body})))
+
+
+def test_unknown_key(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"\[bench\] unknown key\(s\) colour"):
+        load_config(write(tmp_path, toml({"bench": {**GOOD, "colour": "blue"}})))
+
+
+def test_nonexistent_database(tmp_path: Path) -> None:
+    path = write(tmp_path, toml({"bench": {**GOOD, "databases": [str(CHASSIS_DBC), "nope.dbc"]}}))
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert "[bench] databases" in str(info.value) and str(tmp_path / "nope.dbc") in str(info.value)
+
+
+def test_database_paths_are_relative_to_the_file(tmp_path: Path) -> None:
+    (tmp_path / "db").mkdir()
+    (tmp_path / "db" / "x.dbc").write_text("")
+    project = load_config(write(tmp_path, toml({"bench": {**GOOD, "databases": ["db/x.dbc"]}})))
+    assert project.databases == (tmp_path / "db" / "x.dbc",)
+
+
+@pytest.mark.parametrize("content", [b"\xff\xfe[\x00b\x00", b"[bench]\nplant = \"\xe9\"\n"], ids=["utf16", "latin1"])
+def test_not_utf8(tmp_path: Path, content: bytes) -> None:
+    with pytest.raises(ConfigError, match="not UTF-8"):
+        load_config(write(tmp_path, content))
+
+
+def test_deep_nesting(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="nested too deeply"):
+        load_config(write(tmp_path, "[bench]\nplant = " + "[" * 5000 + "]" * 5000 + "\n"))
+
+
+def test_config_is_a_folder_or_missing(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path)
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "nowhere.toml")
+
+
+# -- through the command line --------------------------------------------------------------------------------
+@pytest.mark.parametrize("command", ["run", "plant"])
+@pytest.mark.parametrize("body, key", [
+    ("[bench]\nplant = chassis\n", "line 2"),
+    ("[other]\nx = 1\n", "[bench]"),
+    (toml({"bench": {**GOOD, "plant": 3}}), "[bench] plant"),
+    (toml({"bench": {**GOOD, "colour": "blue"}}), "colour"),
+    (toml({"bench": {**GOOD, "databases": ["nope.dbc"]}}), "[bench] databases"),
+], ids=["toml", "table", "type", "unknown", "database"])
+def test_cli_bad_config(tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str, body: str,
+                        key: str) -> None:
+    path = write(tmp_path, body, "bad.toml")
+    extra = ["--duration", "0.1"] if command == "plant" else ["--out", str(tmp_path / "out")]
+    err = one_line_error(path, capsys, command, *extra)
+    assert key in err
+    assert not (tmp_path / "out").exists(), "no report folder for a run that never started"
+
+
+def test_cli_missing_config_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert "cannot read" in one_line_error(tmp_path / "nowhere.toml", capsys, "run")
+
+
+@pytest.mark.parametrize("duration", ["-1", "0", "nan", "inf", "-inf"])
+def test_plant_bad_duration(capsys: pytest.CaptureFixture[str], duration: str) -> None:
+    assert main(["plant", f"--duration={duration}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--duration" in err and "positive number of seconds" in err and "Traceback" not in err
+
+
+def test_plant_duration_not_a_number(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:     # argparse's own one-line usage error
+        main(["plant", "--duration", "abc"])
+    assert info.value.code == 2
+    assert "invalid float value: 'abc'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--interface", "virtual"], ["--interface virtual", "another process"]),
+    (["--interface", "no_such_interface", "--channel", "x"], ["no_such_interface"]),
+    (["--external", "BOGUS"], ["--external", "BOGUS", "nodes:"]),
+    (["--external", "VCU,NOPE"], ["--external", "NOPE"]),
+    (["--vehicle", "NOPE"], ["NOPE", "EV4WIS"]),
+], ids=["virtual", "unknown-interface", "unknown-node", "unknown-node-in-list", "unknown-vehicle"])
+def test_plant_bad_values(capsys: pytest.CaptureFixture[str], argv: list[str], words: list[str]) -> None:
+    assert main(["plant", *argv, "--duration", "0.1"]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert "Traceback" not in captured.out + captured.err and "\n" not in err
+    assert err.startswith("bench plant: error:") and all(w in err for w in words), err
+
+
+@pytest.mark.parametrize("argv", [["--external", "BOGUS"], ["--interface", "no_such_interface", "--channel", "x"]],
+                         ids=["unknown-node", "unknown-interface"])
+def test_run_bad_values(tmp_path: Path, argv: list[str]) -> None:
+    result = subprocess.run([*BENCH, "run", str(MINI_CASES), "--out", str(tmp_path / "out"), *argv],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert "bench run: error:" in result.stderr
+
+
+# -- fuzzing -------------------------------------------------------------------------------------------------
+_FUZZ_DIR = Path(tempfile.mkdtemp(prefix="bench-config-fuzz-"))
+atexit.register(shutil.rmtree, _FUZZ_DIR, ignore_errors=True)
+KEYS = [*GOOD, "colour", "", "databases ", "Databases"]
+SCALARS = st.one_of(st.text(max_size=20), st.integers(), st.floats(), st.booleans(),
+                    st.sampled_from([str(CHASSIS_DBC), str(BENCH_DBC), "DRIVER", "TESTER", "chassis", "nope.dbc"]))
+VALUES = st.recursive(SCALARS, lambda inner: st.one_of(st.lists(inner, max_size=4),
+                                                       st.dictionaries(st.text(max_size=8), inner, max_size=3)),
+                      max_leaves=10)
+TIMING = st.dictionaries(st.sampled_from(["latency", "other"]), st.one_of(
+    VALUES, st.lists(st.dictionaries(st.sampled_from(["command", "status", "name", "threshold", "window", "x"]),
+                                     st.one_of(SCALARS, st.sampled_from(["A.b", "A.", ".b", "A.b.c"])),
+                                     max_size=6), max_size=3)), max_size=2)
+
+
+def _load(text: str | bytes) -> None:
+    """load_config either succeeds or raises ConfigError; anything else fails the test."""
+    path = _FUZZ_DIR / "bench.toml"
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text, encoding="utf-8", errors="surrogatepass")
+    try:
+        project = load_config(path)
+    except ConfigError as exc:
+        assert str(path) in str(exc)
+        event("ConfigError")
+        return
+    event("loaded")
+    assert isinstance(project, ProjectConfig) and project.databases
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.one_of(st.text(max_size=300), st.binary(max_size=300)))
+def test_fuzz_config_random_text(text: str | bytes) -> None:
+    _load(text)
+
+
+FRAGMENTS = st.sampled_from([
+    "[bench]", "[timing]", "[[bench]]", "[bench.x]", "databases = ", "stimulus = ", "plant = ", "testcases = ",
+    "reports = ", "latency = ", "colour = ", '"chassis"', f'["{CHASSIS_DBC}"]', '["DRIVER", "TESTER"]', "[", "]",
+    "{", "}", ",", '"', "'", "=", "\n", " ", "#", "1", "1.5", "nan", "true", "1979-05-27", '{command = "A.b"}',
+    '"""', "'''", "\\", "\x00", "é",
+])
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(FRAGMENTS, max_size=40))
+def test_fuzz_config_tomlish_text(fragments: list[str]) -> None:
+    _load("".join(fragments))
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(bench=st.one_of(st.dictionaries(st.sampled_from(KEYS), VALUES, max_size=7),
+                       # mostly good values, so that the success path and [timing] are reached too
+                       st.fixed_dictionaries({k: st.one_of(st.just(v), st.just(v), st.just(v), VALUES)
+                                              for k, v in GOOD.items()})),
+       timing=st.one_of(st.none(), st.none(), TIMING), table=st.sampled_from(["bench", "bench", "bench", "bnech"]))
+def test_fuzz_config_random_structures(bench: dict[str, Any], timing: dict[str, Any] | None, table: str) -> None:
+    tables = {table: bench}
+    if timing is not None:
+        tables["timing"] = timing
+    _load(toml(tables))
