@@ -6,15 +6,31 @@ Every problem is a ConfigError naming the file and the key.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from bench.bus import VIRTUAL, is_virtual
 from bench.errors import ConfigError
 from bench.paths import ROOT
 
 CONFIG_NAME = "bench.toml"
+#: s a status has to start following a command change before the change counts as not followed.
+DEFAULT_LATENCY_WINDOW = 1.0
+
+
+@dataclass(frozen=True)
+class LatencyPair:
+    """A command signal and the status signal that follows it, for the report's timing section
+    (`bench.timing`). `threshold` is in the signals' unit; None means one step of the coarser signal."""
+
+    name: str
+    command: tuple[str, str]            # (message, signal)
+    status: tuple[str, str]
+    threshold: float | None = None
+    window: float = DEFAULT_LATENCY_WINDOW
 
 
 @dataclass(frozen=True)
@@ -25,6 +41,7 @@ class ProjectConfig:
     plant: str
     testcases: Path
     reports: Path
+    latency: tuple[LatencyPair, ...] = ()
 
 
 def find_config(start: Path | None = None) -> Path:
@@ -43,10 +60,14 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:   # TOML is UTF-8 by definition
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): not a TOML file") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: {exc}") from None
+    except RecursionError:              # tomllib recurses into nested arrays and inline tables
+        raise ConfigError(f"{path}: arrays or tables nested too deeply") from None
     section = data.get("bench")
     if not isinstance(section, dict):
         raise ConfigError(f"{path}: missing table [bench]")
@@ -67,14 +88,65 @@ def load_config(path: Path | None = None) -> ProjectConfig:
     unknown = set(section) - {"databases", "stimulus", "plant", "testcases", "reports"}
     if unknown:
         raise ConfigError(f"{path}: [bench] unknown key(s) {', '.join(sorted(unknown))}")
+    databases = tuple(base / p for p in strings("databases"))
+    for database in databases:   # checked here so that `bench run` stops before any case starts
+        if not database.is_file():
+            raise ConfigError(f"{path}: [bench] databases: no such DBC file {database}")
     return ProjectConfig(
         path=path,
-        databases=tuple(base / p for p in strings("databases")),
+        databases=databases,
         stimulus=strings("stimulus"),
         plant=string("plant"),
         testcases=base / string("testcases"),
         reports=base / string("reports"),
+        latency=_latency_pairs(path, data.get("timing", {})),
     )
+
+
+def _latency_pairs(path: Path, timing: Any) -> tuple[LatencyPair, ...]:
+    """[timing] latency = [{command = "Msg.Signal", status = "Msg.Signal", name?, threshold?, window?}, ...]"""
+    if not isinstance(timing, dict):
+        raise ConfigError(f"{path}: [timing] must be a table")
+    unknown = set(timing) - {"latency"}
+    if unknown:
+        raise ConfigError(f"{path}: [timing] unknown key(s) {', '.join(sorted(unknown))} (known: latency)")
+    entries = timing.get("latency", [])
+    if not isinstance(entries, list):
+        raise ConfigError(f"{path}: [timing] latency must be a list of tables, got {entries!r}")
+    pairs = []
+    for i, entry in enumerate(entries, 1):
+        where = f"{path}: [timing] latency entry {i}"
+        if not isinstance(entry, dict):
+            raise ConfigError(f"{where} must be a table like {{command = \"Msg.Signal\", status = \"Msg.Signal\"}}, "
+                              f"got {entry!r}")
+        unknown = set(entry) - {"command", "status", "name", "threshold", "window"}
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))} "
+                              f"(known: command, status, name, threshold, window)")
+        command, status = (_signal_ref(where, entry, key) for key in ("command", "status"))
+        name = entry.get("name", f"{command[0]}.{command[1]} → {status[0]}.{status[1]}")
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"{where}: name must be a non-empty string, got {name!r}")
+        threshold = entry.get("threshold")
+        if threshold is not None:
+            threshold = _positive(where, "threshold", threshold)
+        window = _positive(where, "window", entry.get("window", DEFAULT_LATENCY_WINDOW))
+        pairs.append(LatencyPair(name, command, status, threshold, window))
+    return tuple(pairs)
+
+
+def _signal_ref(where: str, entry: dict[str, Any], key: str) -> tuple[str, str]:
+    value = entry.get(key)
+    parts = value.split(".") if isinstance(value, str) else []
+    if len(parts) != 2 or not all(parts):
+        raise ConfigError(f"{where}: {key} must be \"Message.Signal\", got {value!r}")
+    return parts[0], parts[1]
+
+
+def _positive(where: str, key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{where}: {key} must be a positive number, got {value!r}")
+    return float(value)
 
 
 @dataclass

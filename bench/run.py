@@ -15,6 +15,7 @@ from bench.codec import MessageCodec
 from bench.config import ProjectConfig, RunSettings
 from bench.results import CaseResult, RunResult, Step
 from bench.session import BenchSession
+from bench.timing import TimingCollector
 
 MCAP_NAME, HTML_NAME, JUNIT_NAME = "run.mcap", "report.html", "junit.xml"
 
@@ -51,6 +52,7 @@ class BenchRun:
                                  attachments=[p for _, p in databases])
         label = f"{settings.interface}:{settings.channel or 'default'}"
         recorder = self.recorder
+        self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
 
         def sink(t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
                  codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
@@ -58,6 +60,7 @@ class BenchRun:
                            error=reason)
             if values is not None and codec is not None:
                 recorder.decoded(t, codec.name, values)
+            timing(t, arbitration_id, data, direction, valid, reason, codec, values)
 
         self._project, self._sink = project, sink
 
@@ -130,6 +133,8 @@ class BenchRun:
             aborted=aborted, wall_time=time.monotonic() - self._wall0,
             sim_time=session.now() if session else 0.0,
             frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0)
+        if session is not None:   # the report's timing section (bench.timing); never raises
+            run.tables.extend(self.timing.tables(session.codebook))
         try:
             if session is not None:
                 session.close()

@@ -1,15 +1,33 @@
-"""`bench log`: look into run logs (MCAP) without Foxglove, e.g. to see what a killed run left behind."""
+"""`bench log`: look into run logs (MCAP) without Foxglove, e.g. to see what a killed run left behind,
+and export them to the formats other CAN tools read (BLF, ASC, candump, CSV) through python-can's writers."""
 
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 from typing import Any
 
+import can
 from rich.console import Console
 from rich.table import Table
 
-from bench.logread import LogSummary, summarise
+from bench.canio import frame_to_message
+from bench.errors import LogError
+from bench.logread import LoggedFrame, LogSummary, read_frames, summarise
+
+#: --format -> (python-can writer, file suffix). Direction (Rx/Tx) is carried by BLF (the DIR flag),
+#: ASC ("Rx"/"Tx") and candump (python-can's trailing R/T); CSV has no column for it.
+EXPORT_FORMATS: dict[str, tuple[type[can.io.generic.MessageWriter], str]] = {
+    "blf": (can.BLFWriter, ".blf"),
+    "asc": (can.ASCWriter, ".asc"),
+    "candump": (can.CanutilsLogWriter, ".log"),
+    "csv": (can.CSVWriter, ".csv"),
+}
+#: BLF's header holds its start time as a SYSTEMTIME; python-can writes it only for Unix times after 1990
+#: (an all-zero one otherwise, which BLFReader reads back as 0).
+BLF_UNIX_EPOCH_MIN = 631152000.0
+_INTERFACE_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 
 
 def register(subparsers: Any) -> None:
@@ -18,12 +36,77 @@ def register(subparsers: Any) -> None:
     info = actions.add_parser("info", help="time span, frames, attachments and channels of a run log")
     info.add_argument("file", type=Path, help="the run log (.mcap)")
     info.set_defaults(handler=info_handler)
+    export = actions.add_parser("export", help="write a run log's raw frames as BLF, ASC, candump or CSV",
+                                description="Write every raw frame of a run log (MCAP, also a killed run's) "
+                                            "with its log time through python-can's writers.")
+    export.add_argument("file", type=Path, help="the run log (.mcap)")
+    export.add_argument("--format", "-f", required=True, choices=sorted(EXPORT_FORMATS), dest="fmt",
+                        help="blf (Vector binary), asc (Vector ASCII), candump (candump -L log), csv (python-can CSV)")
+    export.add_argument("--output", "-o", type=Path, default=None,
+                        help="where to write (default: FILE with the format's suffix: .blf .asc .log .csv)")
+    export.set_defaults(handler=export_handler)
 
 
 def info_handler(args: argparse.Namespace) -> int:
     """Print a run log's summary; a LogError for a missing or non-MCAP file reaches the framework."""
     show(summarise(args.file), Console())
     return 0
+
+
+def export_handler(args: argparse.Namespace) -> int:
+    output: Path = args.output or args.file.with_suffix(EXPORT_FORMATS[args.fmt][1])
+    frames = export(args.file, output, args.fmt)
+    Console(stderr=True).print(f"bench log export: {frames} frames from {args.file} to {output} ({args.fmt})",
+                               highlight=False)
+    return 0
+
+
+def export(source: Path, output: Path, fmt: str) -> int:
+    """Write every raw frame of `source` to `output` in `fmt`; returns the number of frames.
+
+    Timestamps are the log times (ASC writes them relative to its first frame, whose time is in its
+    header; BLF in 1 ns steps from its start time). Channels: BLF and ASC number them (1, 2, ... in the
+    file, in order of first appearance); candump keeps an interface-like name (the part after the bench's
+    "interface:" prefix, e.g. vcan0) or numbers them can0, can1, ... Invalid frames are exported too:
+    they were on the bus.
+    """
+    writer_class, _ = EXPORT_FORMATS[fmt]
+    if output.resolve() == Path(source).resolve():
+        raise LogError(f"{output}: the export would overwrite the run log itself; choose another --output")
+    frames = read_frames(source)
+    first = next(frames, None)          # a missing or non-MCAP source fails here, before the output exists
+    try:
+        writer = writer_class(output)
+    except OSError as exc:
+        raise LogError(f"{output}: cannot write: {exc.strerror or exc}") from None
+    if fmt == "blf" and first is not None and first.t < BLF_UNIX_EPOCH_MIN:
+        # Bench time is not a Unix time: BLF's header then says "no start time" (zero), so the frames must be
+        # written relative to 0 too, or reading back would shift them by the first frame's time.
+        writer.start_timestamp = 0.0
+    channels: dict[str, int] = {}
+    count = 0
+    try:
+        for frame in ([first] if first is not None else []):
+            count += _write(writer, frame, fmt, channels)
+        for frame in frames:
+            count += _write(writer, frame, fmt, channels)
+    except OSError as exc:
+        raise LogError(f"{output}: cannot write: {exc.strerror or exc}") from None
+    finally:
+        writer.stop()
+    return count
+
+
+def _write(writer: can.io.generic.MessageWriter, frame: LoggedFrame, fmt: str, channels: dict[str, int]) -> int:
+    message = frame_to_message(frame)
+    index = channels.setdefault(frame.channel, len(channels))
+    if fmt == "candump":
+        name = frame.channel.rsplit(":", 1)[-1]
+        message.channel = name if _INTERFACE_NAME.match(name) else f"can{index}"
+    else:
+        message.channel = index          # BLF and ASC write channel + 1 (their channels start at 1)
+    writer.on_message_received(message)
+    return 1
 
 
 def show(summary: LogSummary, console: Console) -> None:

@@ -1,0 +1,100 @@
+"""`bench replay`: a log's frames go back onto a bus with the recorded spacing (udp_multicast, hop limit 0)."""
+
+from __future__ import annotations
+
+import os
+import random
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from bench.bus import open_bus
+from bench.cli import main
+from bench.paths import ROOT
+from bench.recorder import Recorder
+
+SPACING = 0.010   # s between the logged tx frames
+
+
+def make_log(path: Path) -> list[tuple[int, bytes]]:
+    """40 tx frames 10 ms apart, rx frames in between and one error frame; returns the tx (id, data)."""
+    sent = []
+    with Recorder(path, []) as recorder:
+        for i in range(40):
+            t = 5.0 + i * SPACING
+            data = bytes([i, 0xA5, i ^ 0xFF])
+            recorder.frame(t, 0x300 + i % 2, data, channel="can0", direction="tx", valid=i != 7,
+                           error="checksum" if i == 7 else "")
+            sent.append((0x300 + i % 2, data))
+            recorder.frame(t + 0.004, 0x400, bytes([i]), channel="can0", direction="rx")
+            if i == 20:
+                recorder.frame(t + 0.005, 0, bytes(8), channel="can0", direction="tx", is_error=True, valid=False,
+                               error="error frame")
+    return sent
+
+
+def replay(log: Path, channel: str, *extra: str, expect: int) -> tuple[list, subprocess.CompletedProcess]:
+    """Run `bench replay` in its own process and receive what it sends."""
+    with open_bus("udp_multicast", channel) as bus:
+        process = subprocess.Popen([sys.executable, "-m", "bench", "replay", str(log), "--interface",
+                                    "udp_multicast", "--channel", channel, *extra], cwd=ROOT,
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   env={**os.environ, "COLUMNS": "200"})   # rich: one summary line
+        got = []
+        deadline = time.monotonic() + 30.0
+        while len(got) < expect and time.monotonic() < deadline:
+            msg = bus.recv(0.2)
+            if msg is not None:
+                got.append(msg)
+        out, err = process.communicate(timeout=30)
+    return got, subprocess.CompletedProcess(process.args, process.returncode, out, err)
+
+
+def group() -> str:
+    return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+
+
+def test_replay_sends_the_logged_frames_with_their_spacing(tmp_path: Path) -> None:
+    log = tmp_path / "run.mcap"
+    sent = make_log(log)
+    got, result = replay(log, group(), "--direction", "tx", expect=len(sent))
+    assert result.returncode == 0, result.stderr
+    assert [(m.arbitration_id, bytes(m.data)) for m in got] == sent      # invalid frames too; no error frame
+    stamps = [m.timestamp for m in got]                                    # kernel receive times
+    gaps = [b - a for a, b in zip(stamps, stamps[1:])]
+    assert statistics.median(gaps) == pytest.approx(SPACING, abs=0.002)
+    assert stamps[-1] - stamps[0] == pytest.approx(39 * SPACING, abs=0.05)
+    assert "sent 40 frames" in result.stderr and "1 error frames skipped" in result.stderr
+
+
+def test_speed_and_direction(tmp_path: Path) -> None:
+    log = tmp_path / "run.mcap"
+    make_log(log)
+    got, result = replay(log, group(), "--direction", "rx", "--speed", "2", expect=40)
+    assert result.returncode == 0, result.stderr
+    assert [m.arbitration_id for m in got] == [0x400] * 40
+    stamps = [m.timestamp for m in got]
+    assert stamps[-1] - stamps[0] == pytest.approx(39 * SPACING / 2, abs=0.04)
+
+
+@pytest.mark.parametrize(("argv", "needle"), [
+    (["--interface", "virtual"], "in-process virtual bus"),
+    (["--speed", "0"], "--speed"),
+    (["--speed", "inf"], "--speed"),
+])
+def test_bad_options_are_one_line_errors(tmp_path: Path, argv: list[str], needle: str,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    log = tmp_path / "run.mcap"
+    make_log(log)
+    assert main(["replay", str(log), *argv]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err
+
+
+def test_missing_log_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["replay", str(tmp_path / "none.mcap"), "--channel", group()]) == 2
+    assert "none.mcap" in capsys.readouterr().err
