@@ -11,9 +11,9 @@ import pytest
 
 from bench.case import Case
 from bench.checks import LOG_ERROR, LOG_INFO, StepLog
-from bench.codec import MessageCodec
+from bench.codec import Codebook, MessageCodec
 from bench.config import ProjectConfig, RunSettings
-from bench.results import CaseResult, RunResult, Step
+from bench.results import CaseResult, RunResult, Step, Table
 from bench.session import BenchSession
 from bench.timing import TimingCollector
 
@@ -135,6 +135,7 @@ class BenchRun:
             frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0)
         if session is not None:   # the report's timing section (bench.timing); never raises
             run.tables.extend(self.timing.tables(session.codebook))
+            run.tables.append(database_table(session.codebook))
         try:
             if session is not None:
                 session.close()
@@ -145,6 +146,16 @@ class BenchRun:
             write_junit(run, self.out_dir / JUNIT_NAME)
             self.finished = run
         return run
+
+
+def database_table(codebook: Codebook) -> Table:
+    """What the run was checked against: every message of the databases with its comment (DBC text:
+    the report escapes it like every other string)."""
+    rows = [[db_name, f"0x{m.frame_id:X}", m.name, ", ".join(m.senders),
+             f"{m.cycle_time * 1000:g}" if m.cycle_time else "–", m.message.comment or ""]
+            for db_name, m in sorted(((c.database, c) for c in codebook.by_id.values()), key=lambda x: x[1].frame_id)]
+    return Table("Databases: the messages this run checked", ["database", "id", "message", "sender", "cycle [ms]",
+                                                                "comment"], rows)
 
 
 def _longrepr(report: pytest.TestReport) -> str:
