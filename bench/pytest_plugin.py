@@ -9,6 +9,7 @@ MCAP log) starts at the first case that asks for the `bench` fixture; at the end
 from __future__ import annotations
 
 import signal
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,11 +19,14 @@ from bench.case import Case
 from bench.config import RunSettings, load_config
 from bench.faults import parse_fault
 from bench.results import RunResult
-from bench.run import BenchRun, default_out_dir
+from bench import results_io
+from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 
 _RUN_KEY = pytest.StashKey["BenchRun | None"]()
 _CASE_KEY = pytest.StashKey[Case]()
+_WALL0_KEY = pytest.StashKey[float]()
 _last_finished: list[RunResult] = []
+PARTS_DIR = "parts"   # where pytest-xdist workers leave their part of the run for the controller
 
 
 def finished_run() -> RunResult | None:
@@ -45,19 +49,43 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 def pytest_configure(config: pytest.Config) -> None:
     config.stash[_RUN_KEY] = None
+    if _xdist_controller(config):
+        # Workers inherit the controller's options: decide the one output folder for all of them here.
+        if config.getoption("--bench-interface") not in ("virtual", "bench_virtual"):
+            raise pytest.UsageError("-n (pytest-xdist) runs one in-process virtual bus per worker; a real bus "
+                                    "has one plant and cannot be shared by several runners")
+        if not config.getoption("--bench-out"):
+            project = load_config(_config_path(config))
+            config.option.bench_out = str(default_out_dir(project.reports))
+        config.stash[_WALL0_KEY] = time.monotonic()
+
+
+def _xdist_controller(config: pytest.Config) -> bool:
+    return bool(getattr(config.option, "numprocesses", None)) and not hasattr(config, "workerinput")
+
+
+def _worker_id(config: pytest.Config) -> str | None:
+    workerinput = getattr(config, "workerinput", None)
+    return workerinput["workerid"] if workerinput else None
+
+
+def _config_path(config: pytest.Config) -> Path | None:
+    value = config.getoption("--bench-config")
+    return Path(value) if value else None
 
 
 def _run(config: pytest.Config) -> BenchRun:
     run = config.stash[_RUN_KEY]
     if run is None:
-        project = load_config(Path(config.getoption("--bench-config")) if config.getoption("--bench-config") else None)
+        project = load_config(_config_path(config))
         settings = RunSettings(interface=config.getoption("--bench-interface"),
                                channel=config.getoption("--bench-channel"),
                                external=list(config.getoption("--bench-external")))
         out = config.getoption("--bench-out")
         out_dir = Path(out) if out else default_out_dir(project.reports)
         faults = [parse_fault(spec) for spec in config.getoption("--bench-fault")]
-        run = BenchRun(project, settings, out_dir)
+        worker = _worker_id(config)
+        run = BenchRun(project, settings, out_dir, mcap_name=f"run-{worker}.mcap" if worker else MCAP_NAME)
         config.stash[_RUN_KEY] = run
         run.start()
         run.session.faults.extend(faults)
@@ -101,11 +129,37 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Itera
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    run = session.config.stash.get(_RUN_KEY, None)
-    if run is None:
-        return
+    config = session.config
     aborted = exitstatus == pytest.ExitCode.INTERRUPTED
-    _last_finished.append(run.finish(aborted=aborted))
-    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if _xdist_controller(config):
+        out_dir = Path(config.getoption("--bench-out"))
+        result = _merge_parts(out_dir, time.monotonic() - config.stash.get(_WALL0_KEY, time.monotonic()), aborted)
+        if result is None:
+            return
+    else:
+        run = config.stash.get(_RUN_KEY, None)
+        if run is None:
+            return
+        worker = _worker_id(config)
+        part = run.out_dir / PARTS_DIR / f"{worker}.json" if worker else None
+        result = run.finish(aborted=aborted, part_of=part)
+        out_dir = run.out_dir
+    _last_finished.append(result)
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
     if reporter is not None:
-        reporter.write_line(f"bench: report in {run.out_dir}")
+        reporter.write_line(f"bench: report in {out_dir}")
+
+
+def _merge_parts(out_dir: Path, wall_time: float, aborted: bool) -> RunResult | None:
+    """The controller's report: every worker's part of the run merged into one report.html/junit.xml."""
+    folder = out_dir / PARTS_DIR
+    paths = sorted(folder.glob("*.json")) if folder.is_dir() else []
+    if not paths:
+        return None
+    result = results_io.merge([(p.stem, results_io.load(p)) for p in paths], wall_time)
+    result.aborted = result.aborted or aborted
+    write_reports(result, out_dir)
+    for path in paths:
+        path.unlink()
+    folder.rmdir()
+    return result

@@ -11,6 +11,7 @@ import pytest
 
 from bench.case import Case
 from bench.checks import LOG_ERROR, LOG_INFO, StepLog
+from bench import results_io
 from bench.codec import Codebook, MessageCodec
 from bench.config import ProjectConfig, RunSettings
 from bench.results import CaseResult, RunResult, Step, Table
@@ -113,11 +114,11 @@ class BenchRun:
                       f"{result.outcome} {nodeid}")
 
     # -- end -----------------------------------------------------------------------------------------
-    def finish(self, aborted: bool = False) -> RunResult:
-        """Close the bus and the log, then write the reports; safe to call twice."""
+    def finish(self, aborted: bool = False, part_of: Path | None = None) -> RunResult:
+        """Close the bus and the log, then write the reports (or, for a pytest-xdist worker, its part
+        of the run into `part_of` for the controller to merge); safe to call twice."""
         if self.finished is not None:
             return self.finished
-        from bench.report import write_html, write_junit
 
         session = self.session
         for nodeid, result in self.cases.items():
@@ -142,10 +143,19 @@ class BenchRun:
         finally:
             if self.recorder is not None:
                 self.recorder.close()
-            write_html(run, self.out_dir / HTML_NAME)
-            write_junit(run, self.out_dir / JUNIT_NAME)
+            if part_of is not None:
+                results_io.dump(run, part_of)
+            else:
+                write_reports(run, self.out_dir)
             self.finished = run
         return run
+
+
+def write_reports(run: RunResult, out_dir: Path) -> None:
+    from bench.report import write_html, write_junit   # matplotlib only when a report is written
+
+    write_html(run, out_dir / HTML_NAME)
+    write_junit(run, out_dir / JUNIT_NAME)
 
 
 def database_table(codebook: Codebook) -> Table:

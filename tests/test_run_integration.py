@@ -146,3 +146,18 @@ def test_sigint_writes_an_aborted_report_and_a_complete_log(tmp_path: Path) -> N
     assert summary is not None and summary.statistics.message_count > 1000
     junit = (tmp_path / "junit.xml").read_text()
     assert "aborted" in junit
+
+
+def test_parallel_workers_merge_into_one_report(tmp_path: Path) -> None:
+    result = bench_run(tmp_path, "-n", "2")
+    assert result.returncode == 0, result.stdout + result.stderr
+    logs = sorted(p.name for p in tmp_path.glob("run-*.mcap"))
+    assert logs == ["run-gw0.mcap", "run-gw1.mcap"]
+    assert not (tmp_path / "parts").exists()
+    html = (tmp_path / "report.html").read_text()
+    for name in ("test_pivot_reaches_the_commanded_angle", "test_normal_mode_drives_straight",
+                 "test_timer_runs_a_closed_loop", "run-gw0.mcap", "run-gw1.mcap"):
+        assert name in html, name
+    junit = (tmp_path / "junit.xml").read_text()
+    assert 'tests="3"' in junit and 'failures="0"' in junit
+    assert sum(len(frames_of(tmp_path / log)) for log in logs) > 1000

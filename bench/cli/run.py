@@ -30,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_bus_options(parser, "virtual")
     parser.add_argument("-k", dest="keyword", default=None, help="only cases matching this pytest -k expression")
     parser.add_argument("--out", default=None, help="output folder (default: a new folder under reports/)")
+    parser.add_argument("-n", dest="workers", default=None, metavar="N",
+                        help="run the cases in N processes (pytest-xdist; 'auto' = one per core), each with its own "
+                             "in-process virtual bus and MCAP log; one merged report")
     parser.add_argument("paths", nargs="*", help="test files or folders (default: the project's testcases)")
     parser.set_defaults(handler=run)
 
@@ -92,6 +95,11 @@ def run(args: argparse.Namespace) -> int:
         pytest_args += ["--bench-fault", spec]
     if args.keyword:
         pytest_args += ["-k", args.keyword]
+    if args.workers:
+        if not is_virtual(args.interface):
+            raise ConfigError("-n: parallel workers each need their own in-process virtual bus; "
+                              f"--interface {args.interface} is one shared bus")
+        pytest_args += ["-n", args.workers]
     _check_before_running(project, args)
     progress = _Progress(console)
     code = pytest.main(pytest_args, plugins=[progress])

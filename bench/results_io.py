@@ -1,0 +1,62 @@
+"""RunResult to JSON and back: pytest-xdist workers hand their part of a run to the controller,
+which merges the parts into one report."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, fields
+from pathlib import Path
+from typing import Any
+
+from bench.results import CaseResult, Plot, RunResult, Series, Step, Table
+
+
+def dump(run: RunResult, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(asdict(run), allow_nan=True))
+    tmp.replace(path)   # a reader never sees half a file
+
+
+def load(path: Path) -> RunResult:
+    data = json.loads(path.read_text())
+    cases = [_case(c) for c in data.pop("cases")]
+    tables = [Table(**t) for t in data.pop("tables")]
+    return RunResult(**_known(RunResult, data), cases=cases, tables=tables)
+
+
+def _case(data: dict[str, Any]) -> CaseResult:
+    steps = [Step(**s) for s in data.pop("steps")]
+    plots = [Plot(**{**p, "series": [Series(**s) for s in p["series"]]}) for p in data.pop("plots")]
+    tables = [Table(**t) for t in data.pop("tables")]
+    return CaseResult(**_known(CaseResult, data), steps=steps, plots=plots, tables=tables)
+
+
+def _known(cls: type, data: dict[str, Any]) -> dict[str, Any]:
+    names = {f.name for f in fields(cls)}
+    return {k: v for k, v in data.items() if k in names}
+
+
+def merge(parts: list[tuple[str, RunResult]], wall_time: float) -> RunResult:
+    """One run from the workers' parts: cases in nodeid order, counts summed, each worker's log listed."""
+    first = parts[0][1]
+    merged = RunResult(started=min(p.started for _, p in parts), interface=first.interface,
+                       channel=first.channel, time_mode=first.time_mode, external=first.external,
+                       mcap_path=first.mcap_path, aborted=any(p.aborted for _, p in parts), wall_time=wall_time)
+    logs = []
+    for worker, part in sorted(parts):
+        merged.cases.extend(part.cases)
+        merged.sim_time += part.sim_time
+        merged.frames += part.frames
+        merged.invalid_frames += part.invalid_frames
+        logs.append([worker, part.mcap_path, str(len(part.cases)), f"{part.sim_time:.1f}", str(part.frames),
+                     str(part.invalid_frames)])
+        for table in part.tables:
+            if table.title.startswith("Databases") and any(t.title == table.title for t in merged.tables):
+                continue
+            title = table.title if table.title.startswith("Databases") else f"[{worker}] {table.title}"
+            merged.tables.append(Table(title, table.columns, table.rows))
+    merged.cases.sort(key=lambda c: c.nodeid)
+    merged.tables.insert(0, Table("Workers: one in-process bus and one MCAP log each",
+                                  ["worker", "log", "cases", "bench s", "frames", "invalid"], logs))
+    return merged
