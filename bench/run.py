@@ -130,7 +130,7 @@ class BenchRun:
             started=self.started, interface=self.settings.interface, channel=self.settings.channel or "",
             time_mode="virtual" if self.settings.virtual_time else "real",
             external=sorted(session.external) if session else [], cases=list(self.cases.values()),
-            mcap_path=MCAP_NAME if self.mcap_path.parent == self.out_dir else str(self.mcap_path),
+            mcap_path=self.mcap_path.name if self.mcap_path.parent == self.out_dir else str(self.mcap_path),
             aborted=aborted, wall_time=time.monotonic() - self._wall0,
             sim_time=session.now() if session else 0.0,
             frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0)
