@@ -90,6 +90,11 @@ class MessageCodec:
             not message.is_multiplexed()
             and all(s.byte_order == "little_endian" and not s.is_float for s in message.signals)
         )
+        inf = math.inf
+        self._bounds: dict[str, tuple[float, float]] = {
+            s.name: (-inf if s.minimum is None else s.minimum - RANGE_SLACK * abs(s.scale),
+                     inf if s.maximum is None else s.maximum + RANGE_SLACK * abs(s.scale))
+            for s in self.signals}
         self._unpack = tuple(
             (s.name, s.start, (1 << s.length) - 1, (1 << (s.length - 1)) if s.signed else 0,
              1 << s.length, s.scale, s.offset)
@@ -158,7 +163,27 @@ class MessageCodec:
 
     def out_of_range(self, values: Mapping[str, float]) -> list[str]:
         """Names of the signals whose decoded value lies outside the DBC range."""
+        bounds = self._bounds
+        for name, value in values.items():   # the fast common case: every value in range (NaN fails)
+            lo, hi = bounds[name]
+            if not lo <= value <= hi:
+                break
+        else:
+            return []
         return [s.name for s in self.signals if not s.in_range(values[s.name])]
+
+    def checked(self, values: Mapping[str, float | int | str]) -> dict[str, float]:
+        """Every value checked as `physical` does (the restbus, once per frame): plain in-range floats
+        pass on a fast path, anything else (names, ints, NaN, out of range) takes the careful one."""
+        bounds = self._bounds
+        out: dict[str, float] = {}
+        for name, value in values.items():
+            limits = bounds.get(name)
+            if limits is not None and type(value) is float and limits[0] <= value <= limits[1]:
+                out[name] = value
+            else:
+                out[name] = self.physical(name, value)
+        return out
 
 
 class Codebook:

@@ -86,8 +86,7 @@ class Restbus:
 
     def build(self, slot: _Periodic) -> bytes:
         codec = slot.codec
-        values = {name: codec.physical(name, value) for name, value in slot.values.items()}
-        data = codec.encode(values)
+        data = codec.encode(codec.checked(slot.values))
         if codec.e2e:
             e2e.protect(codec.frame_id, data, slot.counter)
             slot.counter = e2e.next_counter(slot.counter)
