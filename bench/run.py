@@ -13,6 +13,8 @@ from bench.case import Case
 from bench.checks import LOG_ERROR, LOG_INFO, StepLog
 from bench import results_io
 from bench.codec import Codebook, MessageCodec
+from bench.errors import BenchError
+from bench.logproc import LogProcess
 from bench.config import ProjectConfig, RunSettings
 from bench.results import CaseResult, RunResult, Step, Table
 from bench.session import BenchSession
@@ -34,8 +36,6 @@ def default_out_dir(reports: Path) -> Path:
 class BenchRun:
     def __init__(self, project: ProjectConfig, settings: RunSettings, out_dir: Path,
                  mcap_name: str = MCAP_NAME) -> None:
-        from bench.recorder import Recorder   # the log is only for runs
-
         self.out_dir = out_dir
         out_dir.mkdir(parents=True, exist_ok=True)
         self.mcap_path = out_dir / mcap_name
@@ -44,23 +44,16 @@ class BenchRun:
         self.settings = settings
         self.cases: dict[str, CaseResult] = {}
         self._case_wall0: dict[str, float] = {}
-        self.recorder = None
+        self.recorder: LogProcess | None = None
         self.session = None
         self.finished: RunResult | None = None
-        databases = [(p.name, p) for p in project.databases]
-        from bench.codec import load_dbc
-        self.recorder = Recorder(self.mcap_path, [load_dbc(p) for _, p in databases],
-                                 attachments=[p for _, p in databases])
         label = f"{settings.interface}:{settings.channel or 'default'}"
-        recorder = self.recorder
+        self.recorder = log = LogProcess(self.mcap_path, project.databases, label)
         self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
 
         def sink(t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
                  codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
-            recorder.frame(t, arbitration_id, data, channel=label, direction=direction, valid=valid,
-                           error=reason)
-            if values is not None and codec is not None:
-                recorder.decoded(t, codec.name, values)
+            log.frame(t, arbitration_id, data, direction, valid, reason)
             timing(t, arbitration_id, data, direction, valid, reason, codec, values)
 
         self._project, self._sink = project, sink
@@ -142,7 +135,10 @@ class BenchRun:
                 session.close()
         finally:
             if self.recorder is not None:
-                self.recorder.close()
+                try:
+                    self.recorder.close()
+                except BenchError as exc:   # the report must still be written, and say what happened
+                    run.tables.insert(0, Table("Run log problem", ["problem"], [[str(exc)]]))
             if part_of is not None:
                 results_io.dump(run, part_of)
             else:

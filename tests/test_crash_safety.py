@@ -1,5 +1,7 @@
 """Crash safety: a bench run killed with SIGKILL keeps at least 95 % of the frames it put on the bus
-before the kill in its MCAP log (chunks are flushed at least every 0.5 s of wall time)."""
+before the kill in its MCAP log. The log is written by a child process (bench/logproc.py) that gets the
+frames every 0.2 s and finishes the file when the run dies; if it dies too, the file still reads back
+up to its last chunk (flushed every 0.5 s: tests/test_recorder.py kills a recorder itself)."""
 
 from __future__ import annotations
 
@@ -42,5 +44,5 @@ def test_sigkill_keeps_95_percent_of_the_frames_sent(tmp_path: Path) -> None:
         listener.shutdown()
     assert on_bus > 1000, "the run put too few frames on the bus to judge"
     logged = sum(1 for _ in read_frames(tmp_path / "run.mcap"))
-    assert summarise(tmp_path / "run.mcap").complete is False
+    assert summarise(tmp_path / "run.mcap").frames == logged
     assert logged >= 0.95 * on_bus, f"{logged} frames logged of {on_bus} on the bus"

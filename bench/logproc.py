@@ -1,0 +1,139 @@
+"""The run's MCAP log, written by a child process.
+
+Logging every frame (JSON of the raw frame and of its decoded values, then mcap's chunking and
+compression) costs more than simulating it; in a child process it runs on the machine's other core
+while the simulation goes on. The simulation hands over raw frames in batches (no decoded values:
+the child decodes them again with the same codec, which is cheaper than pickling them). The child
+ignores SIGINT/SIGTERM and finishes the file when the run closes the pipe, or when the run dies:
+a run killed with SIGKILL still leaves a complete log of every frame handed over before the kill
+(at most BATCH_SECONDS of wall time of frames are lost).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+from bench.errors import LogError
+
+BATCH_FRAMES = 2000      # hand over at least this often ...
+BATCH_SECONDS = 0.2      # ... and at least every 0.2 s of wall time
+CLOSE_TIMEOUT = 120.0    # s the child may take to write what it still has
+_STEP = "step"
+
+
+class LogProcess:
+    """Same calls as the recorder's frame/step/close, served by a child process."""
+
+    def __init__(self, path: Path, databases: Sequence[Path], channel: str) -> None:
+        # A program of its own (not multiprocessing, which would re-import the caller's main module), in a
+        # session of its own so that a signal to the run's process group does not cut the log short.
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", "bench.logproc", str(path), channel, *map(str, databases)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True)
+        assert self._process.stdin is not None and self._process.stdout is not None
+        self._to_child = Connection(os.dup(self._process.stdin.fileno()), readable=False)
+        self._from_child = Connection(os.dup(self._process.stdout.fileno()), writable=False)
+        self._process.stdin.close()
+        self._process.stdout.close()
+        status = self._receive_status()
+        if status != "ready":
+            self._process.wait(10)
+            raise LogError(status)
+        self._batch: list[tuple[Any, ...]] = []
+        self._deadline = time.monotonic() + BATCH_SECONDS
+        self._closed = False
+        self.path = path
+
+    def frame(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, error: str) -> None:
+        batch = self._batch
+        batch.append((t, arbitration_id, data, direction, valid, error))
+        if len(batch) >= BATCH_FRAMES or time.monotonic() >= self._deadline:
+            self._hand_over()
+
+    def step(self, t: float, level: int, name: str, message: str) -> None:
+        self._batch.append((_STEP, t, level, name, message))
+
+    def _hand_over(self) -> None:
+        if self._batch and not self._closed:
+            self._to_child.send(self._batch)
+            self._batch = []
+        self._deadline = time.monotonic() + BATCH_SECONDS
+
+    def close(self) -> None:
+        """Hand over the rest and wait for the child to finish the file; idempotent."""
+        if self._closed:
+            return
+        self._hand_over()
+        self._closed = True
+        try:
+            self._to_child.send(None)
+            status = self._receive_status(CLOSE_TIMEOUT)
+        finally:
+            self._to_child.close()
+            self._from_child.close()
+            self._process.wait(CLOSE_TIMEOUT)
+        if status != "closed":
+            raise LogError(f"{self.path}: {status}")
+
+    def _receive_status(self, timeout: float = 60.0) -> str:
+        if not self._from_child.poll(timeout):
+            return f"the log process did not answer within {timeout:g} s"
+        try:
+            return str(self._from_child.recv())
+        except EOFError:
+            return "the log process ended unexpectedly"
+
+
+def _serve(conn: Connection, reply: Connection, path: str, databases: list[str], channel: str) -> None:
+    """The child: one Recorder, fed batch by batch until the pipe says stop or closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C and SIGTERM are for the run; it closes us
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    from bench.codec import load_codebook, load_dbc
+    from bench.errors import BenchError
+    from bench.recorder import Recorder
+
+    try:
+        codebook = load_codebook(databases)
+        recorder = Recorder(Path(path), [load_dbc(p) for p in databases], attachments=[Path(p) for p in databases])
+    except BenchError as exc:
+        reply.send(str(exc))
+        return
+    reply.send("ready")
+    by_id = codebook.by_id
+    try:
+        while True:
+            try:
+                batch = conn.recv()
+            except EOFError:       # the run died: finish the file with what arrived
+                break
+            if batch is None:
+                break
+            for item in batch:
+                if item[0] == _STEP:
+                    recorder.step(item[1], item[2], item[3], item[4])
+                    continue
+                t, arbitration_id, data, direction, valid, error = item
+                recorder.frame(t, arbitration_id, data, channel=channel, direction=direction, valid=valid,
+                               error=error)
+                codec = by_id.get(arbitration_id) if valid else None
+                if codec is not None:
+                    recorder.decoded(t, codec.name, codec.decode(data))
+    finally:
+        recorder.close()
+    try:
+        reply.send("closed")
+    except (BrokenPipeError, OSError):
+        pass
+
+
+if __name__ == "__main__":
+    _serve(Connection(os.dup(0), writable=False), Connection(os.dup(1), readable=False), sys.argv[1],
+           sys.argv[3:], sys.argv[2])
