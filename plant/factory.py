@@ -16,7 +16,10 @@ from plant.vehicles import VEHICLE_CODES
 DEFAULT_VEHICLE = "EV4WIS"
 
 #: vehicle name (BENCH_Control.Vehicle value table) -> module in plant/assemblies with build(external)
-ASSEMBLIES = {"EV4WIS": "plant.assemblies.ev4wis"}
+ASSEMBLIES = {"EV4WIS": "plant.assemblies.ev4wis",
+              "ACLASS_ABS": "plant.assemblies.aclass_abs",
+              "ACLASS": "plant.assemblies.aclass",
+              }
 
 _BY_CODE = {code: name for name, code in VEHICLE_CODES.items()}
 

@@ -212,8 +212,10 @@ def test_lateral_mode_negative_speed_moves_left():
     assert rig.sent("PLANT_Motion")["Speed"] == pytest.approx(-1.0, rel=1e-3)
     assert rig.sent("PLANT_Dynamics")["Sideslip"] == pytest.approx(90.0)   # signed Speed -1 along +90 deg
     assert rig.sent("VCU_VehicleState")["VehicleSpeed"] == pytest.approx(-1.0, rel=1e-3)
-    assert rig.sent("VCU_RotationCentre") == {"RotationCentreX": CENTRE_AT_INFINITY_M,
-                                              "RotationCentreY": CENTRE_AT_INFINITY_M}
+    # wheels at -90 deg: the centre is at infinity to the right of that heading, (cos, -sin)(-90 deg) = (0, +1)
+    centre = rig.sent("VCU_RotationCentre")
+    assert centre["RotationCentreX"] == pytest.approx(0.0, abs=1e-9)
+    assert centre["RotationCentreY"] == CENTRE_AT_INFINITY_M
 
 
 def test_normal_straight_sends_centre_at_infinity():
@@ -221,6 +223,7 @@ def test_normal_straight_sends_centre_at_infinity():
     rig.request(0, 5.0)
     rig.run(1.0)
     assert rig.sent("VCU_RotationCentre")["RotationCentreX"] == CENTRE_AT_INFINITY_M
+    assert rig.sent("VCU_RotationCentre")["RotationCentreY"] == pytest.approx(0.0, abs=1e-9)
     assert rig.sent("VCU_VehicleState")["CurvatureAngle"] == 0.0
     assert rig.plant.body.vy == pytest.approx(5.0, rel=1e-3)
 

@@ -4,8 +4,10 @@ Step order within a tick: the returned list IS the order and must be stepped fro
 VCU, WHL_FL, WHL_FR, WHL_RL, WHL_RR, PLANT, IMU. The VCU and the wheels talk over the bus (their
 frames carry the latency a real network has); the body then reads the wheels' true states of this very
 tick, and the IMU the body's motion of this very tick, through direct references (no bus latency
-between physics and its sensors). Nodes named in `external` are left out: an external wheel's state
-reaches the body through WHL_Status_xx, an external PLANT's motion reaches the IMU through PLANT_*.
+between physics and its sensors). The body is kinematic at low speed and the single-track model with
+saturating tyres at speed (plant/dynamic_body.py: EvBodyNode, VehicleBody). Nodes named in `external` are
+left out: an external wheel's state reaches the body through WHL_Status_xx, an external PLANT's motion
+reaches the IMU through PLANT_*.
 """
 
 from __future__ import annotations
@@ -13,7 +15,8 @@ from __future__ import annotations
 from collections.abc import Collection
 
 from bench.node import Behaviour
-from plant.body import BodyNode, BusWheel, WheelSource
+from plant.body import BusWheel, WheelSource
+from plant.dynamic_body import EvBodyNode
 from plant.ecus.imu import Imu
 from plant.ecus.vcu import Vcu
 from plant.ecus.wheel import WheelEcu
@@ -36,7 +39,7 @@ def build(external: Collection[str]) -> list[Behaviour]:
             sources[corner] = wheel
     body_node = None
     if "PLANT" not in external:
-        body_node = BodyNode(params.geometry, sources, vehicle="EV4WIS", linked=list(behaviours))
+        body_node = EvBodyNode(params, sources, linked=list(behaviours))
         behaviours.append(body_node)
     if "IMU" not in external:
         imu = Imu(body_node.body if body_node is not None else None)

@@ -2,7 +2,8 @@
 
 Inputs: DRV_MotionRequest (DriveMode, PivotX, PivotY, TargetSpeed), DRV_Steering (HandWheelAngle, in
 NORMAL and ADAPTIVE only), WHL_Status_xx (faults and the VehicleSpeed estimate), IMU_Motion (yaw rate,
-handed to the ADAPTIVE high-speed hook). TargetSpeed is the signed centre speed v (k-matrix.md).
+for ADAPTIVE's feedback law or hook), BENCH_VcuConfig (ADAPTIVE's rear-steering law). TargetSpeed is the
+signed centre speed v (k-matrix.md).
 
 Modes (every one a rotation about a point, seed 000 §1.2):
 - NORMAL: curvature angle X = HandWheelAngle / hand_wheel_ratio at the front-axle centre, centre on the
@@ -10,17 +11,22 @@ Modes (every one a rotation about a point, seed 000 §1.2):
 - LATERAL: every wheel +90° (-90° for a negative TargetSpeed), equal speeds |v| (positive = to the right).
 - PIVOT: centre (PivotX, PivotY), §2 with v_o = TargetSpeed (positive clockwise).
 - ADAPTIVE: below adaptive_low_speed_limit (20 km/h) opposite-phase 4WS, the centre on y = 0 with the
-  front-axle curvature angle X = HandWheelAngle / ratio (seed 000 §3's U-turn). Above it the rear-axle
-  angle comes from `high_speed_law(X, |v|, measured yaw rate)` (the hook for seed 003's feedforward /
-  feedback laws) and all four wheels steer about the one centre of the two axle headings; without a
-  hook the low-speed law is kept at every speed.
+  front-axle curvature angle X = HandWheelAngle / ratio (seed 000 §3's U-turn). Above it the front-axle
+  angle stays X (fixed ratio 15) and the rear-axle angle comes from seed 003 §2's law chosen by the
+  bench-private coding BENCH_VcuConfig.RearSteerLaw (plant/ecus/rear_steer.py: OFF = 2WS, FEEDFORWARD =
+  zero-sideslip k(u) X, FEEDBACK = −X + C2 u r with the IMU_Motion yaw rate; FEEDFORWARD when the message
+  is absent; REQUEST_INVALID when its last frame is invalid or its value unknown), or, when the VCU is
+  built with a hook `high_speed_law(X, |v|, measured yaw rate)`, from the hook instead; all four wheels
+  steer about the one centre of the two axle headings (VCU_RotationCentre).
 In NORMAL and ADAPTIVE a positive v drives forward: v_o = v * sign(x_centre) in §2's convention.
 
 Faults (VCU_VehicleState.VcuFault), checked in this order, the first found is sent:
   5 REQUEST_TIMEOUT  DRV_MotionRequest (or DRV_Steering in NORMAL/ADAPTIVE) never received or timed out.
   4 REQUEST_INVALID  its last frame failed E2E/range checks, a value is non-finite, the mode is unknown,
                      or the request needs more than hub_motor_max_speed on a wheel or more than
-                     max_yaw_rate (e.g. a centre a few cm off the origin): never an out-of-range command.
+                     max_yaw_rate (e.g. a centre a few cm off the origin), or (ADAPTIVE above its low-speed
+                     range) BENCH_VcuConfig's last frame is invalid or names no law: never an out-of-range
+                     command.
   1 CENTRE_AT_ORIGIN centre within 1 cm of the origin with v != 0 (v = 0 sets the spin-in-place angles).
   2 CENTRE_ON_WHEEL  centre within 1 cm of a contact point.
   3 ANGLE_OVER_90    "a wheel that would need more than 90°": in the car-like modes (NORMAL, ADAPTIVE)
@@ -57,6 +63,7 @@ from enum import IntEnum
 from bench.node import NodeIO
 from plant import limits
 from plant.body import VelocityFit
+from plant.ecus.rear_steer import DEFAULT_LAW, SeedLaws, Strategy
 from plant.kinematics import (CORNERS, centre_from_axle_angles, classify_centre, curvature_angle,
                               rotation, translation, yaw_rate)
 from plant.vehicles import Ev4wisParams
@@ -119,6 +126,7 @@ class Vcu:
         self.params = params
         self.geometry = params.geometry
         self.high_speed_law = high_speed_law
+        self.laws = SeedLaws(params)
         self._ratio = params.hand_wheel_ratio
         self._low_speed = params.adaptive_low_speed_limit / 3.6
         self._max_rpm = min(params.hub_motor_max_speed, limits.WHEEL_SPEED_CMD[1])
@@ -167,15 +175,32 @@ class Vcu:
         return result
 
     def _rear_angle(self, front: float, speed: float, io: NodeIO) -> float:
-        if self.high_speed_law is None or speed < self._low_speed:
+        if speed < self._low_speed:
             return opposite_phase(front, speed, 0.0)
         imu = io.latest("IMU_Motion")
         yaw = imu.get("YawRate", 0.0) if imu is not None else 0.0
+        if self.high_speed_law is None:
+            strategy = self._strategy(io)
+            if strategy is None:
+                return math.nan                     # an unknown coding: REQUEST_INVALID
+            measured = yaw if imu is not None and limits.finite(yaw) and not io.invalid("IMU_Motion") else None
+            return self.laws.rear_angle(strategy, front, speed, measured)
         try:
             rear = float(self.high_speed_law(front, speed, yaw if limits.finite(yaw) else 0.0))
         except Exception:       # a broken hook is a bad request, never a crash of the VCU
             return math.nan
         return rear
+
+    @staticmethod
+    def _strategy(io: NodeIO) -> Strategy | None:
+        """BENCH_VcuConfig.RearSteerLaw; DEFAULT_LAW when absent, None when invalid or unknown."""
+        config = io.latest("BENCH_VcuConfig")
+        if config is None:
+            return DEFAULT_LAW
+        value = config.get("RearSteerLaw", math.nan)
+        if io.invalid("BENCH_VcuConfig") or value not in (0, 1, 2):
+            return None
+        return Strategy(int(value))
 
     def _plan(self, mode: int, px: float, py: float, v: float, x_deg: float,
               rear: float) -> tuple[VcuFault, Plan | None]:

@@ -93,12 +93,161 @@ class AclassParams:
         return self.cog_to_front_axle + self.cog_to_rear_axle
 
 
+@dataclass(frozen=True)
+class AbsParams:
+    """ACLASS_ABS (vehicles.md B with seed 004's brakes, tyres, sensors and ABS ECU): what braking adds to
+    AclassParams (aclass.toml), from abs.toml. Units in the field metadata, sources in the file."""
+
+    hand_wheel_ratio: float = _p("1")
+    wheel_inertia: float = _p("kg*m^2")
+    lateral_c: float = _p("1")
+    lateral_e: float = _p("1")
+    slip_speed_floor: float = _p("m/s")
+    load_transfer_lag: float = _p("s")
+    stop_speed: float = _p("m/s")
+    brake_gain_front: float = _p("N*m/bar")
+    brake_gain_rear: float = _p("N*m/bar")
+    inlet_flow: float = _p("bar^0.5/s")
+    outlet_flow: float = _p("bar^0.5/s")
+    master_rate: float = _p("bar/s")
+    pedal_to_pressure: float = _p("bar/%")
+    max_pressure: float = _p("bar")
+    max_drive_torque: float = _p("N*m")
+    cruise_gain: float = _p("N*m/(km/h)")
+    sensor_quantum: float = _p("km/h")
+    roughness_ratio: float = _p("1")
+    roughness_time: float = _p("s")
+    noise_seed: float = _p("1")
+    control_period: float = _p("s")
+    decel_threshold: float = _p("m/s^2")
+    accel_threshold: float = _p("m/s^2")
+    slip_threshold: float = _p("1")
+    slip_max: float = _p("1")
+    turn_front_slip_threshold: float = _p("1")
+    fast_reapply_time: float = _p("s")
+    step_duty: float = _p("1")
+    abs_min_speed: float = _p("km/h")
+    brake_switch_pressure: float = _p("bar")
+    stability_factor: float = _p("s^2/m^2")
+    v_l0: float = _p("km/h")
+    v_l1: float = _p("km/h")
+    v_l2: float = _p("km/h")
+    t0: float = _p("s")
+    t1: float = _p("s")
+    speed_filter_time: float = _p("s")
+    min_turn_speed: float = _p("km/h")
+    delta_average_points: float = _p("1")
+    rear_release_time: float = _p("s")
+    min_delta_speed: float = _p("km/h")
+    sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        signed = {"lateral_e"}    # the only field that may be zero or negative
+        for f in fields(self):
+            if "unit" in f.metadata and f.name not in signed and not getattr(self, f.name) > 0.0:
+                raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(self, f.name)!r}")
+        if self.lateral_e > 1.0:
+            raise ValueError(f"key 'parameters.lateral_e' must be at most 1 (Magic Formula E), got {self.lateral_e!r}")
+        if not self.v_l0 < self.v_l1:
+            raise ValueError(f"key 'parameters.v_l0' ({self.v_l0}) must be below 'parameters.v_l1' ({self.v_l1})")
+        lam = max(self.slip_threshold, self.turn_front_slip_threshold)
+        if not (self.step_duty <= 1.0 and lam < self.slip_max < 1.0):
+            raise ValueError("keys 'parameters.step_duty' <= 1 and 'parameters.slip_threshold', "
+                             "'turn_front_slip_threshold' < 'slip_max' < 1 needed")
+        if self.delta_average_points != int(self.delta_average_points):
+            raise ValueError(f"key 'parameters.delta_average_points' must be a whole number, "
+                             f"got {self.delta_average_points!r}")
+
+
+@dataclass(frozen=True)
+class SbwParams:
+    """The front steer-by-wire system of the A-class car (seed 001 eq. 1-10, formulas.md §4), its steering
+    robot and its reference ECU (bilateral control, seed 001 §2.3-3; yaw-rate feedback, seed 003 §1), from
+    sbw.toml. Angles of the hand wheel, column and pinion are hand-wheel angles (the pinion turns
+    `steering_ratio` times the road wheels). Units in the field metadata, sources in the file."""
+
+    # hand-wheel module (seed 001 eq. 1-2)
+    hand_wheel_inertia: float = _p("kg*m^2")
+    hand_wheel_damping: float = _p("N*m*s/rad")
+    torsion_bar_stiffness: float = _p("N*m/rad")
+    # road-feel motor with its worm gear (eq. 3-5)
+    road_feel_inertia: float = _p("kg*m^2")
+    road_feel_damping: float = _p("N*m*s/rad")
+    road_feel_torque_constant: float = _p("N*m/A")
+    road_feel_resistance: float = _p("ohm")
+    road_feel_inductance: float = _p("H")
+    road_feel_gear_ratio: float = _p("1")
+    road_feel_current_limit: float = _p("A")
+    # steering actuator motor with its reduction to the pinion (eq. 6-8)
+    steer_motor_inertia: float = _p("kg*m^2")
+    steer_motor_damping: float = _p("N*m*s/rad")
+    steer_motor_torque_constant: float = _p("N*m/A")
+    steer_motor_resistance: float = _p("ohm")
+    steer_motor_inductance: float = _p("H")
+    steer_motor_gear_ratio: float = _p("1")
+    steer_motor_current_limit: float = _p("A")
+    supply_voltage: float = _p("V")
+    # rack and pinion with dry friction and the aligning torque (eq. 9-10)
+    pinion_inertia: float = _p("kg*m^2")
+    pinion_damping: float = _p("N*m*s/rad")
+    dry_friction: float = _p("N*m")
+    pinion_radius: float = _p("m")
+    steering_ratio: float = _p("1")
+    tyre_trail: float = _p("m")
+    pinion_travel: float = _p("deg")
+    # steering robot (plant/driver.py)
+    robot_rate_limit: float = _p("deg/s")
+    robot_bandwidth: float = _p("rad/s")
+    robot_torque_lag: float = _p("s")
+    # reference ECU: bilateral control (plant/ecus/sbw.py)
+    control_rate: float = _p("Hz")
+    assist_gain: float = _p("1")
+    torque_rate_gain: float = _p("s")
+    pinion_damping_gain: float = _p("N*m*s/rad")
+    position_gain: float = _p("1/s")
+    speed_kp: float = _p("N*m*s/rad")
+    speed_ki: float = _p("N*m/rad")
+    road_feel_current_kp: float = _p("V/A")
+    road_feel_current_ki: float = _p("V/(A*s)")
+    road_feel_current_kd: float = _p("V*s/A")
+    steer_current_kp: float = _p("V/A")
+    steer_current_ki: float = _p("V/(A*s)")
+    steer_current_kd: float = _p("V*s/A")
+    rack_force_filter: float = _p("s")
+    # reference ECU: yaw-rate feedback with an ideal steering ratio (seed 003 §1.1, §1.2)
+    ideal_yaw_gain: float = _p("1/s")
+    yaw_reference_lag: float = _p("s")
+    yaw_feedback_kp: float = _p("s")
+    yaw_feedback_ki: float = _p("1")
+    lat_accel_weight: float = _p("1")
+    feedback_min_speed: float = _p("km/h")
+    additional_angle_limit: float = _p("deg")
+    additional_angle_rate: float = _p("deg/s")
+    # reference ECU: sensor plausibility (SBW_Pinion.SbwFault)
+    hand_wheel_range: float = _p("deg")
+    pinion_range: float = _p("deg")
+    plausibility_limit: float = _p("deg")
+    stuck_motion: float = _p("deg")
+    sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if "unit" in f.metadata and not getattr(self, f.name) > 0.0:
+                raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(self, f.name)!r}")
+        if self.control_rate < 1000.0:
+            raise ValueError(f"key 'parameters.control_rate' must be at least 1000 Hz (issue 4), got {self.control_rate!r}")
+        if self.lat_accel_weight > 1.0:
+            raise ValueError(f"key 'parameters.lat_accel_weight' must be at most 1, got {self.lat_accel_weight!r}")
+
+
 P = TypeVar("P")
 
 #: vehicle name (as on the bus, BENCH_Control.Vehicle) -> (file, parameter class)
 VEHICLES: dict[str, tuple[str, type]] = {
     "EV4WIS": ("ev4wis.toml", Ev4wisParams),
     "ACLASS": ("aclass.toml", AclassParams),
+    "ACLASS_ABS": ("abs.toml", AbsParams),
+    "SBW": ("sbw.toml", SbwParams),
 }
 
 

@@ -1,0 +1,258 @@
+"""Vehicle "ACLASS": the A-class car of vehicles.md B with front steer-by-wire (seed 001) on the linear
+single-track model (formulas.md §5), as bus nodes.
+
+Behaviours, stepped in this order every plant tick:
+1. PLANT (`AclassPlant`): the physical world. It takes the steering robot's command (BENCH_SteeringRobot)
+   and the injected sensor faults (BENCH_SbwSensorFault), moves the SBW mechanics (plant/sbw.py) in
+   substeps during which the SBW ECU's fast loops run (plant/ecus/sbw.py, `control`), then the vehicle
+   with the road-wheel angle pinion/15 (plant/single_track.py; ISO inside, bus signs outside), and
+   publishes ground truth: PLANT_Position/Motion/Dynamics/Status and PLANT_SbwAngles/Torques/Sensors.
+2. SBW (`SbwEcu`): reads its bus inputs, runs the yaw-rate feedback, publishes SBW_HandWheel/SBW_Pinion.
+3. IMU (plant/ecus/imu.py): IMU_Motion from the vehicle's true motion.
+4. ABS (`WheelSpeedSensors`): ABS_WheelSpeeds from the vehicle's motion (this car has no ABS function;
+   its ABS node reports the wheel speeds, which the SBW ECU needs for the vehicle speed). ABS_SteerState
+   stays at its start values.
+
+Scenario: whenever BENCH_Control.ScenarioId changes (the first one seen included) everything resets and
+the car drives straight at BENCH_Control.InitialSpeed, which this model holds constant (no longitudinal
+dynamics: LongAccel is 0); PLANT_Status.ScenarioIdAck echoes the id, as plant/body.py does. RoadMu and
+SensorNoise do not affect the linear model.
+
+External nodes: with SBW external the mechanics are not simulated (the real ECU has its own actuators);
+the road-wheel angle is SBW_Pinion.PinionAngle / 15 (held when the message is missing). With PLANT external
+nothing of the physics runs here: the simulated SBW ECU, whose loops run inside the plant's time step, is
+left out too. IMU and ABS external: not built.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection, Mapping, Sequence
+
+from bench.node import Behaviour, NodeIO
+from plant import limits
+from plant.driver import SteeringRobot
+from plant.ecus.imu import Imu
+from plant.ecus.sbw import SbwEcu
+from plant.sbw import SbwMechanics, SbwSensors
+from plant.single_track import SingleTrack, SingleTrackParams
+from plant.vehicles import VEHICLE_CODES, AclassParams, SbwParams, load_vehicle
+
+_DEG = 180.0 / math.pi
+_RAD = math.pi / 180.0
+_KMH = 3.6
+
+# bench.dbc ranges of the SBW ground truth (tests/test_sbw_model.py checks them against the file)
+TRUTH_ANGLE = (-2000.0, 2000.0)          # PLANT_SbwAngles.HandWheelAngle/PinionAngle, deg
+TRUTH_TORQUE = (-65.0, 65.0)             # PLANT_SbwTorques.DriverTorque/RoadFeelTorque/AligningTorque, N·m
+SENSOR_ANGLE = (-3000.0, 3000.0)         # PLANT_SbwSensors.HandWheelSensor/PinionSensor, deg
+WHEEL_SPEED = (0.0, 204.75)              # ABS_WheelSpeeds.WheelSpeedxx, km/h (chassis.dbc)
+BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
+    ("PLANT_SbwAngles", "HandWheelAngle"): TRUTH_ANGLE,
+    ("PLANT_SbwAngles", "PinionAngle"): TRUTH_ANGLE,
+    ("PLANT_SbwTorques", "DriverTorque"): TRUTH_TORQUE,
+    ("PLANT_SbwTorques", "RoadFeelTorque"): TRUTH_TORQUE,
+    ("PLANT_SbwTorques", "AligningTorque"): TRUTH_TORQUE,
+    ("PLANT_SbwSensors", "HandWheelSensor"): SENSOR_ANGLE,
+    ("PLANT_SbwSensors", "PinionSensor"): SENSOR_ANGLE,
+    **{("ABS_WheelSpeeds", f"WheelSpeed{w}"): WHEEL_SPEED for w in ("FL", "FR", "RL", "RR")},
+}
+
+
+def single_track_params(p: AclassParams) -> SingleTrackParams:
+    """vehicles.md B as the §5 model's parameters."""
+    return SingleTrackParams(p.mass, p.yaw_inertia, p.cog_to_front_axle, p.cog_to_rear_axle,
+                             p.cornering_stiffness_front, p.cornering_stiffness_rear)
+
+
+class AclassPlant:
+    """The PLANT node of ACLASS (see the module docstring)."""
+
+    nodes: tuple[str, ...] = ("PLANT",)
+
+    def __init__(self, vehicle: AclassParams, sbw: SbwParams, ecu: SbwEcu | None,
+                 linked: Sequence[Behaviour] = ()) -> None:
+        self.vehicle_params = vehicle
+        self.model = SingleTrack(single_track_params(vehicle))
+        self.ecu = ecu
+        self.mechanics = SbwMechanics(sbw) if ecu is not None else None
+        self.robot = SteeringRobot(sbw)
+        self.sensors = SbwSensors()
+        self.control_rate = sbw.control_rate
+        self.ratio = sbw.steering_ratio
+        self.linked = tuple(linked)
+        self.vehicle_code = VEHICLE_CODES["ACLASS"]
+        self.reset()
+
+    def reset(self) -> None:
+        self.model.reset(0.0)
+        if self.mechanics is not None:
+            self.mechanics.reset()
+        self.robot.reset()
+        self.scenario: int | None = None
+        self._t0: float | None = None
+        self.x = self.y = 0.0               # world position of the CoG, m (start frame, formulas.md §1)
+        self._bus_pinion = 0.0              # deg, SBW_Pinion.PinionAngle when the SBW is external
+
+    def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:
+        for behaviour in self.linked:
+            behaviour.reset()
+        self.reset()
+        speed = control.get("InitialSpeed", 0.0)
+        self.model.reset(speed if limits.finite(speed) and speed > 0.0 else 0.0)
+        self.scenario = int(control["ScenarioId"])
+        self._t0 = t - dt
+
+    # -- bus signs of the vehicle's state ---------------------------------------------------------------
+    @property
+    def yaw_rate_dps(self) -> float:
+        """Yaw rate, deg/s, positive clockwise (right turn) — also read by the IMU."""
+        return -self.model.yaw_rate * _DEG
+
+    @property
+    def ax(self) -> float:
+        """Lateral acceleration, m/s², positive to the right (the IMU's name, as plant.body.PlanarBody)."""
+        return -self.model.lat_accel
+
+    @property
+    def ay(self) -> float:
+        """Longitudinal acceleration, m/s²: 0, the speed is held."""
+        return 0.0
+
+    @property
+    def road_wheel_angle(self) -> float:
+        """Front road-wheel angle, rad, bus signs."""
+        if self.mechanics is not None:
+            return self.mechanics.road_wheel_angle
+        return self._bus_pinion * _RAD / self.ratio
+
+    # -- tick -------------------------------------------------------------------------------------------------
+    def step(self, io: NodeIO, t: float, dt: float) -> None:
+        control = io.latest("BENCH_Control")
+        if control is not None:
+            sid = control.get("ScenarioId")
+            if sid is not None and sid != self.scenario and limits.finite(sid):
+                self._restart(control, t, dt)
+        if self._t0 is None:
+            self._t0 = t - dt
+        self.robot.command(io.latest("BENCH_SteeringRobot"))
+        model = self.model
+        mech = self.mechanics
+        if mech is not None and self.ecu is not None:
+            fault = io.latest("BENCH_SbwSensorFault")
+            if fault is not None and limits.finite(fault.get("SensorFault", 0.0), fault.get("SensorOffset", 0.0)):
+                mech.set_sensor_fault(int(fault["SensorFault"]), fault["SensorOffset"] * _RAD)
+            else:
+                mech.set_sensor_fault(0)
+            self._load_front_axle(mech)
+            substeps = max(1, math.ceil(dt * self.control_rate - 1e-9))
+            mech.advance(dt, self.ecu, self.robot, self.sensors, substeps)
+        else:
+            pinion = io.latest("SBW_Pinion")
+            if pinion is not None and limits.finite(pinion.get("PinionAngle", math.nan)):
+                self._bus_pinion = pinion["PinionAngle"]
+        model.step(dt, -self.road_wheel_angle)
+        self._move(dt)
+        self._publish(io, t)
+
+    def _load_front_axle(self, mech: SbwMechanics) -> None:
+        """The front tyre force on the rack (eq. 10) from the vehicle's state, bus signs."""
+        model, p = self.model, self.vehicle_params
+        if model.kinematic:
+            mech.set_front_axle(0.0, 0.0, -model.front_lateral_force)
+        else:
+            slip_offset = -(model.beta + p.cog_to_front_axle * model.yaw_rate / model.speed)
+            mech.set_front_axle(p.cornering_stiffness_front, slip_offset)
+
+    def _move(self, dt: float) -> None:
+        """CoG position in the start frame: velocity direction = heading + sideslip (clockwise from +Y)."""
+        model = self.model
+        direction = -(model.yaw_angle + model.beta)
+        speed = model.speed / math.cos(model.beta) if abs(model.beta) < 1.5 else model.speed
+        self.x += speed * math.sin(direction) * dt
+        self.y += speed * math.cos(direction) * dt
+
+    def _publish(self, io: NodeIO, t: float) -> None:
+        model = self.model
+        clamp = limits.clamp
+        heading = (-model.yaw_angle * _DEG + 180.0) % 360.0 - 180.0
+        io.send_values("PLANT_Position", PosX=clamp(self.x, limits.PLANT_POS), PosY=clamp(self.y, limits.PLANT_POS))
+        io.send_values("PLANT_Motion", Heading=clamp(heading, limits.PLANT_HEADING),
+                       Speed=clamp(model.speed, limits.PLANT_SPEED),
+                       YawRate=clamp(self.yaw_rate_dps, limits.PLANT_YAW_RATE))
+        io.send_values("PLANT_Dynamics", Sideslip=clamp(-model.beta * _DEG, limits.PLANT_SIDESLIP),
+                       LatAccel=clamp(self.ax, limits.PLANT_ACCEL), LongAccel=0.0)
+        io.send_values("PLANT_Status", ScenarioIdAck=self.scenario or 0, Vehicle=self.vehicle_code,
+                       PlantTime=clamp(t - (self._t0 or 0.0), limits.PLANT_TIME))
+        mech = self.mechanics
+        if mech is None:
+            return
+        s = self.sensors
+        mech.read(s)
+        io.send_values("PLANT_SbwAngles", HandWheelAngle=clamp(mech.theta_h * _DEG, TRUTH_ANGLE),
+                       PinionAngle=clamp(mech.theta_p * _DEG, TRUTH_ANGLE))
+        io.send_values("PLANT_SbwTorques", DriverTorque=clamp(mech.driver_torque, TRUTH_TORQUE),
+                       RoadFeelTorque=clamp(mech.road_feel_torque, TRUTH_TORQUE),
+                       AligningTorque=clamp(mech.aligning_torque, TRUTH_TORQUE))
+        io.send_values("PLANT_SbwSensors", HandWheelSensor=clamp(s.hand_wheel * _DEG, SENSOR_ANGLE),
+                       PinionSensor=clamp(s.pinion * _DEG, SENSOR_ANGLE))
+
+
+class WheelSpeedSensors:
+    """Node ABS of ACLASS: ABS_WheelSpeeds (circumferential speeds, km/h) from the vehicle's rigid motion.
+
+    Contact velocity of wheel i at (x_i, y_i) from the CoG (ISO: x forward, y left):
+    (u − r y_i, u β + r x_i); a wheel's circumferential speed is its projection on the wheel heading
+    (front wheels turned by δ_f, rear straight)."""
+
+    nodes: tuple[str, ...] = ("ABS",)
+
+    def __init__(self, plant: AclassPlant, vehicle: AclassParams) -> None:
+        self.plant = plant
+        half = vehicle.track / 2.0
+        a, b = vehicle.cog_to_front_axle, vehicle.cog_to_rear_axle
+        self.positions = (("FL", a, half, True), ("FR", a, -half, True), ("RL", -b, half, False), ("RR", -b, -half, False))
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, io: NodeIO, t: float, dt: float) -> None:
+        model = self.plant.model
+        u, r = model.speed, model.yaw_rate
+        v = u * math.tan(model.beta)
+        delta = -self.plant.road_wheel_angle          # ISO
+        c, s = math.cos(delta), math.sin(delta)
+        out = {}
+        for name, x, y, steered in self.positions:
+            vx, vy = u - r * y, v + r * x
+            speed = vx * c + vy * s if steered else vx
+            out[f"WheelSpeed{name}"] = limits.clamp(abs(speed) * _KMH, WHEEL_SPEED)
+        io.send_values("ABS_WheelSpeeds", **out)
+
+
+def build(external: Collection[str]) -> list[Behaviour]:
+    """The ACLASS behaviours not in `external`, in step order (module docstring)."""
+    vehicle = load_vehicle("ACLASS")
+    sbw = load_vehicle("SBW")
+    behaviours: list[Behaviour] = []
+    if "PLANT" in external:
+        if "IMU" not in external:
+            behaviours.append(Imu(None))
+        return behaviours
+    ecu = SbwEcu(sbw) if "SBW" not in external else None
+    plant = AclassPlant(vehicle, sbw, ecu)
+    behaviours.append(plant)
+    linked: list[Behaviour] = []
+    if ecu is not None:
+        behaviours.append(ecu)
+        linked.append(ecu)
+    if "IMU" not in external:
+        imu = Imu(plant)  # type: ignore[arg-type]   # duck-typed: yaw_rate_dps, ax, ay as plant.body.PlanarBody
+        behaviours.append(imu)
+        linked.append(imu)
+    if "ABS" not in external:
+        wheels = WheelSpeedSensors(plant, vehicle)
+        behaviours.append(wheels)
+        linked.append(wheels)
+    plant.linked = tuple(linked)
+    return behaviours

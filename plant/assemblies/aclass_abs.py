@@ -1,0 +1,35 @@
+"""Vehicle ACLASS_ABS: the A-class car of vehicles.md B with brake hydraulics, Magic Formula tyres, wheel-speed
+sensors and the reference ABS ECU of seed 004.
+
+Parameters: plant/vehicles/aclass.toml (the car) and plant/vehicles/abs.toml (what braking adds; its
+hand_wheel_ratio 18 is seed 004's i_w and replaces the car's 15 for this vehicle).
+
+Step order (the returned list IS the order): PLANT, then ABS. The ABS reads the sensors and commands the
+valves of the plant by direct reference (its wires), so it sees the wheels of this very tick; its valve
+commands act from the next plant tick (the hydraulics' own delay). Nodes named in `external` are left out:
+with ABS external the hydraulic unit's valves stay unpowered (no valve commands reach the plant over CAN:
+the contract has none), so the car brakes without ABS; with PLANT external nothing is built (the ABS has no
+sensors to read).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+
+from bench.node import Behaviour
+from plant.braking_plant import BrakingPlantNode
+from plant.ecus.abs import AbsEcu
+from plant.vehicles import load_vehicle
+
+
+def build(external: Collection[str]) -> list[Behaviour]:
+    if "PLANT" in external:
+        return []
+    car, abs_params = load_vehicle("ACLASS"), load_vehicle("ACLASS_ABS")
+    plant = BrakingPlantNode(car, abs_params)
+    behaviours: list[Behaviour] = [plant]
+    if "ABS" not in external:
+        ecu = AbsEcu(abs_params, car, plant)
+        behaviours.append(ecu)
+        plant.linked = (ecu,)
+    return behaviours

@@ -1,0 +1,200 @@
+"""The PLANT node of vehicle ACLASS_ABS: the braking vehicle (plant/braking_vehicle.py), its brake hydraulics
+(plant/brakes.py) and wheel-speed sensors (plant/sensors.py), driven from the bus; ground truth out.
+
+Inputs (io.latest; a timed-out message keeps its last value, the driver does not vanish with a frame):
+  - DRV_Steering.HandWheelAngle (the hand-wheel sensor, positive right): road-wheel angle of both front wheels
+    = HandWheelAngle / hand_wheel_ratio (18, seed 004 §4), a rigid mechanical linkage (no lag; the stimulus
+    shapes the steering). BENCH_SteeringRobot is not used by this vehicle.
+  - DRV_Pedals: brake demand (plant/brakes.py: BrakePressure, else BrakePedal x 1.5 bar/%), AccelPedal x
+    max_drive_torque on the front axle.
+  - BENCH_AbsStimulus (dbc/bench.dbc): CruiseSpeed > 0: a drive robot holds that speed (km/h, true speed)
+    with the accelerator while the master pressure is below 0.5 bar (steady-state circular tests, seed 004
+    §4); ValveBypass = 1: the hydraulic unit ignores the ABS valves (the locked-wheel reference run).
+  - BENCH_Control: a change of ScenarioId (the first one seen included) resets the world and every linked
+    behaviour (the in-process ABS ECU): straight ahead at InitialSpeed, wheels free rolling, brakes
+    released; RoadMu (tyre set, plant/braking_vehicle.road_shape) and SensorNoise (plant/sensors.py) are taken
+    then and whenever they change. PLANT_Status.ScenarioIdAck echoes the id (plant/body.py does the same).
+
+Ground truth (dbc/bench.dbc): PLANT_Position (geometric centre = mid-point of the axles, start frame of
+formulas.md §1), PLANT_Motion (Heading, Speed of the geometric centre, YawRate positive right),
+PLANT_Dynamics (Sideslip at the CoG positive right, LatAccel positive right, LongAccel), PLANT_Status
+(Vehicle 2 = ACLASS_ABS), and seed 004's truth: PLANT_AbsVehicle (CoG speed over ground in km/h, front
+road-wheel angle positive right, master pressure, bypass) and PLANT_AbsWheel_xx (true circumferential
+speed, braking slip positive when braking, wheel pressure, normal load). All clamped to the DBC ranges, and
+sampled every 10 ms at the ABS ECU's update instants (PUBLISH_MS), plus at once after a scenario reset.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+from bench.node import Behaviour, NodeIO
+from plant import limits
+from plant.brakes import BrakeHydraulics, Valve
+from plant.braking_vehicle import KMH, BrakingVehicle, VehicleSpec
+from plant.sensors import WheelSpeedSensors
+from plant.vehicles import VEHICLE_CODES, AbsParams, AclassParams
+
+_DEG = 180.0 / math.pi
+CORNERS = ("FL", "FR", "RL", "RR")
+CRUISE_RELEASE_BAR = 0.5
+#: ground truth is sampled every 10 ms at bench times that are multiples of 10 ms: the instants at which the ABS
+#: ECU updates its outputs (plant/ecus/abs.py), so truth and estimate are compared at the same instant; every
+#: PLANT message has a cycle of 10 ms or more (dbc/bench.dbc)
+PUBLISH_MS = 10
+#: DBC ranges of the seed 004 truth messages (dbc/bench.dbc; checked by tests/test_abs_estimator.py)
+TRUTH_SPEED = (0.0, 250.0)          # PLANT_AbsVehicle.VehicleSpeed, km/h
+TRUTH_ANGLE = (-90.0, 90.0)         # PLANT_AbsVehicle.FrontWheelAngle, deg
+TRUTH_PRESSURE = (0.0, 400.0)       # PLANT_AbsVehicle.MasterPressure, PLANT_AbsWheel_xx.BrakePressure, bar
+TRUTH_WHEEL_SPEED = (0.0, 600.0)    # PLANT_AbsWheel_xx.WheelSpeed, km/h
+TRUTH_SLIP = (-1.0, 1.0)            # PLANT_AbsWheel_xx.Slip
+TRUTH_LOAD = (0.0, 12750.0)         # PLANT_AbsWheel_xx.NormalLoad, N
+WHEEL_MESSAGES = tuple(f"PLANT_AbsWheel_{c}" for c in CORNERS)
+
+
+def vehicle_spec(car: AclassParams, abs_params: AbsParams) -> VehicleSpec:
+    return VehicleSpec(
+        mass=car.mass, yaw_inertia=car.yaw_inertia, cog_to_front_axle=car.cog_to_front_axle,
+        cog_to_rear_axle=car.cog_to_rear_axle, track=car.track, wheel_radius=car.wheel_radius,
+        cog_height=car.cog_height, cornering_stiffness_front=car.cornering_stiffness_front,
+        cornering_stiffness_rear=car.cornering_stiffness_rear, wheel_inertia=abs_params.wheel_inertia,
+        lateral_c=abs_params.lateral_c, lateral_e=abs_params.lateral_e,
+        slip_speed_floor=abs_params.slip_speed_floor, load_transfer_lag=abs_params.load_transfer_lag,
+        stop_speed=abs_params.stop_speed)
+
+
+class BrakingPlantNode:
+    """Node PLANT of ACLASS_ABS; also the ABS ECU's hardware (sensors and valves, plant/ecus/abs.AbsHardware)."""
+
+    nodes: tuple[str, ...] = ("PLANT",)
+
+    def __init__(self, car: AclassParams, abs_params: AbsParams, *, vehicle: str = "ACLASS_ABS") -> None:
+        self.params = abs_params
+        self.vehicle = BrakingVehicle(vehicle_spec(car, abs_params))
+        self.hydraulics = BrakeHydraulics(
+            inlet_flow=abs_params.inlet_flow, outlet_flow=abs_params.outlet_flow,
+            gain_front=abs_params.brake_gain_front, gain_rear=abs_params.brake_gain_rear,
+            master_rate=abs_params.master_rate, pedal_to_pressure=abs_params.pedal_to_pressure,
+            max_pressure=abs_params.max_pressure)
+        self.sensors = WheelSpeedSensors(quantum=abs_params.sensor_quantum, roughness_ratio=abs_params.roughness_ratio,
+                                         roughness_time=abs_params.roughness_time, seed=int(abs_params.noise_seed))
+        self.linked: tuple[Behaviour, ...] = ()
+        self.vehicle_code = VEHICLE_CODES[vehicle]
+        self._ratio = abs_params.hand_wheel_ratio
+        self._gc = (car.cog_to_front_axle - car.cog_to_rear_axle) / 2.0   # geometric centre ahead of the CoG, m
+        self.reset()
+
+    def reset(self) -> None:
+        self.vehicle.reset()
+        self.hydraulics.reset()
+        self.sensors.reset()
+        self.scenario: int | None = None
+        self._t0: float | None = None
+        self._mu = math.nan
+        self._hand_wheel = 0.0
+        self._demand = 0.0
+        self._accel = 0.0
+        self._ack_due = True
+
+    # -- the ABS ECU's wiring -------------------------------------------------------------------------------
+    def read_sensors(self, dt: float) -> list[float]:
+        return self.sensors.sample(self.vehicle.wheel_speeds_kmh(), dt)
+
+    def command_valves(self, valves: Sequence[Valve], duties: Sequence[float]) -> None:
+        self.hydraulics.command(valves, duties)
+
+    def release_valves(self) -> None:
+        self.hydraulics.release()
+
+    # -- per tick ---------------------------------------------------------------------------------------------
+    def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:
+        v0 = control.get("InitialSpeed", 0.0)
+        self.vehicle.reset(v0 if limits.finite(v0) else 0.0)
+        self.hydraulics.reset()
+        self._mu = math.nan
+        self._apply_control(control, force=True)
+        for behaviour in self.linked:
+            behaviour.reset()
+        self._hand_wheel = self._demand = self._accel = 0.0
+        self._t0 = t - dt
+        self._ack_due = True
+
+    def _apply_control(self, control: Mapping[str, float], force: bool = False) -> None:
+        mu = control.get("RoadMu", 1.0)
+        if force or mu != self._mu:
+            self._mu = mu
+            self.vehicle.set_road(mu if limits.finite(mu) else 1.0)
+        noise = control.get("SensorNoise", 0.0)
+        if force:
+            self.sensors.reset(noise if limits.finite(noise) else 0.0)
+        elif noise != self.sensors.noise and limits.finite(noise) and noise >= 0.0:
+            self.sensors.noise = noise
+
+    def step(self, io: NodeIO, t: float, dt: float) -> None:
+        control = io.latest("BENCH_Control")
+        if control is not None:
+            sid = control.get("ScenarioId")
+            if sid is not None and sid != self.scenario and limits.finite(sid):
+                self.scenario = int(sid)
+                self._restart(control, t, dt)
+            else:
+                self._apply_control(control)
+        if self._t0 is None:
+            self._t0 = t - dt
+        p = self.params
+        steering = io.latest("DRV_Steering")
+        if steering is not None:
+            hw = steering.get("HandWheelAngle", math.nan)
+            if limits.finite(hw):
+                self._hand_wheel = hw
+        pedals = io.latest("DRV_Pedals")
+        if pedals is not None:
+            demand = self.hydraulics.demand(pedals.get("BrakePressure", math.nan), pedals.get("BrakePedal", math.nan))
+            accel = pedals.get("AccelPedal", 0.0)
+            self._demand = demand
+            self._accel = accel if limits.finite(accel) and accel > 0.0 else 0.0
+        stimulus = io.latest("BENCH_AbsStimulus")
+        cruise = bypass = 0.0
+        if stimulus is not None:
+            cruise = stimulus.get("CruiseSpeed", 0.0)
+            bypass = stimulus.get("ValveBypass", 0.0)
+        hyd, veh = self.hydraulics, self.vehicle
+        hyd.bypass = bypass == 1
+        hyd.step(self._demand, dt)
+        drive = min(self._accel, 100.0) / 100.0 * p.max_drive_torque
+        if limits.finite(cruise) and cruise > 0.0 and hyd.master < CRUISE_RELEASE_BAR:
+            drive += p.cruise_gain * (cruise - veh.speed * KMH)
+        veh.drive_torque = 0.0 if drive < 0.0 else p.max_drive_torque if drive > p.max_drive_torque else drive
+        veh.delta = -self._hand_wheel / self._ratio / _DEG          # bus positive right -> internal left
+        veh.brake_torque = hyd.torques()
+        veh.step(dt)
+        ms = round(t * 1000.0)
+        if ms % PUBLISH_MS == 0 or self._ack_due:
+            self._ack_due = False
+            self._publish(io, t)
+
+    def _publish(self, io: NodeIO, t: float) -> None:
+        veh, hyd = self.vehicle, self.hydraulics
+        clamp = limits.clamp
+        c, s = math.cos(veh.psi), math.sin(veh.psi)
+        gx, gy = veh.x + self._gc * c, veh.y + self._gc * s          # geometric centre, internal world frame
+        v_gc = veh.v + veh.r * self._gc
+        io.send_values("PLANT_Position", PosX=clamp(-gy, limits.PLANT_POS), PosY=clamp(gx, limits.PLANT_POS))
+        heading = (-veh.psi * _DEG + 180.0) % 360.0 - 180.0
+        io.send_values("PLANT_Motion", Heading=clamp(heading, limits.PLANT_HEADING),
+                       Speed=clamp(math.hypot(veh.u, v_gc), limits.PLANT_SPEED),
+                       YawRate=clamp(-veh.r * _DEG, limits.PLANT_YAW_RATE))
+        io.send_values("PLANT_Dynamics", Sideslip=clamp(-veh.sideslip * _DEG, limits.PLANT_SIDESLIP),
+                       LatAccel=clamp(-veh.ay, limits.PLANT_ACCEL), LongAccel=clamp(veh.ax, limits.PLANT_ACCEL))
+        io.send_values("PLANT_Status", ScenarioIdAck=self.scenario or 0, Vehicle=self.vehicle_code,
+                       PlantTime=clamp(t - (self._t0 or 0.0), limits.PLANT_TIME))
+        io.send_values("PLANT_AbsVehicle", VehicleSpeed=clamp(veh.speed * KMH, TRUTH_SPEED),
+                       FrontWheelAngle=clamp(-veh.delta * _DEG, TRUTH_ANGLE),
+                       MasterPressure=clamp(hyd.master, TRUTH_PRESSURE), ValveBypass=1 if hyd.bypass else 0)
+        speeds = veh.wheel_speeds_kmh()
+        for i, message in enumerate(WHEEL_MESSAGES):
+            io.send_values(message, WheelSpeed=clamp(speeds[i], TRUTH_WHEEL_SPEED),
+                           Slip=clamp(-veh.kappa[i], TRUTH_SLIP),
+                           BrakePressure=clamp(hyd.pressures[i], TRUTH_PRESSURE),
+                           NormalLoad=clamp(veh.fz[i], TRUTH_LOAD))

@@ -1,0 +1,222 @@
+"""Steer-by-wire mechanics of seed 001 (eq. 1-10, formulas.md §4): hand wheel with torsion bar, road-feel
+motor with its worm gear, steering actuator DC motor, rack and pinion with dry friction and aligning torque.
+
+Coordinates: every angle is a hand-wheel angle in rad, positive to the right (bus convention,
+formulas.md §1): the hand wheel θ_h, the column below the torsion bar θ_c = θ_m / r_m (θ_m the road-feel
+motor's angle, r_m its gear ratio) and the pinion θ_p (the road wheels turn θ_p / i_s, i_s =
+`steering_ratio`). Seed 001's equations, written at the column and at the pinion:
+
+    (1) F_h = J_h θ̈_h + B_h θ̇_h + F_m                  hand wheel, F_h the driver's (robot's) torque
+    (2) F_m = K_h (θ_h − θ_m / r_m)                     torsion bar (the driver-torque sensor)
+    (3) T_m = J_m θ̈_m + B_m θ̇_m − F_m / r_m             road-feel motor, at its shaft
+    (4) T_m = K_m i_m     (5) U_m = R_m i_m + L_m di_m/dt + K_m θ̇_m
+    (6) T_M = J_M θ̈_M + B_M θ̇_M + T_r / r_M             steering motor at its shaft, θ_M = r_M θ_p
+    (7) T_M = K_M i_M     (8) U_M = R_M i_M + L_M di_M/dt + K_M θ̇_M
+    (9) T_t = J_p θ̈_p + B_p θ̇_p + T_f                   rack and pinion, T_f dry friction
+    (10) T_t = T_r + T_a                               T_a aligning torque at the pinion
+
+so that (J_m r_m²) θ̈_c = r_m K_m i_m − B_m r_m² θ̇_c + F_m and
+(J_p + J_M r_M²) θ̈_p = r_M K_M i_M − (B_p + B_M r_M²) θ̇_p − T_f + T_a. The OCR prints r_m (the
+road-feel gear) in eq. 6 too; the steering motor has its own reduction r_M here (`steer_motor_gear_ratio`).
+
+Aligning torque (eq. 10) from the vehicle's front axle force: T_a = −t F_yf / i_s with t the total trail
+(pneumatic + caster), F_yf = C_f α_f, α_f = θ_p / i_s − (β + a r / u) in bus signs: the caller sets the
+front axle through `set_front_axle` every plant tick, the pinion's own angle enters at every substep.
+
+Integration per substep h (the ECU's control period, plant/ecus/sbw.py): currents exactly for the
+voltage and speed held over h; velocities then positions semi-implicitly (stable: h·√(K/J) ≪ 1);
+dry friction by a stick-slip (Karnopp) rule, so the pinion rests instead of chattering; rigid end stops
+at ±`pinion_travel`. In ANGLE mode the steering robot imposes θ_h (plant/driver.py) and eq. 1 gives the
+torque it needs; in TORQUE and OFF modes the hand wheel is free under the robot's torque.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+from plant.vehicles import SbwParams
+
+_RAD = math.pi / 180.0
+
+
+class SensorFault:
+    """What the plant's sensor model may do (BENCH_SbwSensorFault.SensorFault, dbc/bench.dbc)."""
+
+    NONE = 0
+    HANDWHEEL_STUCK = 1      # the hand-wheel angle sensor freezes at its value when the fault starts
+    HANDWHEEL_OFFSET = 2     # the hand-wheel angle sensor reads `offset` too much
+    PINION_OFFSET = 3        # the pinion angle sensor reads `offset` too much
+
+
+class SbwSensors:
+    """What the SBW ECU measures, refreshed before every substep (rad, rad/s, N·m, A; bus signs).
+
+    `hand_wheel` and `pinion` are the angle sensors (subject to injected faults); `column` and
+    `column_rate` come from the road-feel motor's rotor sensor through its gear, `motor_pinion` and
+    `pinion_rate` from the steering motor's rotor sensor through its reduction (independent channels).
+    """
+
+    __slots__ = ("hand_wheel", "torsion_torque", "column", "column_rate", "road_feel_current",
+                 "pinion", "motor_pinion", "pinion_rate", "steer_current")
+
+    def __init__(self) -> None:
+        self.hand_wheel = self.torsion_torque = self.column = self.column_rate = 0.0
+        self.road_feel_current = self.pinion = self.motor_pinion = self.pinion_rate = self.steer_current = 0.0
+
+
+class MotorController(Protocol):
+    """The ECU's fast loops, called once per substep (plant/ecus/sbw.py implements it)."""
+
+    def control(self, sensors: SbwSensors, h: float) -> tuple[float, float]:
+        """(road-feel motor voltage U_m, steering motor voltage U_M), V."""
+
+
+class HandWheelDriver(Protocol):
+    """The steering robot as the hand wheel sees it (plant/driver.py implements it)."""
+
+    def advance(self, h: float, angle: float, rate: float) -> tuple[bool, float, float, float]:
+        """Move by h. (True, θ, θ̇, θ̈) when it imposes the hand-wheel angle, else (False, torque, 0, 0)."""
+
+
+class SbwMechanics:
+    """State and substep of seed 001's SBW system (see the module docstring)."""
+
+    def __init__(self, p: SbwParams) -> None:
+        self.p = p
+        self.j_h, self.b_h, self.k_h = p.hand_wheel_inertia, p.hand_wheel_damping, p.torsion_bar_stiffness
+        rm, rM = p.road_feel_gear_ratio, p.steer_motor_gear_ratio
+        self.j_c = p.road_feel_inertia * rm * rm
+        self.b_c = p.road_feel_damping * rm * rm
+        self.kt_c = p.road_feel_torque_constant * rm            # N·m at the column per A (and V per rad/s)
+        self.j_p = p.pinion_inertia + p.steer_motor_inertia * rM * rM
+        self.b_p = p.pinion_damping + p.steer_motor_damping * rM * rM
+        self.kt_p = p.steer_motor_torque_constant * rM          # N·m at the pinion per A (and V per rad/s)
+        self.friction = p.dry_friction
+        self.ratio = p.steering_ratio
+        self.trail = p.tyre_trail
+        self.travel = p.pinion_travel * _RAD
+        self._h = -1.0
+        self._decay_m = self._decay_M = 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        """Centred, at rest, no current, no tyre load, no sensor fault."""
+        self.theta_h = self.omega_h = 0.0
+        self.theta_c = self.omega_c = 0.0
+        self.theta_p = self.omega_p = 0.0
+        self.i_m = self.i_M = 0.0
+        self.driver_torque = 0.0          # F_h, what the robot (driver) applies at the rim, N·m
+        self.aligning_torque = 0.0        # T_a at the pinion, N·m
+        self._cf = self._slip_offset = self._force_offset = 0.0
+        self.fault = SensorFault.NONE
+        self.fault_offset = 0.0
+        self._stuck_value: float | None = None
+
+    # -- inputs from the vehicle and the bench -------------------------------------------------------
+    def set_front_axle(self, cornering_stiffness: float, slip_offset: float, force: float = 0.0) -> None:
+        """Front axle force F_yf = C_f (θ_p / i_s − slip_offset) + force, N (bus signs): C_f the axle
+        cornering stiffness (0 when the vehicle is kinematic), slip_offset = β + a r / u, force a fixed part."""
+        self._cf, self._slip_offset, self._force_offset = cornering_stiffness, slip_offset, force
+
+    def set_sensor_fault(self, fault: int, offset: float = 0.0) -> None:
+        """Inject a sensor fault (SensorFault) with its offset (rad); NONE clears it."""
+        if fault != self.fault:
+            self._stuck_value = self.theta_h if fault == SensorFault.HANDWHEEL_STUCK else None
+        self.fault, self.fault_offset = fault, offset
+
+    @property
+    def front_lateral_force(self) -> float:
+        """F_yf at the present pinion angle, N (bus signs: positive to the right)."""
+        return self._cf * (self.theta_p / self.ratio - self._slip_offset) + self._force_offset
+
+    @property
+    def road_feel_torque(self) -> float:
+        """Torque of the road-feel motor at the column (hand-wheel side of its gear), N·m."""
+        return self.kt_c * self.i_m
+
+    @property
+    def torsion_torque(self) -> float:
+        """F_m of eq. 2, N·m: what the driver-torque sensor reads."""
+        return self.k_h * (self.theta_h - self.theta_c)
+
+    @property
+    def road_wheel_angle(self) -> float:
+        """δ_f = θ_p / i_s, rad (bus signs)."""
+        return self.theta_p / self.ratio
+
+    # -- sensors -------------------------------------------------------------------------------------------
+    def read(self, s: SbwSensors) -> None:
+        """Fill `s` with what the ECU's sensors read now (faults applied)."""
+        fault = self.fault
+        hand = self.theta_h
+        if fault == SensorFault.HANDWHEEL_STUCK and self._stuck_value is not None:
+            hand = self._stuck_value
+        elif fault == SensorFault.HANDWHEEL_OFFSET:
+            hand += self.fault_offset
+        s.hand_wheel = hand
+        s.torsion_torque = self.k_h * (self.theta_h - self.theta_c)
+        s.column = self.theta_c
+        s.column_rate = self.omega_c
+        s.road_feel_current = self.i_m
+        s.pinion = self.theta_p + (self.fault_offset if fault == SensorFault.PINION_OFFSET else 0.0)
+        s.motor_pinion = self.theta_p
+        s.pinion_rate = self.omega_p
+        s.steer_current = self.i_M
+
+    # -- dynamics -------------------------------------------------------------------------------------------
+    def substep(self, h: float, u_m: float, u_M: float, driver: HandWheelDriver) -> None:
+        """Advance by h with the motor voltages held (V) and the robot acting on the hand wheel."""
+        p = self.p
+        if h != self._h:
+            self._h = h
+            self._decay_m = math.exp(-h * p.road_feel_resistance / p.road_feel_inductance)
+            self._decay_M = math.exp(-h * p.steer_motor_resistance / p.steer_motor_inductance)
+        # (5), (8): currents, exact for the voltage and the back-EMF held over h
+        i_ss = (u_m - self.kt_c * self.omega_c) / p.road_feel_resistance
+        self.i_m = i_ss + (self.i_m - i_ss) * self._decay_m
+        i_ss = (u_M - self.kt_p * self.omega_p) / p.steer_motor_resistance
+        self.i_M = i_ss + (self.i_M - i_ss) * self._decay_M
+        # (2): torsion bar
+        f_m = self.k_h * (self.theta_h - self.theta_c)
+        # (1): hand wheel, imposed by the robot or free under its torque
+        imposed, a, b, c = driver.advance(h, self.theta_h, self.omega_h)
+        if imposed:
+            self.theta_h, self.omega_h = a, b
+            self.driver_torque = self.j_h * c + self.b_h * b + f_m
+        else:
+            self.driver_torque = a
+            self.omega_h += h * (a - self.b_h * self.omega_h - f_m) / self.j_h
+            self.theta_h += h * self.omega_h
+        # (3), (4): column and road-feel motor
+        self.omega_c += h * (self.kt_c * self.i_m - self.b_c * self.omega_c + f_m) / self.j_c
+        self.theta_c += h * self.omega_c
+        # (6), (7), (9), (10): pinion with the steering motor, dry friction and aligning torque
+        t_a = -self.trail * self.front_lateral_force / self.ratio
+        self.aligning_torque = t_a
+        drive = self.kt_p * self.i_M - self.b_p * self.omega_p + t_a
+        w = self.omega_p
+        if w == 0.0 and abs(drive) <= self.friction:
+            pass                                                      # sticking: static friction holds
+        else:
+            direction = w if w != 0.0 else drive
+            w_new = w + h * (drive - math.copysign(self.friction, direction)) / self.j_p
+            if w != 0.0 and w_new * w < 0.0:
+                w_new = 0.0                                           # reversal: stick for now
+            self.omega_p = w_new
+        theta = self.theta_p + h * self.omega_p
+        if theta > self.travel:
+            theta, self.omega_p = self.travel, min(self.omega_p, 0.0)
+        elif theta < -self.travel:
+            theta, self.omega_p = -self.travel, max(self.omega_p, 0.0)
+        self.theta_p = theta
+
+    def advance(self, dt: float, controller: MotorController, driver: HandWheelDriver,
+                sensors: SbwSensors, substeps: int) -> None:
+        """One plant tick dt: `substeps` times (read the sensors, let the ECU's fast loops set the
+        voltages, move by dt/substeps). The ECU therefore runs at substeps/dt (≥ 1 kHz)."""
+        h = dt / substeps
+        for _ in range(substeps):
+            self.read(sensors)
+            u_m, u_M = controller.control(sensors, h)
+            self.substep(h, u_m, u_M, driver)
