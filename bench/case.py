@@ -69,7 +69,7 @@ class Case:
     def every(self, period: float, callback: Callable[[float], None]) -> Callable[[], None]:
         """Call callback(now) every `period` s of bench time while the bench runs (a test node's timer,
         e.g. a closed-loop driver model that sets the stimulus from what it reads). Returns a cancel
-        function; every timer of a case ends with the case."""
+        function; every timer ends with its scenario (start_scenario) or with the case."""
         if not period > 0:
             raise BenchError(f"timer period must be > 0 s, not {period!r}")
         timer = _Timer(self.now + period, period, callback)
@@ -103,7 +103,9 @@ class Case:
 
     def start_scenario(self, **control: float | int | str) -> None:
         """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`),
-        reset every stimulus message to its start values, and wait for the plant's acknowledgement."""
+        reset every stimulus message to its start values, end the timers of the last scenario, and wait
+        for the plant's acknowledgement."""
+        self.close()                  # timers belong to a scenario: a driver of the last one must not steer this one
         restbus = self._runner.restbus
         restbus.reset_all()
         for name in restbus.periodic:
