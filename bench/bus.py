@@ -9,6 +9,7 @@ gives the same frame sequence on every run.
 from __future__ import annotations
 
 import socket
+import sys
 from collections import deque
 from typing import Any
 
@@ -60,12 +61,23 @@ class VirtualTimeBus(can.BusABC):
 UDP_RECEIVE_BUFFER = 8 * 1024 * 1024
 
 
-def _enlarge_receive_buffer(bus: can.BusABC) -> None:
-    """python-can's UdpMulticastBus has no option for it: set SO_RCVBUF on its socket (private attribute,
-    isolated here; without it the bus works, with the default buffer)."""
+#: Linux's IP_MULTICAST_ALL (socket.IP_MULTICAST_ALL where Python defines it).
+IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)
+
+
+def _tune_udp_socket(bus: can.BusABC) -> None:
+    """python-can's UdpMulticastBus has no options for these; set them on its socket (a private attribute,
+    isolated here; without them the bus works, but worse):
+    - SO_RCVBUF: see UDP_RECEIVE_BUFFER;
+    - IP_MULTICAST_ALL = 0: the socket is bound to the wildcard address on python-can's fixed port, and
+      Linux then delivers every group joined by any socket on the host to it; two benches on two groups
+      would hear each other's frames."""
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
-    if sock is not None:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RECEIVE_BUFFER)
+    if sock is None:
+        return
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RECEIVE_BUFFER)
+    if sock.family == socket.AF_INET and sys.platform.startswith("linux"):
+        sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
 
 
 def is_virtual(interface: str) -> bool:
@@ -90,7 +102,7 @@ def open_bus(interface: str, channel: str | None) -> can.BusABC:
     try:
         bus = can.Bus(interface=interface, channel=channel, **kwargs)
         if interface == "udp_multicast":
-            _enlarge_receive_buffer(bus)
+            _tune_udp_socket(bus)
         return bus
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         raise ConfigError(f"cannot open interface {interface!r} channel {channel!r}: {exc}") from None

@@ -20,8 +20,9 @@ TIMEOUT_CYCLES = 3   # k-matrix.md: a message not seen for 3 x its cycle time is
 TIME_EPS = 1e-9      # s: bench times are sums of ticks; equal times must compare equal
 # Memory stays flat in long runs: each list keeps at most its cap (trimmed in halves, amortised), and
 # counts what it dropped so that queries reaching before the retained data fail loudly, never silently.
-HISTORY_CAP = 6000       # frames of decoded history per message (60 s at a 10 ms cycle)
-INTERVALS_CAP = 20000    # frame intervals per message for cycle-time statistics (200 s at 10 ms)
+HISTORY_CAP = 3000       # frames of decoded history per message (30 s at a 10 ms cycle)
+INTERVALS_CAP = 5000     # frame intervals per message for cycle-time checks (50 s at 10 ms; the report's
+                         # timing section keeps its own whole-run histogram, bench/timing.py)
 INVALID_CAP = 20000      # invalid-frame records
 
 FrameSink = Callable[[float, int, bytes, str, bool, str, "MessageCodec | None", "Mapping[str, float] | None"], None]
@@ -63,9 +64,11 @@ class InvalidFrame:
 class Monitor:
     """Checks and remembers every frame; optional sink gets every frame with its verdict (the log)."""
 
-    def __init__(self, codebook: Codebook, *, keep_history: bool = False, sink: FrameSink | None = None) -> None:
+    def __init__(self, codebook: Codebook, *, keep_history: bool = False, keep_intervals: bool = True,
+                 sink: FrameSink | None = None) -> None:
         self.codebook = codebook
         self.keep_history = keep_history
+        self.keep_intervals = keep_intervals   # a plant's ECUs need no cycle-time statistics
         self.sink = sink
         self.states: dict[int, MessageState] = {cid: MessageState(c) for cid, c in codebook.by_id.items()}
         self.by_name: dict[str, MessageState] = {s.codec.name: s for s in self.states.values()}
@@ -92,7 +95,7 @@ class Monitor:
         if state.last_valid is not None and not state.timed_out_flag and codec.cycle_time is not None \
                 and t - state.last_valid > TIMEOUT_CYCLES * codec.cycle_time + TIME_EPS:
             self._time_out(state)   # the gap before this frame was a timeout: record it, resync the counter
-        if state.last_seen is not None:
+        if state.last_seen is not None and self.keep_intervals:
             state.intervals.append(t - state.last_seen)
             if len(state.intervals) > 2 * INTERVALS_CAP:
                 state.intervals_dropped += _trim(state.intervals, INTERVALS_CAP)

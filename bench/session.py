@@ -69,7 +69,7 @@ class BenchSession:
                 behaviours = factory(self.external | set(project.stimulus), settings.vehicle)
             except ValueError as exc:
                 raise ConfigError(f"plant {project.plant!r}: {exc}") from None
-            self.plant = self._station("plant", plant_nodes, Monitor(self.codebook), behaviours)
+            self.plant = self._station("plant", plant_nodes, Monitor(self.codebook, keep_intervals=False), behaviours)
             self.stations.append(self.plant)
         if role == "runner":
             monitor = Monitor(self.codebook, keep_history=keep_history, sink=sink)

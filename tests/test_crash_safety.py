@@ -11,8 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-import can
-
+from bench.bus import open_bus
 from bench.logread import read_frames, summarise
 from bench.paths import ROOT
 
@@ -21,7 +20,7 @@ RUN_SECONDS = 8.0
 
 def test_sigkill_keeps_95_percent_of_the_frames_sent(tmp_path: Path) -> None:
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
-    listener = can.Bus(interface="udp_multicast", channel=group, hop_limit=0)
+    listener = open_bus("udp_multicast", group)   # hop limit 0, and only this group's frames
     try:
         run = subprocess.Popen([sys.executable, "-m", "bench", "run", str(ROOT / "tests/fixtures/cases/test_long.py"),
                                 "--interface", "udp_multicast", "--channel", group, "--out", str(tmp_path)],
