@@ -22,7 +22,9 @@ SIGN_CHANGE_TOL_KMH = 1.0    # issue 5
 RATIO_ABS_TOL = 0.01         # chosen: the bus carries the angles to 0.01°, i.e. ±0.005°/3° ≈ ±0.002 in k
 ANGLE_TOL = 0.05             # deg, as the 4WIS cases (issue 3)
 HOLD_S = 0.6                 # s at a speed before the reached angles are read (servo: 50 ms lag)
-SCAN_STEP_S = 0.03           # s per TargetSpeed step of the scan (VCU task 5 ms + command frame 10 ms)
+SCAN_STEP_S = 0.04           # s per TargetSpeed step: worst path = DRV_MotionRequest cycle 20 ms + VCU task 5 ms
+                             # + VCU_WheelCmd cycle 10 ms + 1 ms tick (a shorter step reads stale commands
+                             # whenever the case starts at another phase of the 20 ms cycle)
 
 
 def _set_speed(bench, u: float) -> None:
