@@ -13,43 +13,22 @@ instants (both documented with dbc/bench.dbc's truth messages), and each message
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
 from bench.case import Case
 from bench.results import Series
+from testcases.limits import LIMITS_FILE, load_limits
 from testcases import oracle_abs as oracle
 
 VEHICLE = "ACLASS_ABS"
-LIMITS_FILE = Path(__file__).resolve().parent / "limits.toml"
 WHEELS = ("FL", "FR", "RL", "RR")
 NOMINAL_NOISE = 0.1      # km/h, BENCH_Control.SensorNoise of the accuracy cases (issue 6: sensor noise on)
 PAIR_WINDOW = 0.0095     # s: the truth frame paired with an ABS frame is at most this much older
 
 
-def load_limits(section: str = "abs", path: Path = LIMITS_FILE) -> dict[str, tuple[float, str, str]]:
-    """name -> (value, unit, source) of one table of limits.toml; ValueError naming the file and the key."""
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read the limits ({exc})") from None
-    table = data.get(section)
-    if not isinstance(table, dict):
-        raise ValueError(f"{path}: no table [{section}]")
-    out = {}
-    for name, item in table.items():
-        if not (isinstance(item, dict) and set(item) == {"value", "unit", "source"}
-                and isinstance(item["value"], (int, float)) and not isinstance(item["value"], bool)
-                and math.isfinite(item["value"])):
-            raise ValueError(f"{path}: key '{section}.{name}' must be {{ value = <number>, unit, source }}")
-        out[name] = (float(item["value"]), str(item["unit"]), str(item["source"]))
-    return out
-
-
-LIMITS = load_limits()
+LIMITS = load_limits("abs")
 
 
 def limit(name: str) -> float:

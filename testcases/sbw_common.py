@@ -9,39 +9,18 @@ testcases/oracle_sbw.py, never from plant/.
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
 from bench.case import Case
 from bench.results import Series
+from testcases.limits import LIMITS_FILE, load_limits
 from testcases import oracle_sbw as oracle
 
 VEHICLE = "ACLASS"
-LIMITS_FILE = Path(__file__).resolve().parent / "limits.toml"
 SBW_FAULT = {"OK": 0, "HANDWHEEL_RANGE": 1, "HANDWHEEL_STUCK": 2, "PINION_RANGE": 3, "INPUT_TIMEOUT": 4}
 STEADY_WINDOW = 0.5   # s averaged at the end of a hold for steady values
-
-
-def load_limits(section: str, path: Path = LIMITS_FILE) -> dict[str, tuple[float, str, str]]:
-    """name -> (value, unit, source) of one table of limits.toml; ValueError naming file and key."""
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read the limits ({exc})") from None
-    table = data.get(section)
-    if not isinstance(table, dict):
-        raise ValueError(f"{path}: no table [{section}]")
-    out = {}
-    for name, item in table.items():
-        if not (isinstance(item, dict) and set(item) == {"value", "unit", "source"}
-                and isinstance(item["value"], (int, float)) and not isinstance(item["value"], bool)
-                and math.isfinite(item["value"])):
-            raise ValueError(f"{path}: key '{section}.{name}' must be {{ value = <number>, unit, source }}")
-        out[name] = (float(item["value"]), str(item["unit"]), str(item["source"]))
-    return out
 
 
 class Limits:

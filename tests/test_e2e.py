@@ -6,26 +6,17 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from bench import e2e
-
-
-def crc8_bitwise(data: bytes) -> int:
-    """A bit-by-bit reference of CRC-8/SAE-J1850, written from the catalogue parameters."""
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
+from tests.reference import crc8_j1850
 
 
 def test_check_value() -> None:
     assert e2e.crc8_sae_j1850(b"123456789") == 0x4B
-    assert crc8_bitwise(b"123456789") == 0x4B
+    assert crc8_j1850(b"123456789") == 0x4B
 
 
 @given(st.binary(max_size=64))
 def test_table_crc_matches_bitwise_reference(data: bytes) -> None:
-    assert e2e.crc8_sae_j1850(data) == crc8_bitwise(data)
+    assert e2e.crc8_sae_j1850(data) == crc8_j1850(data)
 
 
 @given(st.integers(0, 0x7FF), st.binary(min_size=8, max_size=8), st.integers(0, 15))
@@ -36,7 +27,7 @@ def test_protect_writes_counter_and_checksum_over_id_and_bytes_0_to_6(frame_id: 
     assert data[6] & 0x0F == counter
     assert data[6] & 0xF0 == payload[6] & 0xF0          # the upper nibble belongs to a signal
     assert data[:6] == payload[:6]
-    expected = crc8_bitwise(bytes([frame_id & 0xFF, frame_id >> 8]) + bytes(data[:7]))
+    expected = crc8_j1850(bytes([frame_id & 0xFF, frame_id >> 8]) + bytes(data[:7]))
     assert data[7] == expected
     assert e2e.counter_of(data) == counter
 

@@ -29,29 +29,12 @@ from bench.logread import MAGIC, read_decoded, read_frames, read_steps, summaris
 from bench.monitor import Monitor
 from bench.paths import BENCH_DBC, CHASSIS_DBC
 from bench.recorder import Recorder
+from tests.reference import protected
 
 _CODEBOOK = load_codebook([CHASSIS_DBC, BENCH_DBC])
 CODECS = sorted(_CODEBOOK.by_id.values(), key=lambda c: c.frame_id)
 IDS = [c.frame_id for c in CODECS]
 HALF_STEP = 0.5   # of the scale: the monitor's allowance for rounding at the range ends (bench.codec.RANGE_SLACK)
-
-
-def crc8_j1850(data: bytes) -> int:
-    """CRC-8/SAE-J1850 from its catalogue parameters (poly 0x1D, init 0xFF, no reflection, xorout 0xFF)."""
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
-
-
-def protected(frame_id: int, payload: bytes, counter: int) -> bytes:
-    """The payload with the contract's AliveCounter (low nibble of byte 6) and Checksum (byte 7)."""
-    data = bytearray(payload)
-    data[6] = (data[6] & 0xF0) | (counter & 0x0F)
-    data[7] = crc8_j1850(bytes([frame_id & 0xFF, (frame_id >> 8) & 0xFF]) + bytes(data[:7]))
-    return bytes(data)
 
 
 def test_the_contract_messages_take_the_fast_path() -> None:

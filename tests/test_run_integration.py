@@ -17,19 +17,10 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from bench.paths import ROOT
+from tests.reference import crc8_j1850
 
 CASES = ROOT / "tests" / "fixtures" / "cases"
 BENCH = [sys.executable, "-m", "bench"]
-
-
-def crc8_j1850(data: bytes) -> int:
-    """CRC-8/SAE-J1850 written here from its catalogue parameters, independent of bench.e2e."""
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
 
 
 def bench_run(out: Path, *extra: str, timeout: float = 300) -> subprocess.CompletedProcess:
