@@ -67,6 +67,12 @@ class _Progress:
                 self.console.print(report.longreprtext, highlight=False, markup=False)
 
 
+def _short(nodeid: str) -> str:
+    """`testcases/test_x.py::test_y[p]` -> `test_x::test_y[p]`: what a reader needs in a narrow table."""
+    path, sep, rest = nodeid.partition("::")
+    return path.rsplit("/", 1)[-1].removesuffix(".py") + sep + rest
+
+
 def _check_before_running(project: ProjectConfig, args: argparse.Namespace) -> None:
     """What the bench needs before any case starts: databases that load, known nodes and interface.
     A mistake here is one clear error (exit 2), not an error in every case."""
@@ -112,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         table.add_column(column)
     for case in result.cases:
         passed = sum(1 for s in case.steps if s.verdict == "pass")
-        table.add_row(case.nodeid, f"[{OUTCOME_STYLE.get(case.outcome, '')}]{case.outcome}[/]",
+        table.add_row(_short(case.nodeid), f"[{OUTCOME_STYLE.get(case.outcome, '')}]{case.outcome}[/]",
                       f"{passed}/{len(case.steps)}", f"{case.sim_time:.2f}", f"{case.wall_time:.2f}")
     console.print(table)
     counts = result.counts
