@@ -15,6 +15,7 @@ import can
 from bench.faults import FaultPlan
 from bench.monitor import Monitor
 from bench.node import Behaviour
+from bench.periodic import KernelPeriodic
 from bench.restbus import Restbus
 
 
@@ -72,6 +73,8 @@ class Station:
         # it reaches the monitor (which will flag its counter). Bounded: only the last few are kept.
         self._echoes: dict[int, deque[bytes]] = {
             p.codec.frame_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
+        # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (bench/periodic.py)
+        self.kernel = KernelPeriodic.attach(bus, restbus)
 
     def poll(self, timeout: float = 0.0) -> None:
         """Receive every pending frame into the monitor (the first recv may wait up to timeout)."""
@@ -95,6 +98,17 @@ class Station:
         faults = self.faults
         if faults is not None and (faults.any or self._delayed):
             self._tick_faults(faults, t, dt)
+        kernel = self.kernel
+        if kernel is not None:   # bench/periodic.py
+            for frame_id, data in kernel.echoes():   # what the kernel sent for this station: logged as tx
+                self.sent += 1
+                self.monitor.on_frame(self.now(), frame_id, data, "tx")
+            faulty = faults is not None and faults.any
+            kernel.check(faulty)
+            for frame_id, data in self.restbus.due(tick):
+                if not kernel.offer(frame_id, data, faulty):
+                    self.send(t, frame_id, data)
+            return
         for frame_id, data in self.restbus.due(tick):
             self.send(t, frame_id, data)
 

@@ -1,0 +1,303 @@
+"""Kernel periodic sending on SocketCAN: the broadcast manager (BCM) sends restbus messages whose payload stays.
+
+Why: a frame the tick loop sends is late whenever the Python process is (a busy host, emulation, a slow
+check in a test case); the kernel's BCM sends a cyclic frame on its own timer, however busy the process,
+and costs the process nothing per frame. python-can exposes it as `bus.send_periodic(msgs, period)`; a
+sequence of frames becomes one BCM task that sends them in turn (`nframes`).
+
+How (k-matrix.md "End-to-end protection": AliveCounter +1 per transmission, 15 -> 0; Checksum over it):
+- A message whose payload (every byte but the AliveCounter nibble and the Checksum) is unchanged for
+  STABLE_CYCLES cycles is handed to the kernel as 16 frames carrying AliveCounter c, c+1, ... c+15 (mod 16),
+  each with its Checksum: one whole counter cycle, so the kernel's walk through the frames is the counter
+  sequence. c is the counter of the frame due now, which the kernel sends at once (STARTTIMER announces),
+  then one frame per cycle time on its own timer.
+- PRECHECK_S before each of the kernel's frames the values are compared with the ones it holds; a change
+  rewrites the 16 frames in place (`task.modify_data`) and goes out with that frame, as the tick scheduler
+  would send it: the kernel keeps its position in the sequence and its timer, so counter and cycle run on.
+- A message that changes CHANGES_TO_STOP cycles in a row, whose sending is stopped (stop_sending) or while a
+  fault plan acts on the station's frames goes back to the tick scheduler. The task is deleted between two of
+  its frames (at least STOP_MARGIN_S away from either), so no frame is in flight; the restbus counter then
+  continues after the last frame the kernel sent, and its next frame is due one cycle after it.
+- The log stays complete and exact: the kernel loops every frame it sends back to the raw sockets of the
+  interface. A second raw socket of the station, filtered to the identifiers the kernel sends, reads them
+  without python-can's per-frame overhead, and the station logs them as "tx" (at the tick that reads them,
+  within a tick of the kernel sending them); the station's bus socket filters them out in the kernel
+  (inverted filters joined with CAN_RAW_JOIN_FILTERS, Linux >= 4.1). A foreign sender on an identifier the
+  kernel sends is therefore not seen while the kernel sends it.
+
+Only messages of 8 bytes with a cycle time of at least MIN_CYCLE_S qualify (a message without E2E signals
+is handed over as one frame). The echo socket lives as long as the station (it closes with the process).
+Set BENCH_KERNEL_PERIODIC=0 in the environment to keep every message on the tick scheduler.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import struct
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import can
+
+from bench import e2e
+from bench.restbus import Restbus
+
+STABLE_CYCLES = 3        # unchanged cycles before a message is handed to the kernel
+CHANGES_TO_STOP = 3      # consecutive changed cycles that send it back to the tick scheduler
+STOP_MARGIN_S = 0.0015   # a task is deleted only this far from its frames (none in flight)
+PRECHECK_S = 0.0015      # the values are compared this long before each of the kernel's frames
+MIN_CYCLE_S = 4 * STOP_MARGIN_S
+FRAME_LENGTH = 8         # the contract's frames (E2E bytes 6 and 7)
+ENV_SWITCH = "BENCH_KERNEL_PERIODIC"
+SOCKETCAN_BUS_CLASSES = ("SocketcanBus",)
+
+# linux/can.h and linux/can/raw.h (Python's socket module lacks CAN_INV_FILTER)
+CAN_INV_FILTER = 0x20000000
+CAN_SFF_MASK = 0x7FF
+CAN_EFF_FLAG = 0x80000000
+CAN_RTR_FLAG = 0x40000000
+CAN_RAW_JOIN_FILTERS = 6
+_FILTER = struct.Struct("=II")
+_FRAME = struct.Struct("=IB3x8s")
+_EXACT_STANDARD = CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG   # mask: this 11-bit data frame and no other
+_clock = time.monotonic   # the kernel's BCM timers run on CLOCK_MONOTONIC too
+
+
+def _raw_socket() -> socket.socket:
+    return socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+
+
+def _payload(data: bytes) -> bytes:
+    """The frame without its E2E bytes: AliveCounter (low nibble of byte 6) and Checksum (byte 7)."""
+    return data[:e2e.COUNTER_BYTE] + bytes((data[e2e.COUNTER_BYTE] & 0xF0,))
+
+
+def counter_cycle(frame_id: int, data: bytes, first_counter: int) -> list[can.Message]:
+    """16 frames of one payload with AliveCounter first_counter, first_counter + 1, ... (mod 16) and their
+    Checksums: what the BCM sends in turn."""
+    frames = []
+    for k in range(e2e.COUNTER_MODULO):
+        frame = bytearray(data)
+        e2e.protect(frame_id, frame, (first_counter + k) % e2e.COUNTER_MODULO)
+        frames.append(can.Message(arbitration_id=frame_id, data=frame, is_extended_id=False, is_fd=False))
+    return frames
+
+
+class _Task:
+    __slots__ = ("slot", "frame_id", "task", "payload", "base", "period", "t0", "changes", "stopping",
+                 "last_counter", "next_check", "checked")
+
+    def __init__(self, slot: Any, frame_id: int, task: Any, payload: bytes, base: int, t0: float) -> None:
+        self.slot = slot                 # the restbus' _Periodic
+        self.frame_id = frame_id
+        self.task = task                 # python-can's CyclicSendTask (a BCM TX_SETUP)
+        self.payload = payload
+        self.base = base                 # AliveCounter of frame 0 of the sequence
+        self.period: float = slot.codec.cycle_time
+        self.t0 = t0                     # _clock() when the kernel sent frame 0
+        self.changes = 0                 # consecutive cycles whose payload changed
+        self.stopping = False            # back to the tick scheduler at the next quiet moment
+        self.last_counter: int | None = None   # AliveCounter of the last frame seen back from the kernel
+        self.next_check = t0             # _clock() of the next look at this task
+        self.checked = 0                 # index of the kernel frame whose values were last checked
+
+
+class KernelPeriodic:
+    """The BCM side of one station's restbus on a socketcan bus."""
+
+    def __init__(self, bus: Any, restbus: Restbus) -> None:
+        self.bus = bus
+        self.restbus = restbus
+        self.slots = {slot.codec.frame_id: slot for slot in restbus.periodic.values()
+                      if slot.codec.length == FRAME_LENGTH and (slot.codec.cycle_time or 0.0) >= MIN_CYCLE_S}
+        self.tasks: dict[int, _Task] = {}
+        self._last: dict[int, bytes] = {}
+        self._stable: dict[int, int] = {}
+        self.enabled = True
+        self.started = self.modified = self.stopped = 0
+        self.error = ""
+        self.pending_echoes: list[tuple[int, bytes]] = []
+        self.echo = _raw_socket()
+        try:
+            self.echo.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER, b"")   # nothing until a task starts
+            self.echo.bind((bus.channel,))
+            self.echo.setblocking(False)
+            bus.socket.setsockopt(socket.SOL_CAN_RAW, CAN_RAW_JOIN_FILTERS, struct.pack("=i", 1))
+        except OSError:
+            self.echo.close()
+            raise
+
+    @classmethod
+    def attach(cls, bus: can.BusABC, restbus: Restbus) -> "KernelPeriodic | None":
+        """A KernelPeriodic for a socketcan bus without filters of its own (unless switched off by
+        BENCH_KERNEL_PERIODIC=0); None for every other bus or when the kernel refuses the sockets."""
+        if (type(bus).__name__ not in SOCKETCAN_BUS_CLASSES or os.environ.get(ENV_SWITCH, "1") == "0"
+                or getattr(bus, "filters", None) or not hasattr(bus, "socket")):
+            return None
+        try:
+            return cls(bus, restbus)
+        except OSError:
+            return None
+
+    # -- send side (the station's tick) -------------------------------------------------------------
+    def offer(self, frame_id: int, data: bytes, faulty: bool) -> bool:
+        """A frame due now (the restbus' schedule); True when the kernel sends it: then the station neither
+        sends nor logs it (the log gets the kernel's frame when it comes back)."""
+        task = self.tasks.get(frame_id)
+        if task is not None:
+            if faulty and not task.stopping:
+                task.stopping, task.next_check = True, _clock()
+            elif not task.stopping and _payload(data) != task.payload:
+                self._changed(task, data)        # missed by check() (a late tick): on the kernel's next frame
+            return True
+        slot = self.slots.get(frame_id)
+        if slot is None or faulty or not self.enabled:
+            return False
+        payload = _payload(data) if slot.codec.e2e else data
+        if self._last.get(frame_id) == payload:
+            stable = self._stable.get(frame_id, 0) + 1
+        else:
+            stable = 0
+            self._last[frame_id] = payload
+        self._stable[frame_id] = stable
+        if stable < STABLE_CYCLES:
+            return False
+        return self._start(slot, frame_id, data, payload)
+
+    def check(self, faulty: bool) -> None:
+        """Every tick. PRECHECK_S before each of the kernel's frames, the message's values are compared with
+        the frames the kernel holds and rewritten when they changed (so a change goes out with that frame,
+        as the tick scheduler would send it); a task to stop (sending stopped, a fault plan active, too many
+        changes) is deleted at its next quiet moment."""
+        if not self.tasks:
+            return
+        now = _clock()
+        for task in list(self.tasks.values()):
+            if (faulty or not task.slot.enabled) and not task.stopping:
+                task.stopping, task.next_check = True, now
+            if now >= task.next_check:
+                self._look(task, now)
+
+    def _look(self, task: _Task, now: float) -> None:
+        period = task.period
+        index = int((now - task.t0) / period) + 1          # the kernel's next frame
+        t_next = task.t0 + index * period
+        if task.stopping:
+            if STOP_MARGIN_S <= now - (t_next - period) and t_next - now >= STOP_MARGIN_S:
+                self._stop(task)
+            else:
+                task.next_check = t_next + STOP_MARGIN_S if t_next - now < STOP_MARGIN_S else now
+            return
+        if t_next - now <= PRECHECK_S and task.checked != index:
+            task.checked = index
+            slot, counter = task.slot, task.slot.counter
+            try:
+                data = self.restbus.build(slot)      # the values now (its counter is the kernel's business)
+            except Exception:                      # a bad value: the restbus' own build stops the sender at due
+                data = None
+            slot.counter = counter
+            if data is not None and (_payload(data) if slot.codec.e2e else data) != task.payload:
+                self._changed(task, data)
+            else:
+                task.changes = 0
+            if task.stopping:
+                task.next_check = now
+                return
+            index += 1
+        task.next_check = task.t0 + index * period - PRECHECK_S
+
+    def _changed(self, task: _Task, data: bytes) -> None:
+        task.changes += 1
+        self._modify(task, data)
+        if task.changes >= CHANGES_TO_STOP:
+            task.stopping, task.next_check = True, _clock()
+
+    def _frames(self, slot: Any, frame_id: int, data: bytes, base: int) -> list[can.Message]:
+        if slot.codec.e2e:
+            return counter_cycle(frame_id, data, base)
+        return [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=False)]
+
+    def _start(self, slot: Any, frame_id: int, data: bytes, payload: bytes) -> bool:
+        base = e2e.counter_of(data)
+        frames = self._frames(slot, frame_id, data, base)
+        self.tasks[frame_id] = placeholder = _Task(slot, frame_id, None, payload, base, _clock())
+        try:
+            self._set_filters()   # before the kernel's first frame: it must reach the echo socket
+            task = self.bus.send_periodic(frames, slot.codec.cycle_time)
+        except (can.CanError, OSError, ValueError, NotImplementedError) as exc:
+            del self.tasks[frame_id]
+            try:
+                self._set_filters()
+            except OSError:
+                pass
+            self._disable(f"send_periodic of {slot.codec.name} failed: {exc}")
+            return False
+        placeholder.task = task
+        placeholder.t0 = placeholder.next_check = _clock()
+        self.started += 1
+        return True
+
+    def _modify(self, task: _Task, data: bytes) -> None:
+        slot = task.slot
+        try:
+            task.task.modify_data(self._frames(slot, task.frame_id, data, task.base))
+        except (can.CanError, OSError, ValueError) as exc:
+            task.stopping, task.next_check = True, _clock()
+            self._disable(f"modify_data of {slot.codec.name} failed: {exc}")
+            return
+        task.payload = _payload(data) if slot.codec.e2e else bytes(data)
+        self.modified += 1
+
+    def _stop(self, task: _Task) -> None:
+        """Delete the BCM task (no frame in flight) and hand the counter back to the restbus."""
+        try:
+            task.task.stop()
+        except (can.CanError, OSError) as exc:
+            self._disable(f"stopping the task of {task.slot.codec.name} failed: {exc}")
+        self.pending_echoes = list(self.echoes())    # its last frames, before its filter goes
+        del self.tasks[task.frame_id]
+        try:
+            self._set_filters()
+        except OSError as exc:
+            self._disable(f"setting the socket filters failed: {exc}")
+        if task.slot.codec.e2e:
+            last = task.base - 1 if task.last_counter is None else task.last_counter
+            task.slot.counter = e2e.next_counter(last % e2e.COUNTER_MODULO)
+        self._stable[task.frame_id] = 0
+        self.stopped += 1
+
+    def _disable(self, why: str) -> None:
+        self.enabled = False
+        self.error = why
+
+    def _set_filters(self) -> None:
+        """The echo socket takes exactly the kernel's identifiers; the bus socket everything else."""
+        ids = sorted(self.tasks)
+        self.echo.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER,
+                             b"".join(_FILTER.pack(i, _EXACT_STANDARD) for i in ids))
+        inverted = [_FILTER.pack(i | CAN_INV_FILTER, _EXACT_STANDARD) for i in ids] or [_FILTER.pack(0, 0)]
+        self.bus.socket.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER, b"".join(inverted))
+
+    # -- receive side (the station's tick) ------------------------------------------------------------
+    def echoes(self) -> Iterator[tuple[int, bytes]]:
+        """The frames the kernel sent since the last call, as (identifier, data), in order."""
+        if self.pending_echoes:
+            pending, self.pending_echoes = self.pending_echoes, []
+            yield from pending
+        if not self.tasks:
+            return      # the echo socket's filter is empty
+        recv, tasks = self.echo.recv, self.tasks
+        while True:
+            try:
+                raw = recv(16)
+            except (BlockingIOError, InterruptedError):
+                return
+            can_id, length, data = _FRAME.unpack(raw)
+            frame_id = can_id & CAN_SFF_MASK
+            data = data[:length]
+            task = tasks.get(frame_id)
+            if task is not None and length == FRAME_LENGTH and task.slot.codec.e2e:
+                task.last_counter = data[e2e.COUNTER_BYTE] & 0x0F
+            yield frame_id, data
