@@ -1,0 +1,110 @@
+"""Target 6: scale-out — the same virtual-time sweep in one process and with `bench run -n 2` (pytest-xdist).
+
+The sweep: benchmarks/cases/test_sweep_rotation_centres.py, N random rotation centres (full 200, quick 40),
+each checked against formulas.md §2. Measured: wall time of `bench run -n 2 <sweep>` (two workers, each with
+its own in-process virtual-time bus and MCAP log; the controller merges one report); baseline in the same
+run: `bench run <sweep>` (one process, no xdist). Speed-up = baseline wall / measured wall (the whole
+command: start-up, the cases, the reports). With --with-n1 also `-n 1` (the cost of xdist itself).
+Target (issue 9): >= 1.7x on this machine's 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import common
+
+CASE = common.CASES / "test_sweep_rotation_centres.py"
+TARGET = 1.7
+
+
+def has_workers_option() -> bool:
+    out = subprocess.run([sys.executable, "-m", "bench", "run", "--help"], capture_output=True, text=True,
+                         cwd=common.ROOT).stdout
+    return "-n N" in out
+
+
+def one_run(out: Path, n: int, workers: str | None) -> dict:
+    env = dict(os.environ, BENCH_SWEEP_N=str(n))
+    argv = [sys.executable, "-m", "bench", "run", "--out", str(out), *(["-n", workers] if workers else []), str(CASE)]
+    load = common.load_average()
+    wall0, cpu0 = time.perf_counter(), common.cpu_seconds()
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / "bench-run.log", "w") as log:
+        proc = subprocess.Popen(argv, cwd=common.ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+        roles = common.ProcessCpu(proc.pid)
+        while proc.poll() is None and time.perf_counter() - wall0 < 1800:
+            roles.sample()
+            time.sleep(0.25)
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    wall, cpu = time.perf_counter() - wall0, common.cpu_seconds() - cpu0
+    tests = failures = errors = 0
+    bench_s = None
+    junit = out / "junit.xml"
+    if junit.is_file():
+        root = ET.parse(junit).getroot()
+        tests, failures, errors = (int(root.get(k, 0)) for k in ("tests", "failures", "errors"))
+        for prop in root.iter("property"):
+            if prop.get("name") == "bench_time":
+                bench_s = float(prop.get("value"))
+    return {"workers": workers or "none (one process)", "exit_code": proc.returncode, "wall_s": wall,
+            "cpu_s_all_processes": cpu, "cpu_s_by_role": roles.by_role(), "cases": tests, "failures": failures, "errors": errors, "bench_s": bench_s,
+            "mcap_logs": sorted(p.name for p in out.glob("*.mcap")), "load_before": load}
+
+
+def measure(result: common.Result, args: argparse.Namespace) -> None:
+    if not has_workers_option():
+        result.error = "bench run has no -n option (pytest-xdist scale-out not available in this version)"
+        return
+    n = 40 if args.quick else 200
+    single = one_run(args.work / "single", n, None)
+    parallel = one_run(args.work / "n2", n, "2")
+    runs = {"single": single, "n2": parallel}
+    if args.with_n1:
+        runs["n1"] = one_run(args.work / "n1", n, "1")
+    result.details.update(centres=n, runs=runs)
+    for label, run in runs.items():
+        if run["exit_code"] != 0 or run["cases"] != n:
+            result.details.setdefault("problems", []).append(
+                f"{label}: exit {run['exit_code']}, {run['cases']} cases, {run['failures']} failed, {run['errors']} errors")
+    speedup = single["wall_s"] / parallel["wall_s"]
+    result.add("sweep wall time, bench run -n 2", parallel["wall_s"], "s", single["wall_s"],
+               "bench run, one process",
+               note=f"{n} centres; logs {', '.join(parallel['mcap_logs'])}; CPU {parallel['cpu_s_all_processes']:.0f} s "
+                    f"vs {single['cpu_s_all_processes']:.0f} s")
+    cores = common.machine()["usable_cores"] or 1
+    busy = single["cpu_s_all_processes"] / single["wall_s"]
+    roles = single["cpu_s_by_role"]
+    main_cpu = roles.get("bench run (pytest, bus, plant, monitors)", 0.0)
+    demand = (single["cpu_s_all_processes"] / main_cpu) if main_cpu else float("nan")
+    result.add("speed-up on 2 cores (one process / -n 2)", speedup, "×", 1.0, "one process", TARGET, ">=",
+               note=f"cores busy: one process {busy:.2f}, -n 2 {parallel['cpu_s_all_processes'] / parallel['wall_s']:.2f} "
+                    f"(what the machine gave us); CPU -n 2 / one process "
+                    f"{parallel['cpu_s_all_processes'] / single['cpu_s_all_processes']:.2f}")
+    result.add("cores one run wants (its CPU / its main process's CPU)", demand, "cores",
+               note=f"the log process works beside the run: CPU by role {', '.join(f'{k} {v:.1f} s' for k, v in roles.items())}; "
+                    f"so {cores} cores allow at most ~{cores / demand:.2f}× over one run, on an otherwise idle machine")
+    if "n1" in runs:
+        result.add("sweep wall time, bench run -n 1 (xdist overhead)", runs["n1"]["wall_s"], "s", single["wall_s"],
+                   "bench run, one process")
+    if single.get("bench_s"):
+        result.add("sweep, one process: bench time / wall time", single["bench_s"] / single["wall_s"], "× real time")
+        result.add("sweep, -n 2: bench time / wall time", (parallel["bench_s"] or 0) / parallel["wall_s"],
+                   "× real time", single["bench_s"] / single["wall_s"], "one process")
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--with-n1", action="store_true", help="also run with -n 1 (one xdist worker)")
+
+
+if __name__ == "__main__":
+    raise SystemExit(common.main("scale_out", "Target 6: scale-out with bench run -n 2", measure, configure,
+                                 __doc__))

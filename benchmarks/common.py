@@ -1,0 +1,426 @@
+"""What every benchmark of benchmarks/ shares: the machine, figures with their baseline and target, JSON out.
+
+Each benchmark is a script (`python benchmarks/bench_<name>.py [--quick] [--json PATH]`) that measures one
+target of issue 9 and a baseline in the same run, prints its figures and writes them as JSON;
+`benchmarks/run_all.py` runs them all, each in its own process (a benchmark never inherits another's
+imports, threads or heap), and prints every figure next to its baseline. Only the project's dependencies
+are used here (the profilers named in docs/performance.md are for people, not for these scripts).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import random
+import resource
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+BENCHMARKS = ROOT / "benchmarks"
+CASES = BENCHMARKS / "cases"
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+PACKAGES = ("chassis-hil-bench", "python-can", "cantools", "mcap", "zstandard", "msgpack", "numpy", "pytest",
+            "pytest-xdist", "matplotlib", "jinja2", "rich")
+
+
+# -- the machine ---------------------------------------------------------------------------------------------
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def load_average() -> list[float]:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return []
+
+
+def source_version() -> str:
+    """The repository's commit and whether the tree had changes (figures belong to a version of the code)."""
+    import subprocess
+
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return f"{head or 'unknown'}{' + uncommitted changes' if dirty else ''}"
+
+
+def machine() -> dict[str, Any]:
+    """What a figure depends on: CPU, cores, Python, packages, kernel, load at the time of measuring."""
+    packages = {}
+    for name in PACKAGES:
+        try:
+            packages[name] = version(name)
+        except PackageNotFoundError:
+            packages[name] = None
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        usable = os.cpu_count()
+    return {
+        "cpu": cpu_model(), "cores": os.cpu_count(), "usable_cores": usable,
+        "python": f"{platform.python_implementation()} {platform.python_version()}",
+        "os": f"{platform.system()} {platform.release()}", "arch": platform.machine(),
+        "packages": packages, "load_average": load_average(),
+        "date": time.strftime("%Y-%m-%d %H:%M:%S %z"), "source": source_version(),
+    }
+
+
+def machine_line(m: dict[str, Any]) -> str:
+    pk = m["packages"]
+    return (f"{m['cpu']}, {m['cores']} cores ({m['usable_cores']} usable), {m['python']}, {m['os']}; "
+            f"python-can {pk.get('python-can')}, cantools {pk.get('cantools')}, mcap {pk.get('mcap')}, "
+            f"numpy {pk.get('numpy')}, pytest-xdist {pk.get('pytest-xdist')}; code {m.get('source', '?')}; load average "
+            f"{' / '.join(str(x) for x in m['load_average'])} (1/5/15 min)")
+
+
+# -- figures -------------------------------------------------------------------------------------------------
+@dataclass
+class Figure:
+    """One measured figure, the baseline measured in the same run, and the issue's target (if any)."""
+
+    name: str
+    value: float | None
+    unit: str
+    baseline: float | None = None
+    baseline_name: str = ""
+    target: float | None = None
+    target_op: str = ""          # ">=" or "<=" (value against target)
+    note: str = ""
+
+    @property
+    def met(self) -> bool | None:
+        if self.target is None or self.value is None or not math.isfinite(self.value):
+            return None if self.target is None else False
+        return self.value >= self.target if self.target_op == ">=" else self.value <= self.target
+
+
+@dataclass
+class Result:
+    """What one benchmark hands to run_all: figures, details (tables, per-message data) and how long it took."""
+
+    benchmark: str
+    title: str
+    figures: list[Figure] = field(default_factory=list)
+    details: dict[str, Any] = field(default_factory=dict)
+    machine: dict[str, Any] = field(default_factory=machine)
+    seconds: float = 0.0
+    quick: bool = False
+    error: str = ""
+
+    def add(self, *args: Any, **kwargs: Any) -> Figure:
+        fig = Figure(*args, **kwargs)
+        self.figures.append(fig)
+        return fig
+
+    def to_json(self) -> dict[str, Any]:
+        out = asdict(self)
+        for fig, raw in zip(self.figures, out["figures"]):
+            raw["met"] = fig.met
+        return _finite(out)
+
+
+def _finite(obj: Any) -> Any:
+    """JSON without NaN/inf (they become null)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def fmt(value: float | None, unit: str = "") -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    a = abs(value)
+    if a >= 1000:
+        text = f"{value:,.0f}"
+    elif a >= 100:
+        text = f"{value:.0f}"
+    elif a >= 10:
+        text = f"{value:.1f}"
+    elif a >= 0.1 or a == 0:
+        text = f"{value:.2f}"
+    else:
+        text = f"{value:.3g}"
+    return f"{text} {unit}".rstrip()
+
+
+def verdict(fig: Figure) -> str:
+    return {None: "", True: "met", False: "NOT met"}[fig.met]
+
+
+def print_result(result: Result) -> None:
+    print(f"\n== {result.title} ({result.seconds:.0f} s{', quick' if result.quick else ''})")
+    if result.error:
+        print(f"   ERROR: {result.error}")
+    for fig in result.figures:
+        target = f"target {fig.target_op} {fmt(fig.target, fig.unit)}" if fig.target is not None else ""
+        base = f"baseline {fmt(fig.baseline, fig.unit)} ({fig.baseline_name})" if fig.baseline_name else ""
+        print(f"   {fig.name:<52} {fmt(fig.value, fig.unit):>16}   {base}  {target} {verdict(fig)}".rstrip())
+        if fig.note:
+            print(f"   {'':<52} {fig.note}")
+
+
+# -- statistics ----------------------------------------------------------------------------------------------
+def percentile(values: Sequence[float], q: float) -> float:
+    """Linear interpolation between order statistics (numpy's default); NaN for no values."""
+    if not values:
+        return math.nan
+    ordered = sorted(values)
+    pos = (len(ordered) - 1) * q / 100.0
+    lo = math.floor(pos)
+    hi = min(lo + 1, len(ordered) - 1)
+    return ordered[lo] + (ordered[hi] - ordered[lo]) * (pos - lo)
+
+
+def summary(values: Sequence[float], scale: float = 1.0) -> dict[str, float | int]:
+    """n, p50, p99, max (and mean) of values, times scale (e.g. 1000 for ms)."""
+    return {"n": len(values), "p50": percentile(values, 50) * scale, "p99": percentile(values, 99) * scale,
+            "max": (max(values) if values else math.nan) * scale,
+            "mean": (sum(values) / len(values) if values else math.nan) * scale}
+
+
+# -- processes and time --------------------------------------------------------------------------------------
+def cpu_seconds() -> float:
+    """CPU time (user + system) of this process and of its children that have been waited for."""
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+class ProcessCpu:
+    """CPU seconds of a process tree by role, sampled from /proc while it runs (a finished process's last sample
+    stands: sample often). Roles by command line: the log process, xdist workers, the main process."""
+
+    def __init__(self, root: int) -> None:
+        self.root = root
+        self.last: dict[int, tuple[str, float]] = {}
+
+    @staticmethod
+    def _role(cmd: str, pid: int, root: int) -> str:
+        if "bench.logproc" in cmd:
+            return "log process(es)"
+        if pid == root:
+            return "bench run (pytest, bus, plant, monitors)"
+        if "execnet" in cmd or "xdist" in cmd or "-c" in cmd.split()[:3]:
+            return "xdist workers (bus, plant, monitors)"
+        return "other children"
+
+    def sample(self) -> None:
+        tick = os.sysconf("SC_CLK_TCK")
+        for pid in _descendants(self.root):
+            try:
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            except (OSError, IndexError):
+                continue
+            cpu = (int(fields[11]) + int(fields[12])) / tick
+            self.last[pid] = (self._role(cmd, pid, self.root), cpu)
+
+    def by_role(self) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for role, cpu in self.last.values():
+            out[role] = round(out.get(role, 0.0) + cpu, 2)
+        return {role: cpu for role, cpu in out.items() if cpu >= 0.05}
+
+
+def random_group() -> str:
+    """A multicast group of its own (administratively scoped, hop limit 0 keeps it on this host)."""
+    rng = random.SystemRandom()
+    return f"239.255.{rng.randint(1, 254)}.{rng.randint(1, 254)}"
+
+
+UDP_MULTICAST_PORT = 43113   # python-can's udp_multicast port, the same for every group
+
+
+def _udp_inodes(port: int) -> set[str]:
+    suffix = f":{port:04X}"
+    inodes = set()
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if len(fields) > 9 and fields[1].endswith(suffix):
+                inodes.add(fields[9])
+    return inodes
+
+
+def _descendants(root: int) -> set[int]:
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+        except (OSError, IndexError, ValueError):
+            continue
+    out, todo = {root}, [root]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in out:
+                out.add(child)
+                todo.append(child)
+    return out
+
+
+def udp_multicast_users(port: int = UDP_MULTICAST_PORT) -> list[str]:
+    """Processes other than this one and its descendants with a socket on python-can's udp_multicast port.
+
+    Why it matters: python-can binds every udp_multicast bus to 0.0.0.0:43113, and Linux delivers a group's
+    datagrams to every socket so bound whose process joined any group (IP_MULTICAST_ALL is on by default),
+    so two runs on different groups of one host received each other's frames until bench.bus turned
+    IP_MULTICAST_ALL off. A real-time benchmark still records who else ran meanwhile: they share the CPU."""
+    inodes = _udp_inodes(port)
+    if not inodes:
+        return []
+    mine = _descendants(os.getpid())
+    users = []
+    for fd_dir in Path("/proc").glob("[0-9]*/fd"):
+        pid = int(fd_dir.parent.name)
+        if pid in mine:
+            continue
+        try:
+            links = {os.readlink(fd) for fd in fd_dir.iterdir()}
+        except OSError:
+            continue
+        if any(link.startswith("socket:[") and link[8:-1] in inodes for link in links):
+            try:
+                cmd = (fd_dir.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
+            except OSError:
+                cmd = "?"
+            users.append(f"{pid} {cmd[:120]}")
+    return users
+
+
+class UdpWatch:
+    """Samples, in a thread, which other processes use the udp_multicast port while a benchmark runs."""
+
+    def __init__(self, every: float = 3.0) -> None:
+        import threading
+
+        self.seen: dict[str, float] = {}
+        self._stop = threading.Event()
+        self._every = every
+        self._t0 = time.monotonic()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            for user in udp_multicast_users():
+                self.seen.setdefault(user, round(time.monotonic() - self._t0, 1))
+            self._stop.wait(self._every)
+
+    def stop(self) -> dict[str, float]:
+        """{process: seconds into the benchmark it was first seen}."""
+        self._stop.set()
+        self._thread.join(timeout=10)
+        return dict(self.seen)
+
+
+def udp_users_at_start() -> dict[str, Any]:
+    """Who else uses the udp_multicast port as a real-time benchmark starts (see note_udp_users)."""
+    return {"other_users_when_started": udp_multicast_users()}
+
+
+def note_udp_users(result: "Result", quiet: dict[str, Any], seen: dict[str, float]) -> None:
+    """Record who else used the udp_multicast port during the measurement. Since bench.bus sets
+    IP_MULTICAST_ALL = 0 their frames no longer reach our buses (nor ours theirs), but they share the CPU."""
+    others = sorted(set(quiet.get("other_users_when_started", [])) | set(seen))
+    result.details["other_udp_multicast_users"] = {"wait": quiet, "seen_during_run": seen}
+    result.add("other real-time benches on this host during the run", float(len(others)), "processes",
+               note="none" if not others else "they share the CPU (not the frames): " + "; ".join(others)[:300])
+
+
+def isolate_group(bus: Any) -> bool:
+    """Make a python-can udp_multicast bus receive only its own group (IP_MULTICAST_ALL = 0, Linux)."""
+    import socket
+
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    option = getattr(socket, "IP_MULTICAST_ALL", 49)
+    if sock is None or sock.family != socket.AF_INET:
+        return False
+    try:
+        sock.setsockopt(socket.IPPROTO_IP, option, 0)
+    except OSError:
+        return False
+    return True
+
+
+def bench_inprocess(argv: list[str]) -> tuple[int, Any, float, float]:
+    """Run `bench <argv>` in this process (bench.cli.main); returns (exit code, the run's RunResult from
+    bench.pytest_plugin.finished_run(), wall s, CPU s of this process and its waited-for children)."""
+    from bench.cli import main
+    from bench.pytest_plugin import finished_run
+
+    before = finished_run()
+    wall0, cpu0 = time.perf_counter(), cpu_seconds()
+    code = main(argv)
+    wall, cpu = time.perf_counter() - wall0, cpu_seconds() - cpu0
+    result = finished_run()
+    return code, (None if result is before else result), wall, cpu
+
+
+def table_rows(result: Any, title_start: str) -> tuple[list[str], list[list[str]]] | None:
+    """Columns and rows of the first table of a RunResult whose title starts with title_start."""
+    for table in getattr(result, "tables", []):
+        if table.title.startswith(title_start):
+            return list(table.columns), [list(r) for r in table.rows]
+    return None
+
+
+# -- command line --------------------------------------------------------------------------------------------
+def main(name: str, title: str, measure: Callable[[Result, argparse.Namespace], None],
+         configure: Callable[[argparse.ArgumentParser], None] | None = None, doc: str | None = None) -> int:
+    """The command line every benchmark shares: --quick, --json PATH; prints the figures."""
+    parser = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="a short smoke run (figures less reliable)")
+    parser.add_argument("--json", type=Path, default=None, help="write the figures as JSON to this file")
+    parser.add_argument("--work", type=Path, default=None, help="folder for reports and logs (default: a temp dir)")
+    if configure:
+        configure(parser)
+    args = parser.parse_args()
+    if args.work is None:
+        import tempfile
+        args.work = Path(tempfile.mkdtemp(prefix=f"bench-{name}-"))
+    args.work.mkdir(parents=True, exist_ok=True)
+    result = Result(name, title, quick=args.quick)
+    t0 = time.perf_counter()
+    try:
+        measure(result, args)
+    except Exception as exc:  # noqa: BLE001 - a benchmark that breaks still reports what it has
+        import traceback
+        traceback.print_exc()
+        result.error = f"{type(exc).__name__}: {exc}"
+    result.seconds = time.perf_counter() - t0
+    result.machine["load_average_end"] = load_average()
+    print_result(result)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result.to_json(), indent=1, ensure_ascii=False))
+    return 1 if result.error else 0
