@@ -59,14 +59,17 @@ def wait_for_output(process: subprocess.Popen, needle: bytes, timeout: float) ->
 
 def test_can_logger_records_a_bench_log(tmp_path: Path) -> None:
     channel = group()
+    # A port of its own: python-can's logger cannot restrict its socket to its group (IP_MULTICAST_ALL), and
+    # on the default port it would also hear any other bench on this host.
+    port = random.randint(44000, 44999)
     log = tmp_path / "x.mcap"
     logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "udp_multicast", "-c", channel,
-                               "--bus-kwargs", "hop_limit=0", "-f", str(log)], cwd=tmp_path, env=ENV,
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, bufsize=0)
+                               "--bus-kwargs", "hop_limit=0", f"port={port}", "-f", str(log)], cwd=tmp_path,
+                              env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, bufsize=0)
     sent = frames_to_send(60)
     try:
         wait_for_output(logger, b"Can Logger", timeout=30)
-        with open_bus("udp_multicast", channel) as bus:
+        with can.Bus(interface="udp_multicast", channel=channel, hop_limit=0, port=port) as bus:
             for msg in sent:
                 bus.send(msg)
                 time.sleep(0.002)
