@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import math
 import signal
+import socket
 import sys
 import time
 from pathlib import Path
@@ -356,6 +357,17 @@ class Sender:
         return min(slot["due"] for slot in self.slots)
 
 
+def hear_only_own_group(bus: can.BusABC) -> None:
+    """udp_multicast on Linux: a socket hears every group joined on the host unless IP_MULTICAST_ALL is 0, so
+    another bench on another group would reach this ECU (python-can keeps the socket in a private attribute)."""
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is not None and sock.family == socket.AF_INET:
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, getattr(socket, "IP_MULTICAST_ALL", 49), 0)
+        except OSError:
+            pass
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--interface", default="udp_multicast", help="python-can interface")
@@ -375,6 +387,8 @@ def main() -> int:
     except (can.CanError, OSError, ValueError) as exc:
         print(f"vcu_ecu: cannot open {args.interface} {args.channel}: {exc}", file=sys.stderr)
         return 2
+    if args.interface == "udp_multicast":
+        hear_only_own_group(bus)
     stop = {"now": False}
     signal.signal(signal.SIGINT, lambda *_: stop.update(now=True))
     signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
