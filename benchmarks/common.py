@@ -30,6 +30,8 @@ CASES = BENCHMARKS / "cases"
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from bench.checks import percentile  # noqa: E402 - the bench's own, after the repository is on sys.path
+
 PACKAGES = ("chassis-hil-bench", "python-can", "cantools", "mcap", "zstandard", "msgpack", "numpy", "pytest",
             "pytest-xdist", "matplotlib", "jinja2", "rich")
 
@@ -185,18 +187,7 @@ def print_result(result: Result) -> None:
             print(f"   {'':<52} {fig.note}")
 
 
-# -- statistics ----------------------------------------------------------------------------------------------
-def percentile(values: Sequence[float], q: float) -> float:
-    """Linear interpolation between order statistics (numpy's default); NaN for no values."""
-    if not values:
-        return math.nan
-    ordered = sorted(values)
-    pos = (len(ordered) - 1) * q / 100.0
-    lo = math.floor(pos)
-    hi = min(lo + 1, len(ordered) - 1)
-    return ordered[lo] + (ordered[hi] - ordered[lo]) * (pos - lo)
-
-
+# -- statistics (percentile: the bench's own, bench/checks.py) ----------------------------------------------------------------------------------------------
 def summary(values: Sequence[float], scale: float = 1.0) -> dict[str, float | int]:
     """n, p50, p99, max (and mean) of values, times scale (e.g. 1000 for ms)."""
     return {"n": len(values), "p50": percentile(values, 50) * scale, "p99": percentile(values, 99) * scale,
