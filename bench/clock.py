@@ -15,6 +15,9 @@ from typing import Protocol
 from bench.station import Station
 
 DEFAULT_DT = 0.001
+#: A receive timestamp is taken as bench time only when it lies this far before now at most; outside
+#: (an interface whose timestamps are not the host's epoch time) the frame gets the time it was read.
+STAMP_WINDOW = 5.0
 
 
 class Clock(Protocol):
@@ -53,14 +56,23 @@ class WallClock:
     realtime = True
 
     def __init__(self) -> None:
-        self._t0 = time.monotonic()
+        self.start()
         self.max_lag = 0.0   # worst lateness of a tick, s
 
     def start(self) -> None:
         self._t0 = time.monotonic()
+        self._epoch0 = time.time()   # the same instant in the epoch time of receive timestamps
 
     def now(self) -> float:
         return time.monotonic() - self._t0
+
+    def stamp(self, timestamp: float, now: float) -> float:
+        """Bench time of a frame the kernel stamped at `timestamp` (epoch s: python-can's socketcan and
+        udp_multicast give the socket's receive time), read at bench time `now`. A station that reads
+        late then still sees the intervals the bus had; a stamp outside [now - STAMP_WINDOW, now] is
+        not of this clock, and the frame gets `now`."""
+        t = timestamp - self._epoch0
+        return t if now - STAMP_WINDOW <= t <= now else now
 
     def wait_until(self, t: float, stations: Sequence[Station]) -> None:
         remaining = t - self.now()
@@ -68,7 +80,7 @@ class WallClock:
             self.max_lag = max(self.max_lag, -remaining)
         while remaining > 0:
             if len(stations) == 1:
-                stations[0].poll(timeout=remaining)
+                stations[0].poll(timeout=remaining)   # bounded: returns after a batch, then the deadline
             else:
                 for station in stations:
                     station.poll(timeout=0.0)

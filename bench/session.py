@@ -85,7 +85,8 @@ class BenchSession:
 
     def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence) -> Station:
         bus = open_bus(self.settings.interface, self.channel)
-        return Station(name, bus, Restbus(self.codebook, nodes), monitor, self.now, behaviours)
+        stamp = getattr(self.clock, "stamp", None)   # real time: frames get their receive timestamps
+        return Station(name, bus, Restbus(self.codebook, nodes), monitor, self.now, behaviours, stamp)
 
     def now(self) -> float:
         return self.scheduler.now if not self.clock.realtime else self.clock.now()

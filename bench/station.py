@@ -20,6 +20,9 @@ from bench.restbus import Restbus
 
 
 ECHO_WINDOW = 4
+#: Frames one poll takes from the socket at most: a station slower than the bus still gets back to its
+#: tick (and the clock to its deadline) instead of draining for ever; the rest waits in the socket.
+POLL_BATCH = 64
 #: python-can buses that deliver a sender's own frames back to it, whatever receive_own_messages says.
 LOOPING_BUS_CLASSES = ("UdpMulticastBus",)
 
@@ -54,12 +57,17 @@ class _StationIO:
 
 class Station:
     def __init__(self, name: str, bus: can.BusABC, restbus: Restbus, monitor: Monitor,
-                 now: Callable[[], float], behaviours: Sequence[Behaviour] = ()) -> None:
+                 now: Callable[[], float], behaviours: Sequence[Behaviour] = (),
+                 stamp: Callable[[float, float], float] | None = None) -> None:
         self.name = name
         self.bus = bus
         self.restbus = restbus
         self.monitor = monitor
         self.now = now
+        # Real time: bench time of a received frame from its receive timestamp (bench.clock.WallClock.stamp),
+        # so a late station still measures the bus's timing, not its own lateness. None: the time of reading.
+        self.stamp = stamp
+        self._last_rx = float("-inf")
         self.behaviours = list(behaviours)
         self.loops_back = type(bus).__name__ in LOOPING_BUS_CLASSES
         self.io = _StationIO(self)
@@ -76,19 +84,28 @@ class Station:
         # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (bench/periodic.py)
         self.kernel = KernelPeriodic.attach(bus, restbus)
 
-    def poll(self, timeout: float = 0.0) -> None:
-        """Receive every pending frame into the monitor (the first recv may wait up to timeout)."""
-        bus, monitor, echoes = self.bus, self.monitor, self._echoes
+    def poll(self, timeout: float = 0.0, limit: int = POLL_BATCH) -> int:
+        """Receive up to `limit` pending frames into the monitor (the first recv may wait up to timeout).
+        Returns how many were read: `limit` means more may be waiting."""
+        bus, monitor, echoes, stamp, now = self.bus, self.monitor, self._echoes, self.stamp, self.now
         msg = bus.recv(timeout)
+        count = 0
         while msg is not None:
+            count += 1
             data = bytes(msg.data)
             pending = echoes.get(msg.arbitration_id)
             if pending and data in pending:
                 pending.remove(data)   # our own frame looped back (udp_multicast does): already logged as tx
             else:
-                monitor.on_frame(self.now(), msg.arbitration_id, data, "rx", msg.is_extended_id,
-                                 msg.is_error_frame)
+                if stamp is None:
+                    t = now()
+                else:   # one socket delivers in order: a stamp never goes back (one of another base could)
+                    t = self._last_rx = max(self._last_rx, stamp(msg.timestamp, now()))
+                monitor.on_frame(t, msg.arbitration_id, data, "rx", msg.is_extended_id, msg.is_error_frame)
+            if count >= limit:
+                break
             msg = bus.recv(0.0)
+        return count
 
     def tick(self, tick: int, t: float, dt: float) -> None:
         self.poll(0.0)

@@ -1,0 +1,138 @@
+"""A station under the wall clock: bounded draining, and frames timed by their receive timestamps.
+
+A station slower than its bus must still get back to its tick (the vcan lane's runner in an emulated
+guest did not: its receive loop never returned), and a station that reads late must still measure the
+bus's intervals, not its own lateness.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+
+import can
+import pytest
+
+from bench.bus import open_bus
+from bench.clock import STAMP_WINDOW, WallClock
+from bench.codec import load_codebook
+from bench.config import load_config
+from bench.monitor import Monitor
+from bench.restbus import Restbus
+from bench.station import POLL_BATCH, Station
+
+
+@pytest.fixture(scope="module")
+def codebook():
+    return load_codebook(load_config().databases)
+
+
+class FloodBus(can.BusABC):
+    """A bus that always has another frame: `budget` frames, or without end when budget is None."""
+
+    def __init__(self, frame: can.Message, budget: int | None = None) -> None:
+        self.frame, self.budget, self.read = frame, budget, 0
+        super().__init__(channel="flood")
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self.budget is not None and self.read >= self.budget:
+            return None, False
+        self.read += 1
+        return self.frame, False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        pass
+
+
+def _frame(codebook, name: str, timestamp: float = 0.0) -> can.Message:
+    codec = codebook[name]
+    return can.Message(arbitration_id=codec.frame_id, data=bytes(codec.length), is_extended_id=False,
+                       timestamp=timestamp)
+
+
+def _station(codebook, bus: can.BusABC, clock: WallClock | None = None) -> Station:
+    now = clock.now if clock else (lambda: 0.0)
+    return Station("runner", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), now, (),
+                   clock.stamp if clock else None)
+
+
+def test_poll_takes_at_most_a_batch_and_leaves_the_rest_in_the_socket(codebook) -> None:
+    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=POLL_BATCH + 10)
+    station = _station(codebook, bus)
+    assert station.poll() == POLL_BATCH
+    assert station.monitor.frames == POLL_BATCH
+    assert station.poll() == 10
+    assert station.poll() == 0
+    assert station.monitor.frames == POLL_BATCH + 10
+
+
+def test_wall_clock_keeps_its_deadline_on_a_bus_that_never_goes_quiet(codebook) -> None:
+    clock = WallClock()
+    station = _station(codebook, FloodBus(_frame(codebook, "VCU_WheelCmd_FL")), clock)
+    clock.start()
+    clock.wait_until(0.05, [station])
+    late = clock.now() - 0.05
+    # One batch at most after the deadline: a few ms even on a slow machine, never "until the bus stops".
+    assert 0 <= late < 0.5, f"returned {late * 1000:.1f} ms after its deadline"
+    assert station.monitor.frames > POLL_BATCH
+
+
+def test_a_frame_is_timed_by_its_receive_timestamp(codebook) -> None:
+    clock = WallClock()
+    clock.start()
+    epoch0 = time.time()
+    time.sleep(0.05)
+    received = epoch0 + 0.01                     # the kernel received it 10 ms after start
+    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL", timestamp=received), budget=1)
+    station = _station(codebook, bus, clock)
+    station.poll()
+    seen = station.monitor.state("VCU_WheelCmd_FL").last_seen
+    assert seen == pytest.approx(0.01, abs=0.002)   # not the ~50 ms at which it was read
+
+
+def test_a_timestamp_of_another_time_base_gets_the_time_of_reading(codebook) -> None:
+    clock = WallClock()
+    clock.start()
+    time.sleep(0.02)
+    # Some interfaces stamp with the device's uptime: nothing like this host's epoch time.
+    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL", timestamp=123.456), budget=1)
+    station = _station(codebook, bus, clock)
+    before = clock.now()
+    station.poll()
+    seen = station.monitor.state("VCU_WheelCmd_FL").last_seen
+    assert before <= seen <= clock.now()
+    assert clock.stamp(time.time() - 2 * STAMP_WINDOW, clock.now()) == pytest.approx(clock.now(), abs=0.01)
+
+
+def test_a_late_reader_measures_the_intervals_the_bus_had() -> None:
+    """Over udp_multicast (loopback, hop limit 0): 20 frames 10 ms apart, read in one go 0.3 s later."""
+    codebook = load_codebook(load_config().databases)
+    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    sender, receiver = open_bus("udp_multicast", group), open_bus("udp_multicast", group)
+    try:
+        clock = WallClock()
+        station = _station(codebook, receiver, clock)
+        # Linux switches receive timestamping on a moment after the first socket asks for it (a deferred
+        # static key); a frame that arrives before is stamped when it is read.
+        time.sleep(0.1)
+        clock.start()
+        frame = _frame(codebook, "VCU_WheelCmd_FL")
+        sent_at = []
+        for _ in range(20):
+            sent_at.append(time.monotonic())
+            sender.send(frame)
+            time.sleep(0.01)
+        time.sleep(0.3)
+        while station.poll(0.05):
+            pass
+        state = station.monitor.state("VCU_WheelCmd_FL")
+        assert state.frames == 20
+        sent_intervals = [b - a for a, b in zip(sent_at, sent_at[1:])]
+        measured = list(state.intervals)
+        assert len(measured) == 19
+        # The reader took all 20 within a few ms; the stamps still give the sender's spacing.
+        for sent, got in zip(sent_intervals, measured):
+            assert got == pytest.approx(sent, abs=0.003)
+    finally:
+        sender.shutdown()
+        receiver.shutdown()
