@@ -70,9 +70,10 @@ class WallClock:
         """Bench time of a frame the kernel stamped at `timestamp` (epoch s: python-can's socketcan and
         udp_multicast give the socket's receive time), read at bench time `now`. A station that reads
         late then still sees the intervals the bus had; a stamp outside [now - STAMP_WINDOW, now] is
-        not of this clock, and the frame gets `now`."""
+        not of this clock, and the frame gets `now`. A frame received before the clock started (waiting
+        in the socket) gets 0."""
         t = timestamp - self._epoch0
-        return t if now - STAMP_WINDOW <= t <= now else now
+        return max(t, 0.0) if now - STAMP_WINDOW <= t <= now else now
 
     def wait_until(self, t: float, stations: Sequence[Station]) -> None:
         remaining = t - self.now()

@@ -108,6 +108,7 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
         return
     reply.send("ready")
     by_id = codebook.by_id
+    rejected = 0
     try:
         while True:
             try:
@@ -117,17 +118,25 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
             if batch is None:
                 break
             for item in batch:
-                if item[0] == _STEP:
-                    recorder.step(item[1], item[2], item[3], item[4])
-                    continue
-                t, arbitration_id, data, direction, valid, error = item
-                recorder.frame(t, arbitration_id, data, channel=channel, direction=direction, valid=valid,
-                               error=error)
-                codec = by_id.get(arbitration_id) if valid else None
-                if codec is not None:
-                    recorder.decoded(t, codec.name, codec.decode(data))
+                try:
+                    if item[0] == _STEP:
+                        recorder.step(item[1], item[2], item[3], item[4])
+                        continue
+                    t, arbitration_id, data, direction, valid, error = item
+                    recorder.frame(t, arbitration_id, data, channel=channel, direction=direction, valid=valid,
+                                   error=error)
+                    codec = by_id.get(arbitration_id) if valid else None
+                    if codec is not None:
+                        recorder.decoded(t, codec.name, codec.decode(data))
+                except (BenchError, ValueError, TypeError) as exc:   # one bad record must not end the log
+                    rejected += 1
+                    if rejected == 1:
+                        print(f"bench log: {path}: record not written ({exc}); later ones are counted",
+                              file=sys.stderr, flush=True)
     finally:
         recorder.close()
+    if rejected:
+        print(f"bench log: {path}: {rejected} record(s) not written", file=sys.stderr, flush=True)
     try:
         reply.send("closed")
     except (BrokenPipeError, OSError):

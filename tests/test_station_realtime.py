@@ -136,3 +136,25 @@ def test_a_late_reader_measures_the_intervals_the_bus_had() -> None:
     finally:
         sender.shutdown()
         receiver.shutdown()
+
+
+def test_a_frame_waiting_from_before_the_start_gets_time_zero() -> None:
+    clock = WallClock()
+    clock.start()
+    assert clock.stamp(time.time() - 0.5, clock.now()) == 0.0
+
+
+def test_the_log_process_skips_a_record_it_cannot_write_and_keeps_the_rest(tmp_path, codebook) -> None:
+    """A frame whose time does not fit the log (negative) is reported and skipped; the log goes on."""
+    from bench.config import load_config
+    from bench.logproc import LogProcess
+    from bench.logread import read_frames
+
+    databases = load_config().databases
+    codec = codebook["VCU_WheelCmd_FL"]
+    log = LogProcess(tmp_path / "run.mcap", databases, "vcan0")
+    log.frame(-0.25, codec.frame_id, bytes(8), "rx", False, "test")
+    log.frame(0.5, codec.frame_id, bytes(range(8)), "rx", False, "test")
+    log.close()
+    frames = list(read_frames(tmp_path / "run.mcap"))
+    assert [(f.t, f.data) for f in frames] == [(0.5, bytes(range(8)))]
