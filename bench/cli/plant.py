@@ -18,9 +18,11 @@ from bench.cli.common import add_bus_options
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError
 from bench.faults import parse_fault
+from bench.monitor import Monitor
 from bench.session import BenchSession
 
 STATUS_PERIOD = 5.0   # s between status lines
+INVALID_SHOWN = 3     # invalid frames described per status line
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,6 +33,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--vehicle", default=None, help="vehicle of the plant at start (BENCH_Control may change it)")
     parser.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     parser.set_defaults(handler=run)
+
+
+def _report_invalid(console: Console, monitor: Monitor, shown: int) -> int:
+    """Print what was wrong with the frames that became invalid since the last status line (the first
+    few of them), so that a user of an external ECU sees why, not only how many. Returns the new count."""
+    new = monitor.invalid_frames - shown
+    if new > 0:
+        for record in monitor.invalid_log[-new:][:INVALID_SHOWN]:
+            console.print(f"  invalid at t={record.t:.3f} s: {record.message} (0x{record.arbitration_id:X}): "
+                          f"{record.reason}", highlight=False, markup=False)
+        if new > INVALID_SHOWN:
+            console.print(f"  ... and {new - INVALID_SHOWN} more", highlight=False)
+    return monitor.invalid_frames
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     end = args.duration if args.duration is not None else math.inf
     wall0 = time.monotonic()
     next_status = STATUS_PERIOD
+    shown = 0   # invalid frames of the plant's monitor already reported (monitor.invalid_frames)
     try:
         while not stop["now"] and session.now() < end:
             session.run_until(min(end, session.scheduler.now + 0.1), lambda: stop["now"])
@@ -69,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
                 console.print(f"t={session.now():7.1f} s  sent {plant.sent}  received "
                               f"{plant.monitor.frames - plant.sent}  invalid {plant.monitor.invalid_frames}  "
                               f"max lag {getattr(session.clock, 'max_lag', 0.0) * 1000:.1f} ms", highlight=False)
+                shown = _report_invalid(console, plant.monitor, shown)
     finally:
         session.close()
     console.print(f"bench plant: stopped after {time.monotonic() - wall0:.1f} s, sent {plant.sent} frames")
