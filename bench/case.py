@@ -209,10 +209,12 @@ class Case:
     def check_cycle_times(self, messages: Iterable[str] | None = None, *, p50_band: float = 0.05,
                           p99_max: float = 1.5, max_max: float = 3.0, min_frames: int = 10) -> bool:
         """Measured cycle time per message since the case started: p50 within ±p50_band of the DBC
-        cycle, p99 ≤ p99_max × cycle and max < max_max × cycle (the timeout bound), as fractions."""
+        cycle, p99 ≤ p99_max × cycle and max < max_max × cycle (the timeout bound), as fractions.
+        Without `messages`: every periodic message seen on the bus since the case started."""
         ok_all = True
         names = list(messages) if messages is not None else [
-            n for n, s in self._monitor.by_name.items() if s.codec.cycle_time and s.frames]
+            n for n, s in self._monitor.by_name.items()
+            if s.codec.cycle_time and s.intervals_dropped + len(s.intervals) > self._interval_marks.get(n, 0)]
         for name in names:
             state = self._monitor.state(name)
             cycle = state.codec.cycle_time

@@ -45,6 +45,11 @@ class _StationIO:
     def reset_outputs(self) -> None:
         self._station.restbus.reset_all()
 
+    def sending(self, message: str, enabled: bool) -> None:
+        slot = self._station.restbus.periodic.get(message)
+        if slot is not None:
+            slot.enabled = enabled
+
     def latest(self, message: str) -> Mapping[str, float] | None:
         return self._station.monitor.latest(message, self._station.now())
 

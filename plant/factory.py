@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Collection
+from types import ModuleType
 
 from bench.node import Behaviour, NodeIO
 from plant.vehicles import VEHICLE_CODES
@@ -24,13 +25,22 @@ ASSEMBLIES = {"EV4WIS": "plant.assemblies.ev4wis",
 _BY_CODE = {code: name for name, code in VEHICLE_CODES.items()}
 
 
-def assemble(vehicle: str, external: Collection[str]) -> list[Behaviour]:
-    """The behaviours of one vehicle; ValueError naming the vehicle when there is no such plant."""
+def _assembly(vehicle: str) -> ModuleType:
     module = ASSEMBLIES.get(vehicle.upper())
     if module is None:
         raise ValueError(f"no plant for vehicle {vehicle!r} (available: {', '.join(sorted(ASSEMBLIES))})")
-    builder: Callable[[Collection[str]], list[Behaviour]] = importlib.import_module(module).build
+    return importlib.import_module(module)
+
+
+def assemble(vehicle: str, external: Collection[str]) -> list[Behaviour]:
+    """The behaviours of one vehicle; ValueError naming the vehicle when there is no such plant."""
+    builder: Callable[[Collection[str]], list[Behaviour]] = _assembly(vehicle).build
     return builder(frozenset(external))
+
+
+def messages_of(vehicle: str) -> frozenset[str]:
+    """The plant-side messages the vehicle's network carries (its assembly's MESSAGES)."""
+    return _assembly(vehicle).MESSAGES
 
 
 class PlantHost:
@@ -42,6 +52,7 @@ class PlantHost:
         self.inner = assemble(self.vehicle, self.external)
         self.nodes = tuple(dict.fromkeys(n for b in self.inner for n in b.nodes))
         self.unavailable: str | None = None   # a vehicle asked for that has no plant
+        self._network: frozenset[str] | None = None   # messages sending now (None: not set on the bus yet)
 
     def reset(self) -> None:
         for behaviour in self.inner:
@@ -56,8 +67,22 @@ class PlantHost:
                 self.inner = assemble(wanted, self.external)
                 io.reset_outputs()          # nothing of the previous vehicle stays on the bus
             self.unavailable = wanted if wanted not in ASSEMBLIES else None
+        if self._network is None or self._network != messages_of(self.vehicle):
+            self._set_network(io)
         for behaviour in self.inner:
             behaviour.step(io, t, dt)
+
+
+    def _set_network(self, io: NodeIO) -> None:
+        """Send the messages of this vehicle's network, and none of the other vehicles' (a 4WIS EV has no
+        SBW ECU: its bus carries no SBW frames). Messages no vehicle claims are left as they are."""
+        mine = messages_of(self.vehicle)
+        for vehicle in ASSEMBLIES:
+            for message in messages_of(vehicle) - mine:
+                io.sending(message, False)
+        for message in mine:
+            io.sending(message, True)
+        self._network = mine
 
 
 def build(external: Collection[str] = (), vehicle: str | None = None) -> list[Behaviour]:

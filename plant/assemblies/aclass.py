@@ -58,6 +58,14 @@ BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
     **{("ABS_WheelSpeeds", f"WheelSpeed{w}"): WHEEL_SPEED for w in ("FL", "FR", "RL", "RR")},
 }
 
+#: What this vehicle's network carries from the plant's side (plant/factory.py stops the rest): the SBW ECU,
+#: the IMU, the ABS node (wheel speeds; ABS_SteerState at its start values), the body's and the SBW's ground truth.
+MESSAGES = frozenset({
+    "SBW_HandWheel", "SBW_Pinion", "IMU_Motion", "ABS_WheelSpeeds", "ABS_SteerState",
+    "PLANT_Status", "PLANT_Position", "PLANT_Motion", "PLANT_Dynamics",
+    "PLANT_SbwAngles", "PLANT_SbwTorques", "PLANT_SbwSensors",
+})
+
 
 def single_track_params(p: AclassParams) -> SingleTrackParams:
     """vehicles.md B as the §5 model's parameters."""

@@ -22,6 +22,13 @@ from plant.ecus.abs import AbsEcu
 from plant.vehicles import load_vehicle
 
 
+#: What this vehicle's network carries from the plant's side (plant/factory.py stops the rest): the ABS ECU
+#: and the ground truth of the body and of the braking wheels.
+MESSAGES = frozenset({
+    "ABS_WheelSpeeds", "ABS_SteerState", "PLANT_Status", "PLANT_Position", "PLANT_Motion", "PLANT_Dynamics",
+    "PLANT_AbsVehicle", "PLANT_AbsWheel_FL", "PLANT_AbsWheel_FR", "PLANT_AbsWheel_RL", "PLANT_AbsWheel_RR",
+})
+
 def build(external: Collection[str]) -> list[Behaviour]:
     if "PLANT" in external:
         return []

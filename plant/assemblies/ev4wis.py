@@ -24,6 +24,14 @@ from plant.kinematics import CORNERS
 from plant.vehicles import load_vehicle
 
 
+#: What this vehicle's network carries from the plant's side (plant/factory.py stops the rest): the VCU's
+#: commands and state, the four wheel ECUs' status, the IMU and the ground truth of the body.
+MESSAGES = frozenset({
+    "VCU_WheelCmd_FL", "VCU_WheelCmd_FR", "VCU_WheelCmd_RL", "VCU_WheelCmd_RR", "VCU_VehicleState",
+    "VCU_RotationCentre", "WHL_Status_FL", "WHL_Status_FR", "WHL_Status_RL", "WHL_Status_RR", "IMU_Motion",
+    "PLANT_Status", "PLANT_Position", "PLANT_Motion", "PLANT_Dynamics",
+})
+
 def build(external: Collection[str]) -> list[Behaviour]:
     params = load_vehicle("EV4WIS")
     behaviours: list[Behaviour] = []

@@ -1,0 +1,66 @@
+"""Each vehicle's bus carries its own ECUs' messages only (plant/factory.py, the assemblies' MESSAGES).
+
+Checked on the virtual bus against what the plant's behaviours really do, not against the declarations
+alone: every message a vehicle's behaviours set must be on the bus, and nothing of another vehicle may be.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.config import RunSettings, load_config
+from bench.session import BenchSession
+from plant.factory import ASSEMBLIES, messages_of
+from plant.vehicles import VEHICLE_CODES
+
+CLAIMED = frozenset().union(*(messages_of(v) for v in ASSEMBLIES))
+
+
+def _session(vehicle: str) -> tuple[BenchSession, set[str]]:
+    """A session whose plant starts as `vehicle`, and the set of messages its behaviours set."""
+    session = BenchSession(load_config(), RunSettings(vehicle=vehicle))
+    set_by_behaviours: set[str] = set()
+    restbus = session.plant.restbus
+    original = restbus.set_unchecked
+
+    def recording(message: str, signals: dict) -> None:
+        set_by_behaviours.add(message)
+        original(message, signals)
+
+    restbus.set_unchecked = recording
+    return session, set_by_behaviours
+
+
+def _seen_since(session: BenchSession, since: float) -> set[str]:
+    return {name for name, state in session.runner.monitor.by_name.items()
+            if state.last_seen is not None and state.last_seen >= since}
+
+
+@pytest.mark.parametrize("vehicle", sorted(ASSEMBLIES))
+def test_a_vehicle_sends_what_its_ecus_set_and_nothing_of_the_others(vehicle: str) -> None:
+    session, set_by_behaviours = _session(vehicle)
+    session.start()
+    session.runner.restbus.set("BENCH_Control", Vehicle=VEHICLE_CODES[vehicle], ScenarioId=1)
+    session.run_until(1.0)
+    seen = _seen_since(session, 0.5)
+    plant_sent = {c.name for c in session.codebook.sent_by(session.plant.restbus.nodes)}
+    session.close()
+    assert set_by_behaviours <= messages_of(vehicle), "set by the behaviours but not declared"
+    assert set_by_behaviours <= seen, "set by the behaviours but not on the bus"
+    others = CLAIMED - messages_of(vehicle)
+    assert not (seen & others), f"{vehicle} sends messages of other vehicles: {sorted(seen & others)}"
+    assert (plant_sent & messages_of(vehicle)) <= seen
+
+
+def test_switching_vehicle_switches_the_network() -> None:
+    session, _ = _session("EV4WIS")
+    session.start()
+    session.runner.restbus.set("BENCH_Control", Vehicle=VEHICLE_CODES["EV4WIS"], ScenarioId=1)
+    session.run_until(0.5)
+    assert "VCU_WheelCmd_FL" in _seen_since(session, 0.3)
+    session.runner.restbus.set("BENCH_Control", Vehicle=VEHICLE_CODES["ACLASS"], ScenarioId=2)
+    session.run_until(1.0)
+    seen = _seen_since(session, 0.8)
+    session.close()
+    assert "SBW_Pinion" in seen and "PLANT_SbwAngles" in seen
+    assert not seen & (messages_of("EV4WIS") - messages_of("ACLASS"))
