@@ -108,6 +108,10 @@ def bench(request: pytest.FixtureRequest) -> Iterator[Case]:
     case.close()
 
 
+class FailedSteps(AssertionError):
+    """A case whose code ran to its end with failed steps (expect, eventually, ... recorded False)."""
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
     outcome = yield
@@ -115,13 +119,15 @@ def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
     if case is not None and outcome.excinfo is None and case.result.failed_steps:
         lines = [f"{s.name}: measured {s.measured}, expected {s.expected} ({s.tolerance})"
                  for s in case.result.failed_steps]
-        outcome.force_exception(AssertionError("failed steps:\n" + "\n".join(lines)))
+        outcome.force_exception(FailedSteps("failed steps:\n" + "\n".join(lines)))
 
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Iterator[None]:
     outcome = yield
     report: pytest.TestReport = outcome.get_result()
+    if call.excinfo is not None and call.excinfo.errisinstance(FailedSteps):
+        report.longrepr = str(call.excinfo.value)   # the steps say it all: no traceback through pytest's hooks
     run = item.config.stash.get(_RUN_KEY, None)
     if run is None or "bench" not in getattr(item, "fixturenames", ()):
         return
