@@ -73,7 +73,7 @@ class BenchSession:
             self.stations.append(self.plant)
         if role == "runner":
             monitor = Monitor(self.codebook, keep_history=keep_history, sink=sink)
-            self.runner = self._station("runner", set(project.stimulus), monitor, ())
+            self.runner = self._station("runner", set(project.stimulus), monitor, (), every_tick=False)
             self.stations.append(self.runner)
         if not self.stations:
             raise ConfigError("nothing to simulate: every node is external")
@@ -83,10 +83,12 @@ class BenchSession:
         self.stations[-1].babbles = True
         self.scheduler = Scheduler(self.stations, self.clock)
 
-    def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence) -> Station:
+    def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence, *,
+                 every_tick: bool = True) -> Station:
         bus = open_bus(self.settings.interface, self.channel)
         stamp = getattr(self.clock, "stamp", None)   # real time: frames get their receive timestamps
-        return Station(name, bus, Restbus(self.codebook, nodes), monitor, self.now, behaviours, stamp)
+        return Station(name, bus, Restbus(self.codebook, nodes), monitor, self.now, behaviours, stamp,
+                       every_tick=every_tick)
 
     def now(self) -> float:
         return self.scheduler.now if not self.clock.realtime else self.clock.now()

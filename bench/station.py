@@ -63,7 +63,7 @@ class _StationIO:
 class Station:
     def __init__(self, name: str, bus: can.BusABC, restbus: Restbus, monitor: Monitor,
                  now: Callable[[], float], behaviours: Sequence[Behaviour] = (),
-                 stamp: Callable[[float, float], float] | None = None) -> None:
+                 stamp: Callable[[float, float], float] | None = None, *, every_tick: bool = True) -> None:
         self.name = name
         self.bus = bus
         self.restbus = restbus
@@ -73,6 +73,9 @@ class Station:
         # so a late station still measures the bus's timing, not its own lateness. None: the time of reading.
         self.stamp = stamp
         self._last_rx = float("-inf")
+        # A plant's models integrate every tick; a runner's timers and restbus are due-based and may skip
+        # ticks when late (bench.clock.Scheduler).
+        self.every_tick = every_tick
         self.behaviours = list(behaviours)
         self.loops_back = type(bus).__name__ in LOOPING_BUS_CLASSES
         self.io = _StationIO(self)

@@ -158,3 +158,35 @@ def test_the_log_process_skips_a_record_it_cannot_write_and_keeps_the_rest(tmp_p
     log.close()
     frames = list(read_frames(tmp_path / "run.mcap"))
     assert [(f.t, f.data) for f in frames] == [(0.5, bytes(range(8)))]
+
+
+def test_a_late_runner_goes_to_the_wall_clock_a_late_plant_replays_every_tick(codebook) -> None:
+    """Scheduler under the wall clock, 0.1 s late at start: the runner jumps, the plant steps every tick."""
+    from bench.clock import Scheduler
+
+    for every_tick in (False, True):
+        clock = WallClock()
+        steps: list[float] = []
+
+        class Counting:
+            nodes = ()
+
+            def reset(self) -> None:
+                pass
+
+            def step(self, io: object, t: float, dt: float) -> None:
+                steps.append(t)
+
+        bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
+        station = Station("s", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, [Counting()],
+                          clock.stamp, every_tick=every_tick)
+        scheduler = Scheduler([station], clock)
+        clock.start()
+        time.sleep(0.1)
+        scheduler.run_until(0.15)
+        assert scheduler.tick == 150
+        if every_tick:
+            assert len(steps) == 150 and scheduler.skipped == 0
+        else:
+            assert scheduler.skipped >= 90 and len(steps) == 150 - scheduler.skipped
+            assert steps[0] >= 0.09       # the first step is at the wall clock's time, not at 1 ms
