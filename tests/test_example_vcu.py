@@ -70,8 +70,6 @@ def _stop(process: subprocess.Popen) -> str:
     return output
 
 
-@pytest.mark.xfail(strict=False, reason="flaky in the full suite (passes alone): a real-time campaign against "
-                   "examples/vcu_ecu.py over udp_multicast whose frames time out under load; issue 7 is open")
 def test_campaign_passes_against_the_example_vcu(tmp_path: Path) -> None:
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
     bus = ["--interface", "udp_multicast", "--channel", group]
