@@ -48,6 +48,9 @@ class DictIO:
     def reset_outputs(self) -> None:
         pass
 
+    def sending(self, message: str, enabled: bool) -> None:
+        pass
+
     def latest(self, message: str) -> Mapping[str, float] | None:
         return self.values.get(message)
 
