@@ -101,15 +101,22 @@ class Case:
     def resume_sending(self, message: str) -> None:
         self._runner.restbus.enable(message, True)
 
-    def start_scenario(self, **control: float | int | str) -> None:
+    def start_scenario(self, *, stimulus: Iterable[str] | None = None, **control: float | int | str) -> None:
         """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`),
         reset every stimulus message to its start values, end the timers of the last scenario, and wait
-        for the plant's acknowledgement."""
+        for the plant's acknowledgement. `stimulus`: the stimulus messages this scenario sends (besides
+        the scenario message itself); the others stay off the bus until the next scenario (a vehicle whose
+        network reads none of them need not carry them). Default: every stimulus message."""
         self.close()                  # timers belong to a scenario: a driver of the last one must not steer this one
         restbus = self._runner.restbus
         restbus.reset_all()
+        wanted = None if stimulus is None else {SCENARIO_MESSAGE, *stimulus}
+        unknown = set() if wanted is None else wanted - set(restbus.periodic)
+        if unknown:
+            raise BenchError(f"start_scenario(stimulus=...): {', '.join(sorted(unknown))} is no periodic stimulus "
+                             f"message (stimulus: {', '.join(sorted(restbus.periodic))})")
         for name in restbus.periodic:
-            restbus.enable(name, True)
+            restbus.enable(name, wanted is None or name in wanted)
         state = self._monitor.state(SCENARIO_ACK_MESSAGE)
         previous = int(state.latest[SCENARIO_ACK_SIGNAL]) if state.latest else 0
         scenario = previous % 255 + 1

@@ -21,6 +21,7 @@ from bench.case import Case
 from bench.results import Series
 from testcases.limits import LIMITS_FILE, load_limits
 from testcases import oracle_abs as oracle
+from testcases.stimulus import STIMULUS
 
 VEHICLE = "ACLASS_ABS"
 WHEELS = ("FL", "FR", "RL", "RR")
@@ -45,7 +46,7 @@ def source(name: str) -> str:
 
 def start(bench: Case, speed_kmh: float, *, mu: float = 1.0, noise: float = NOMINAL_NOISE) -> None:
     """A fresh ACLASS_ABS straight ahead at `speed_kmh` on a road of friction `mu`, wheel-speed noise `noise`."""
-    bench.start_scenario(Vehicle=VEHICLE, InitialSpeed=round(speed_kmh / oracle.KMH, 2), RoadMu=mu,
+    bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=round(speed_kmh / oracle.KMH, 2), RoadMu=mu,
                          SensorNoise=noise)
 
 

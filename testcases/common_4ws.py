@@ -17,6 +17,7 @@ from bench.case import Case
 from bench.results import Series
 from testcases import oracle_4ws as oracle
 from testcases.path_driver import CarModel
+from testcases.stimulus import STIMULUS
 
 VEHICLE = "EV4WIS"
 STRATEGIES = ("2WS", "FEEDFORWARD", "FEEDBACK")
@@ -34,7 +35,7 @@ def start(bench: Case, speed_kmh: float, strategy: str, mu: float = 1.0) -> floa
     commands 0 rpm until the case sends its request, so the hub motors first slow down a little).
     Returns the speed as the bus carries it, m/s (the oracle uses this value)."""
     u = round(oracle.mps(speed_kmh), 2)
-    bench.start_scenario(Vehicle=VEHICLE, InitialSpeed=u, RoadMu=mu)
+    bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=u, RoadMu=mu)
     bench.set("BENCH_VcuConfig", RearSteerLaw=LAW[strategy])
     bench.set("DRV_Steering", HandWheelAngle=0.0)
     bench.set("DRV_MotionRequest", DriveMode="ADAPTIVE", TargetSpeed=u)

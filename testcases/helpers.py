@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping
 from bench.case import Case
 from testcases import oracle
 from testcases.oracle import WHEELS, WheelTarget
+from testcases.stimulus import STIMULUS
 
 VEHICLE = "EV4WIS"
 ANGLE_TOL = 0.05          # deg, commanded and reached steering angle (issue)
@@ -33,7 +34,7 @@ FAULT_VALUE = {"OK": 0, "CENTRE_AT_ORIGIN": 1, "CENTRE_ON_WHEEL": 2, "ANGLE_OVER
 
 def start(bench: Case) -> None:
     """A fresh plant with the 4WIS EV, every stimulus at its start values (acknowledged by PLANT_Status)."""
-    bench.start_scenario(Vehicle=VEHICLE)
+    bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE])
 
 
 def speed_for(centre: tuple[float, float] | None, v_max: float = 2.0, yaw_max: float = 0.75) -> float:

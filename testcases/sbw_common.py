@@ -17,6 +17,7 @@ from bench.case import Case
 from bench.results import Series
 from testcases.limits import LIMITS_FILE, load_limits
 from testcases import oracle_sbw as oracle
+from testcases.stimulus import STIMULUS
 
 VEHICLE = "ACLASS"
 SBW_FAULT = {"OK": 0, "HANDWHEEL_RANGE": 1, "HANDWHEEL_STUCK": 2, "PINION_RANGE": 3, "INPUT_TIMEOUT": 4}
@@ -86,7 +87,7 @@ def start(bench: Case, speed_kmh: float, mode: str = "DIRECT", ideal_gain: float
     """Fresh ACLASS at `speed_kmh`, the SBW in `mode`, the robot holding the hand wheel at 0°.
     Returns the speed as the bus carries it (BENCH_Control.InitialSpeed, 0.01 m/s), for the oracle."""
     u = round(speed_kmh / 3.6, 2)
-    bench.start_scenario(Vehicle=VEHICLE, InitialSpeed=u)
+    bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=u)
     config: dict[str, float | str] = {"SteeringMode": mode}
     if ideal_gain is not None:
         config["IdealYawGain"] = ideal_gain

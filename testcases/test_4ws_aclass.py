@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from testcases import oracle_4ws as oracle
 from testcases.common_4ws import mean_since
+from testcases.stimulus import STIMULUS
 
 #: vehicles.md B, "Derived (linear 2-DOF)": value, printed decimals (tolerance = half a unit of the last one)
 PUBLISHED = {"K [s²/m²]": (1.90e-3, 0.005e-3), "characteristic speed [km/h]": (82.6, 0.05),
@@ -48,7 +49,7 @@ def test_aclass_crosscheck_of_the_closed_forms(bench):
     rows = []
     for speed_kmh, hand_wheel in SPEEDS:
         u = round(oracle.mps(speed_kmh), 2)
-        bench.start_scenario(Vehicle="ACLASS", InitialSpeed=u)
+        bench.start_scenario(Vehicle="ACLASS", stimulus=STIMULUS["ACLASS"], InitialSpeed=u)
         bench.set("BENCH_SbwConfig", SteeringMode="DIRECT")
         bench.set("BENCH_SteeringRobot", RobotMode="ANGLE", RobotAngle=0.0)
         bench.run(0.3)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import pytest
 
 from bench.case import Case
+from testcases.stimulus import STIMULUS
 
 TICK = 0.001
 CYCLE = {"DRV_MotionRequest": 0.020, "VCU_WheelCmd_FL": 0.010, "WHL_Status_FR": 0.010, "DRV_Steering": 0.010}
@@ -63,7 +64,7 @@ CASES = [
 
 
 def _drive(bench: Case) -> None:
-    bench.start_scenario(Vehicle="EV4WIS")
+    bench.start_scenario(Vehicle="EV4WIS", stimulus=STIMULUS["EV4WIS"])
     bench.set("DRV_MotionRequest", DriveMode="PIVOT", PivotX=6.0, PivotY=-1.38, TargetSpeed=1.0)
     bench.run(1.5)   # wheels at their angles and speeds, no fault
     bench.expect("no fault before the injection", bench.value("VCU_VehicleState", "VcuFault"), 0)

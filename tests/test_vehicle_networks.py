@@ -64,3 +64,38 @@ def test_switching_vehicle_switches_the_network() -> None:
     session.close()
     assert "SBW_Pinion" in seen and "PLANT_SbwAngles" in seen
     assert not seen & (messages_of("EV4WIS") - messages_of("ACLASS"))
+
+
+def _case(session: BenchSession):
+    from bench.case import Case
+    from bench.checks import StepLog
+    from bench.results import CaseResult
+
+    return Case(session, CaseResult(nodeid="t", name="t", outcome="passed"), StepLog(session.now))
+
+
+def test_a_scenario_sends_only_the_stimulus_it_names() -> None:
+    session = BenchSession(load_config(), RunSettings())
+    session.start()
+    case = _case(session)
+    case.start_scenario(Vehicle="EV4WIS", stimulus=["DRV_MotionRequest"])
+    t0 = session.now()
+    case.run(0.5)
+    seen = _seen_since(session, t0 + 0.1)
+    assert {"BENCH_Control", "DRV_MotionRequest"} <= seen
+    assert not seen & {"DRV_Steering", "DRV_Pedals", "BENCH_SteeringRobot", "BENCH_AbsStimulus"}
+    case.start_scenario(Vehicle="EV4WIS")          # the next scenario without a list: every stimulus again
+    t1 = session.now()
+    case.run(0.5)
+    assert {"DRV_Steering", "DRV_Pedals", "BENCH_AbsStimulus"} <= _seen_since(session, t1 + 0.1)
+    session.close()
+
+
+def test_an_unknown_stimulus_message_is_a_clear_error() -> None:
+    from bench.errors import BenchError
+
+    session = BenchSession(load_config(), RunSettings())
+    session.start()
+    with pytest.raises(BenchError, match="VCU_WheelCmd_FL is no periodic stimulus message"):
+        _case(session).start_scenario(Vehicle="EV4WIS", stimulus=["VCU_WheelCmd_FL"])
+    session.close()
