@@ -8,7 +8,7 @@ default both run in one process on the virtual-time bus.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import can
 
@@ -17,6 +17,7 @@ from bench.monitor import Monitor
 from bench.node import Behaviour
 from bench.periodic import KernelPeriodic
 from bench.restbus import Restbus
+from bench.socketcan_rx import FastReceiver
 
 
 ECHO_WINDOW = 4
@@ -91,14 +92,17 @@ class Station:
             p.codec.frame_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
         # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (bench/periodic.py)
         self.kernel = KernelPeriodic.attach(bus, restbus)
+        # socketcan: frames read from the bus's socket without a can.Message each (bench/socketcan_rx.py)
+        self._fast = FastReceiver.attach(bus)
 
     def poll(self, timeout: float = 0.0, limit: int = POLL_BATCH) -> int:
         """Receive up to `limit` pending frames into the monitor (the first recv may wait up to timeout).
         Returns how many were read: `limit` means more may be waiting."""
-        bus, monitor, echoes, stamp, now = self.bus, self.monitor, self._echoes, self.stamp, self.now
-        msg = bus.recv(timeout)
+        monitor, echoes, stamp, now = self.monitor, self._echoes, self.stamp, self.now
+        fast = self._fast
+        frames = fast.frames(timeout, limit) if fast is not None else self._recv(timeout, limit)
         count = 0
-        while msg is not None:
+        for msg in frames:
             count += 1
             data = bytes(msg.data)
             pending = echoes.get(msg.arbitration_id)
@@ -110,10 +114,19 @@ class Station:
                 else:   # one socket delivers in order: a stamp never goes back (one of another base could)
                     t = self._last_rx = max(self._last_rx, stamp(msg.timestamp, now()))
                 monitor.on_frame(t, msg.arbitration_id, data, "rx", msg.is_extended_id, msg.is_error_frame)
-            if count >= limit:
-                break
-            msg = bus.recv(0.0)
         return count
+
+    def _recv(self, timeout: float, limit: int) -> Iterator[can.Message]:
+        """Up to `limit` frames through python-can's recv (every interface)."""
+        bus = self.bus
+        msg = bus.recv(timeout)
+        count = 0
+        while msg is not None:
+            yield msg
+            count += 1
+            if count >= limit:
+                return      # not one recv more: a frame read here would be lost
+            msg = bus.recv(0.0)
 
     def tick(self, tick: int, t: float, dt: float) -> None:
         self.poll(0.0)

@@ -108,6 +108,13 @@ class FakeRawSocket:
             raise BlockingIOError
         return self.queue.popleft()
 
+    def recvmsg(self, size: int, ancillary_size: int, flags: int = 0) -> tuple[bytes, list, int, Any]:
+        """As SocketCAN gives a frame with SO_TIMESTAMPNS (the fake kernel's time as the receive time)."""
+        frame = self.recv(size)
+        seconds = int(self.kernel.now)
+        stamp = struct.pack("@ll", seconds, int((self.kernel.now - seconds) * 1e9))
+        return frame, [(socket.SOL_SOCKET, 35, stamp)], 0, ("vcan0",)
+
 
 class FakeTask:
     """A BCM TX_SETUP task: sends its frames in turn, the first at once (STARTTIMER announces)."""

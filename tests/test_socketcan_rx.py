@@ -1,0 +1,83 @@
+"""bench/socketcan_rx.py reads a received frame exactly as python-can's socketcan `capture_message` does.
+
+Both parse the same bytes (struct can_frame / canfd_frame and the SO_TIMESTAMPNS control message, as the
+kernel delivers them) from a socket that replays them; hypothesis picks identifiers, flags, lengths, data and
+times. The receiver itself runs on the fake kernel of tests/test_periodic.py and on the real vcan0 in the
+vcan lane (tests/test_vcan_lane.py).
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+
+import can
+from can.interfaces.socketcan.socketcan import capture_message
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bench.socketcan_rx import FastReceiver, parse
+
+SO_TIMESTAMPNS = 35
+
+
+class ReplaySocket:
+    """Gives back prepared (frame, control message) pairs through recvmsg, then would block."""
+
+    def __init__(self, items: list[tuple[bytes, bytes]]) -> None:
+        self.items = list(items)
+
+    def recvmsg(self, size: int, ancillary_size: int, flags: int = 0) -> tuple[bytes, list, int, tuple]:
+        if not self.items:
+            raise BlockingIOError
+        frame, stamp = self.items.pop(0)
+        assert len(frame) <= size
+        return frame, [(socket.SOL_SOCKET, SO_TIMESTAMPNS, stamp)], 0, ("vcan0",)
+
+
+def _frame(can_id: int, length: int, data: bytes, fd: bool) -> bytes:
+    body = data[:length].ljust(64 if fd else 8, b"\0")
+    return struct.pack("=IBB1xB", can_id, length, 0, 0) + body
+
+
+frames = st.builds(
+    lambda ext, err, rtr, ident, fd, length, data, sec, nsec: (
+        (ident & (0x1FFFFFFF if ext else 0x7FF)) | (0x80000000 if ext else 0) | (0x20000000 if err else 0)
+        | (0x40000000 if rtr else 0),
+        length if fd else min(length, 8), data, fd, sec, nsec),
+    st.booleans(), st.booleans(), st.booleans(), st.integers(0, 0x1FFFFFFF), st.booleans(),
+    st.integers(0, 64), st.binary(min_size=64, max_size=64), st.integers(0, 2**31 - 1), st.integers(0, 999_999_999))
+
+
+@settings(max_examples=400, deadline=None)
+@given(frames)
+def test_parse_agrees_with_python_can(item: tuple) -> None:
+    can_id, length, data, fd, sec, nsec = item
+    raw, stamp = _frame(can_id, length, data, fd), struct.pack("@ll", sec, nsec)
+    ours = parse(raw, [(socket.SOL_SOCKET, SO_TIMESTAMPNS, stamp)])
+    theirs: can.Message = capture_message(ReplaySocket([(raw, stamp)]))
+    assert ours.timestamp == theirs.timestamp
+    assert ours.arbitration_id == theirs.arbitration_id
+    assert ours.is_extended_id == theirs.is_extended_id
+    assert ours.is_error_frame == theirs.is_error_frame
+    assert bytes(ours.data) == bytes(theirs.data)
+
+
+def test_frames_stop_at_the_limit_and_when_the_socket_is_empty() -> None:
+    items = [(_frame(0x100 + i, 8, bytes(range(8)), False), struct.pack("@ll", 10, i)) for i in range(5)]
+    receiver = FastReceiver(ReplaySocket(items))
+    first = list(receiver.frames(0.0, 3))
+    assert [f.arbitration_id for f in first] == [0x100, 0x101, 0x102]
+    rest = list(receiver.frames(0.0, 64))
+    assert [f.arbitration_id for f in rest] == [0x103, 0x104]
+    assert list(receiver.frames(0.0, 64)) == []
+
+
+def test_a_bus_with_python_can_filters_keeps_python_can_recv() -> None:
+    class SocketcanBus:              # named like python-can's; filters are python-can's to apply in recv
+        socket = object()
+        filters = [{"can_id": 0x100, "can_mask": 0x7FF}]
+
+    assert FastReceiver.attach(SocketcanBus()) is None
+    SocketcanBus.filters = None
+    assert FastReceiver.attach(SocketcanBus()) is not None
