@@ -104,18 +104,24 @@ def test_lateral_speeds(bench, v: float) -> None:
     wait_for_targets(bench, targets, settle=True)
     expect_fault(bench, "OK")
     expect_wheels(bench, targets, "vehicles.md A LATERAL; eq. 6")
-    x0, y0 = bench.value("PLANT_Position", "PosX"), bench.value("PLANT_Position", "PosY")
+    since = bench.now
     bench.run(0.5)
-    dx = bench.value("PLANT_Position", "PosX") - x0
-    dy = bench.value("PLANT_Position", "PosY") - y0
+    # Between the first and the last PLANT_Position frame of the 0.5 s, over the time between those frames
+    # (their receive times): in real time the latest frame is up to one cycle old at either end, 2 % of 0.5 s.
+    times, xs = bench.history("PLANT_Position", "PosX", since=since)
+    _, ys = bench.history("PLANT_Position", "PosY", since=since)
+    span = float(times[-1] - times[0])
+    dx, dy = float(xs[-1] - xs[0]), float(ys[-1] - ys[0])
     # in the body frame: the wheels' commands reach them a few ms apart (one frame phase each), so the body may
     # have yawed a few hundredths of a degree while steering to 90°
     h = math.radians(bench.value("PLANT_Motion", "Heading"))
     body_dx, body_dy = dx * math.cos(h) - dy * math.sin(h), dx * math.sin(h) + dy * math.cos(h)
-    bench.expect("ground truth: travelled to the right in 0.5 s (body frame)", body_dx, 0.5 * v, abs_tol=0.002,
-                 rel_tol=SPEED_REL_TOL, unit="m",
-                 detail="positive = right (k-matrix.md); 0.002 m = two LSB of PLANT_Position")
-    bench.expect("ground truth: travelled forward in 0.5 s (body frame)", body_dy, 0.0, abs_tol=0.002, unit="m",
+    bench.expect(f"ground truth: travelled to the right in {span:.3f} s (body frame)", body_dx, span * v,
+                 abs_tol=0.002, rel_tol=SPEED_REL_TOL, unit="m",
+                 detail="positive = right (k-matrix.md); 0.002 m = two LSB of PLANT_Position; the time is that "
+                        "between the first and last PLANT_Position frames of 0.5 s")
+    bench.expect(f"ground truth: travelled forward in {span:.3f} s (body frame)", body_dy, 0.0, abs_tol=0.002,
+                 unit="m",
                  detail="0.002 m = two LSB of PLANT_Position")
     bench.expect("ground truth yaw rate", bench.value("PLANT_Motion", "YawRate"), 0.0, abs_tol=YAW_ABS_TOL,
                  unit="deg/s")
