@@ -12,12 +12,14 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
 
-from bench.station import Station
+from bench.station import POLL_BATCH, Station
 
 DEFAULT_DT = 0.001
 #: A receive timestamp is taken as bench time only when it lies this far before now at most; outside
 #: (an interface whose timestamps are not the host's epoch time) the frame gets the time it was read.
 STAMP_WINDOW = 5.0
+#: At most this many frames are read when a real-time run stops to be looked at (Scheduler._catch_up).
+CATCH_UP_FRAMES = 8192
 
 
 class Clock(Protocol):
@@ -125,5 +127,21 @@ class Scheduler:
             for station in self.stations:
                 station.tick(self.tick, t, self.dt)
             if stop is not None and stop():
+                self._catch_up()
                 return True
+        self._catch_up()
         return False
+
+    def _catch_up(self) -> None:
+        """In real time, read what waits in the sockets before the caller looks at the bus: a station that
+        is behind (it takes one batch per tick) would otherwise answer with values of the past, or call a
+        message timed out that only waits to be read. Bounded (CATCH_UP_FRAMES), so that it returns."""
+        if not self.clock.realtime:
+            return
+        for station in self.stations:
+            read = 0
+            while read < CATCH_UP_FRAMES:
+                got = station.poll(0.0)
+                read += got
+                if got < POLL_BATCH:
+                    break

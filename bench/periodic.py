@@ -48,6 +48,7 @@ STABLE_CYCLES = 3        # unchanged cycles before a message is handed to the ke
 CHANGES_TO_STOP = 3      # consecutive changed cycles that send it back to the tick scheduler
 STOP_MARGIN_S = 0.0015   # a task is deleted only this far from its frames (none in flight)
 PRECHECK_S = 0.0015      # the values are compared this long before each of the kernel's frames
+ECHO_WAIT_S = 0.02       # longest wait, at a hand-over, for the echo of the kernel's last frame
 MIN_CYCLE_S = 4 * STOP_MARGIN_S
 FRAME_LENGTH = 8         # the contract's frames (E2E bytes 6 and 7)
 ENV_SWITCH = "BENCH_KERNEL_PERIODIC"
@@ -257,6 +258,7 @@ class KernelPeriodic:
         except (can.CanError, OSError) as exc:
             self._disable(f"stopping the task of {task.slot.codec.name} failed: {exc}")
         self.pending_echoes = list(self.echoes())    # its last frames, before its filter goes
+        self._await_last_echo(task)
         del self.tasks[task.frame_id]
         try:
             self._set_filters()
@@ -267,6 +269,21 @@ class KernelPeriodic:
             task.slot.counter = e2e.next_counter(last % e2e.COUNTER_MODULO)
         self._stable[task.frame_id] = 0
         self.stopped += 1
+
+    def _await_last_echo(self, task: _Task) -> None:
+        """The kernel's loopback of its last frame may still be on its way to the echo socket (a busy machine
+        delivers it from a softirq that may run late): without it the restbus would send that frame's
+        AliveCounter again. The kernel started at t0 and sends one frame per period, so by now it can have
+        sent frame `possible - 1` at most; wait (sleeping, which lets the kernel deliver) up to ECHO_WAIT_S for
+        that frame's echo. When it does not come, the kernel did not send it (the stop came first)."""
+        if not task.slot.codec.e2e:
+            return
+        possible = int((_clock() - task.t0) / task.period) + 1
+        expected = (task.base + possible - 1) % e2e.COUNTER_MODULO
+        deadline = time.monotonic() + ECHO_WAIT_S
+        while task.last_counter != expected and time.monotonic() < deadline:
+            time.sleep(0.0005)
+            self.pending_echoes += list(self._read_echoes())
 
     def _disable(self, why: str) -> None:
         self.enabled = False
@@ -286,6 +303,10 @@ class KernelPeriodic:
         if self.pending_echoes:
             pending, self.pending_echoes = self.pending_echoes, []
             yield from pending
+        yield from self._read_echoes()
+
+    def _read_echoes(self) -> Iterator[tuple[int, bytes]]:
+        """What the echo socket holds now (noting each task's last AliveCounter)."""
         if not self.tasks:
             return      # the echo socket's filter is empty
         recv, tasks = self.echo.recv, self.tasks

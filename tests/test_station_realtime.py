@@ -190,3 +190,23 @@ def test_a_late_runner_goes_to_the_wall_clock_a_late_plant_replays_every_tick(co
         else:
             assert scheduler.skipped >= 90 and len(steps) == 150 - scheduler.skipped
             assert steps[0] >= 0.09       # the first step is at the wall clock's time, not at 1 ms
+
+
+def test_a_real_time_run_reads_what_waits_before_it_returns(codebook) -> None:
+    """run_until ends with the sockets read (up to CATCH_UP_FRAMES), so checks see the present."""
+    from bench.clock import CATCH_UP_FRAMES, Scheduler
+
+    clock = WallClock()
+    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=5 * POLL_BATCH)
+    station = Station("runner", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, (),
+                      clock.stamp, every_tick=False)
+    scheduler = Scheduler([station], clock)
+    clock.start()
+    time.sleep(0.01)
+    scheduler.run_until(0.001)            # one tick, one batch; then the rest before returning
+    assert station.monitor.frames == 5 * POLL_BATCH
+    flood = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"))   # without end: bounded all the same
+    station = Station("runner", flood, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, (),
+                      clock.stamp, every_tick=False)
+    Scheduler([station], clock).run_until(0.0)
+    assert CATCH_UP_FRAMES <= station.monitor.frames < CATCH_UP_FRAMES + POLL_BATCH
