@@ -52,7 +52,7 @@ class PlantHost:
         self.inner = assemble(self.vehicle, self.external)
         self.nodes = tuple(dict.fromkeys(n for b in self.inner for n in b.nodes))
         self.unavailable: str | None = None   # a vehicle asked for that has no plant
-        self._network: frozenset[str] | None = None   # messages sending now (None: not set on the bus yet)
+        self._network: str | None = None   # the vehicle whose network the bus carries (None: not set yet)
 
     def reset(self) -> None:
         for behaviour in self.inner:
@@ -67,7 +67,7 @@ class PlantHost:
                 self.inner = assemble(wanted, self.external)
                 io.reset_outputs()          # nothing of the previous vehicle stays on the bus
             self.unavailable = wanted if wanted not in ASSEMBLIES else None
-        if self._network is None or self._network != messages_of(self.vehicle):
+        if self._network != self.vehicle:
             self._set_network(io)
         for behaviour in self.inner:
             behaviour.step(io, t, dt)
@@ -82,7 +82,7 @@ class PlantHost:
                 io.sending(message, False)
         for message in mine:
             io.sending(message, True)
-        self._network = mine
+        self._network = self.vehicle
 
 
 def build(external: Collection[str] = (), vehicle: str | None = None) -> list[Behaviour]:
