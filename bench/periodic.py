@@ -43,6 +43,7 @@ import can
 
 from bench import e2e
 from bench.restbus import Restbus
+from bench.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, plain_socketcan
 
 STABLE_CYCLES = 3        # unchanged cycles before a message is handed to the kernel
 CHANGES_TO_STOP = 3      # consecutive changed cycles that send it back to the tick scheduler
@@ -52,13 +53,10 @@ ECHO_WAIT_S = 0.02       # longest wait, at a hand-over, for the echo of the ker
 MIN_CYCLE_S = 4 * STOP_MARGIN_S
 FRAME_LENGTH = 8         # the contract's frames (E2E bytes 6 and 7)
 ENV_SWITCH = "BENCH_KERNEL_PERIODIC"
-SOCKETCAN_BUS_CLASSES = ("SocketcanBus",)
 
 # linux/can.h and linux/can/raw.h (Python's socket module lacks CAN_INV_FILTER)
 CAN_INV_FILTER = 0x20000000
 CAN_SFF_MASK = 0x7FF
-CAN_EFF_FLAG = 0x80000000
-CAN_RTR_FLAG = 0x40000000
 CAN_RAW_JOIN_FILTERS = 6
 _FILTER = struct.Struct("=II")
 _FRAME = struct.Struct("=IB3x8s")
@@ -134,8 +132,7 @@ class KernelPeriodic:
     def attach(cls, bus: can.BusABC, restbus: Restbus) -> "KernelPeriodic | None":
         """A KernelPeriodic for a socketcan bus without filters of its own (unless switched off by
         BENCH_KERNEL_PERIODIC=0); None for every other bus or when the kernel refuses the sockets."""
-        if (type(bus).__name__ not in SOCKETCAN_BUS_CLASSES or os.environ.get(ENV_SWITCH, "1") == "0"
-                or getattr(bus, "filters", None) or not hasattr(bus, "socket")):
+        if not plain_socketcan(bus) or os.environ.get(ENV_SWITCH, "1") == "0":
             return None
         try:
             return cls(bus, restbus)

@@ -56,6 +56,14 @@ def parse(frame: bytes, ancillary: list[tuple[int, int, bytes]]) -> RawFrame:
                     bool(can_id & CAN_ERR_FLAG))
 
 
+def plain_socketcan(bus: can.BusABC) -> bool:
+    """A python-can socketcan bus (its raw socket reachable) without python-can filters of its own: one whose
+    socket the bench may read (here) and filter in the kernel (bench/periodic.py) without changing what
+    python-can's recv would have delivered."""
+    return (type(bus).__name__ in SOCKETCAN_BUS_CLASSES and not getattr(bus, "filters", None)
+            and hasattr(bus, "socket"))
+
+
 class FastReceiver:
     """Batches of frames from a socketcan bus's socket; `attach` says whether a bus can have one."""
 
@@ -64,8 +72,7 @@ class FastReceiver:
 
     @classmethod
     def attach(cls, bus: can.BusABC) -> "FastReceiver | None":
-        if (type(bus).__name__ not in SOCKETCAN_BUS_CLASSES or os.environ.get(ENV_SWITCH, "1") == "0"
-                or getattr(bus, "filters", None) or not hasattr(bus, "socket") or not _ANCILLARY):
+        if not plain_socketcan(bus) or os.environ.get(ENV_SWITCH, "1") == "0" or not _ANCILLARY:
             return None
         return cls(bus.socket)
 

@@ -47,9 +47,9 @@ class _StationIO:
         self._station.restbus.reset_all()
 
     def sending(self, message: str, enabled: bool) -> None:
-        slot = self._station.restbus.periodic.get(message)
-        if slot is not None:
-            slot.enabled = enabled
+        restbus = self._station.restbus
+        if message in restbus.periodic:      # a message of an external node is not this station's to switch
+            restbus.enable(message, enabled)
 
     def latest(self, message: str) -> Mapping[str, float] | None:
         return self._station.monitor.latest(message, self._station.now())

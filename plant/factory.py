@@ -72,14 +72,13 @@ class PlantHost:
         for behaviour in self.inner:
             behaviour.step(io, t, dt)
 
-
     def _set_network(self, io: NodeIO) -> None:
         """Send the messages of this vehicle's network, and none of the other vehicles' (a 4WIS EV has no
         SBW ECU: its bus carries no SBW frames). Messages no vehicle claims are left as they are."""
         mine = messages_of(self.vehicle)
-        for vehicle in ASSEMBLIES:
-            for message in messages_of(vehicle) - mine:
-                io.sending(message, False)
+        others = frozenset().union(*(messages_of(vehicle) for vehicle in ASSEMBLIES)) - mine
+        for message in others:
+            io.sending(message, False)
         for message in mine:
             io.sending(message, True)
         self._network = self.vehicle
