@@ -11,7 +11,6 @@ tests/test_periodic.py'), the same checks run against the real BCM on vcan0.
 
 from __future__ import annotations
 
-import os
 import socket
 import struct
 import time
@@ -27,18 +26,10 @@ from bench.faults import FaultPlan, parse_fault
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import Station
+from tests.reference import contract_checksum
+from tests.vcan import IN_LANE, has_vcan
 
 DT = 0.001
-
-
-def crc8_j1850(data: bytes) -> int:
-    """CRC-8/SAE-J1850 written here from its catalogue parameters, independent of bench.e2e."""
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
 
 
 # -- a fake SocketCAN kernel -------------------------------------------------------------------------------
@@ -200,7 +191,7 @@ def _check_wire(kernel: FakeKernel, codebook: Codebook, paused: dict[int, tuple[
     for frame_id, frames in by_id.items():
         period = codebook.by_id[frame_id].cycle_time
         for (t0, d0), (t1, d1) in zip(frames, frames[1:]):
-            assert d1[7] == crc8_j1850(bytes([frame_id & 0xFF, frame_id >> 8]) + d1[:7]), (hex(frame_id), t1)
+            assert d1[7] == contract_checksum(frame_id, d1), (hex(frame_id), t1)
             assert d1[6] & 0x0F == ((d0[6] & 0x0F) + 1) % 16, (hex(frame_id), t0, t1)
             gap = t1 - t0
             window = (paused or {}).get(frame_id)
@@ -215,7 +206,7 @@ def test_counter_cycle_covers_every_counter_with_its_checksum() -> None:
     assert [f.data[6] & 0x0F for f in frames] == [(9 + k) % 16 for k in range(16)]
     for f in frames:
         assert f.data[6] & 0xF0 == 0x30 and bytes(f.data[:6]) == data[:6]
-        assert f.data[7] == crc8_j1850(bytes([0x02, 0x01]) + bytes(f.data[:7]))
+        assert f.data[7] == contract_checksum(0x102, bytes(f.data))
 
 
 def test_stable_messages_go_to_the_kernel_and_the_log_is_the_wire(codebook: Codebook, fake: FakeKernel) -> None:
@@ -294,17 +285,8 @@ def test_other_buses_and_the_switch_keep_the_scheduler(codebook: Codebook, fake:
 
 
 # -- the real kernel (vcan lane) --------------------------------------------------------------------------
-def _has_vcan() -> bool:
-    try:
-        sock = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
-    except OSError:
-        return False
-    sock.close()
-    return os.path.exists("/sys/class/net/vcan0")
-
-
 # Inside the vcan lane (VCAN_CHANNEL set) it never skips: a lane without vcan0 must fail, not pass empty.
-@pytest.mark.skipif(not _has_vcan() and "VCAN_CHANNEL" not in os.environ,
+@pytest.mark.skipif(not has_vcan("vcan0") and not IN_LANE,
                     reason="needs SocketCAN and vcan0 (the vcan lane runs it: scripts/vcan-lane)")
 def test_real_bcm_on_vcan(codebook: Codebook) -> None:
     """The real BCM: a station on vcan0 through stable values, a change and a ramp; an independent
@@ -341,7 +323,7 @@ def test_real_bcm_on_vcan(codebook: Codebook) -> None:
         for frame_id, frames in seen.items():
             for a, b in zip(frames, frames[1:]):
                 assert b.data[6] & 0x0F == ((a.data[6] & 0x0F) + 1) % 16, hex(frame_id)
-                assert b.data[7] == crc8_j1850(bytes([frame_id & 0xFF, frame_id >> 8]) + bytes(b.data[:7]))
+                assert b.data[7] == contract_checksum(frame_id, bytes(b.data))
         assert station.monitor.invalid_frames == 0
         assert abs(station.monitor.frames - sum(len(f) for f in seen.values())) <= 6
     finally:

@@ -13,13 +13,10 @@ plant's own status line reports no invalid frame.
 
 from __future__ import annotations
 
-import os
 import signal
-import socket
 import statistics
 import subprocess
 import sys
-import time
 
 import can
 import pytest
@@ -29,23 +26,13 @@ from bench.config import load_config
 from bench.paths import ROOT
 from plant.factory import ASSEMBLIES, messages_of
 from tests.reference import contract_checksum
+from tests.vcan import CHANNEL, IN_LANE, has_vcan
 
-CHANNEL = os.environ.get("VCAN_CHANNEL", "vcan0")
-IN_LANE = "VCAN_CHANNEL" in os.environ
 WARM_UP_S = 2.0     # s after the plant's first frame before judging (its BCM tasks start after 3 cycles)
 WINDOW_S = 6.0      # s of bus judged
 
 
-def _has_vcan() -> bool:
-    try:
-        sock = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
-    except (OSError, AttributeError):
-        return False
-    sock.close()
-    return os.path.exists(f"/sys/class/net/{CHANNEL}")
-
-
-if not _has_vcan():
+if not has_vcan():
     if IN_LANE:
         raise RuntimeError(f"the vcan lane set VCAN_CHANNEL={CHANNEL}, but this kernel has no such SocketCAN "
                            "interface")
