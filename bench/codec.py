@@ -81,7 +81,7 @@ class MessageCodec:
         )
         self.by_name: dict[str, SignalCodec] = {s.name: s for s in self.signals}
         self.signal_names: tuple[str, ...] = tuple(s.name for s in self.signals)
-        # The contract's end-to-end layout (k-matrix.md): only messages that carry it are checked for it.
+        # The contract's end-to-end layout (docs/spec/k-matrix.md): only messages that carry it are checked for it.
         layout = {s.name: (s.start, s.length, s.byte_order) for s in message.signals}
         self.e2e = (message.length == 8
                     and layout.get("AliveCounter") == (e2e.COUNTER_BYTE * 8, 4, "little_endian")

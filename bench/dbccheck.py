@@ -4,13 +4,13 @@ Why a checker of its own rather than cantools' strict load: strict loading stops
 and knows nothing of what the bench relies on — the restbus sends only messages with a cycle time,
 encodes with a mask (a range wider than the raw field wraps silently), starts every signal at its
 `GenSigStartValue` (a start value outside the range stops the run at the first send), writes the
-end-to-end bytes 6-7 of every message and its monitor checks them (k-matrix.md "End-to-end protection").
+end-to-end bytes 6-7 of every message and its monitor checks them (docs/spec/e2e.md).
 
 cantools gives no line numbers for parsed objects, so the text is scanned for `BO_ <id> <name>`,
 the ` SG_ <name> ` lines of that message's block, and the `BA_`/`VAL_` lines naming them.
 
 Severities: an *error* is something the bench would get wrong or refuse (a database with errors is
-rejected); a *warning* is something the contract asks for (k-matrix.md: cycle time, send type, unit,
+rejected); a *warning* is something the contract asks for (docs/spec/k-matrix.md: cycle time, send type, unit,
 range, start value and comment on everything; value tables for enumerations) whose absence the bench
 survives.
 
@@ -37,7 +37,7 @@ from bench.errors import DatabaseError
 
 ERROR, WARNING = "error", "warning"
 E2E_MODES = ("auto", "required", "optional")
-FRAME_LENGTH = 8                     # k-matrix.md: classical CAN, 8-byte frames
+FRAME_LENGTH = 8                     # docs/spec/k-matrix.md: classical CAN, 8-byte frames
 COUNTER_NAME, CHECKSUM_NAME = "AliveCounter", "Checksum"
 COUNTER_START, COUNTER_LENGTH = e2e.COUNTER_BYTE * 8, 4
 CHECKSUM_START, CHECKSUM_LENGTH = e2e.CHECKSUM_BYTE * 8, 8
@@ -548,7 +548,7 @@ def _check_e2e(message: Message, lines: _Lines, required: bool, findings: list[F
         if signal is None:
             if required:
                 findings.append(Finding(severity, "e2e", f"no {name} signal ({length} bits at bit {start}, "
-                                        "k-matrix.md end-to-end protection)", lines.of_message(message),
+                                        "docs/spec/e2e.md)", lines.of_message(message),
                                         message.name))
             continue
         wrong = []

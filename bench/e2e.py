@@ -1,4 +1,4 @@
-"""End-to-end protection of the contract (k-matrix.md "End-to-end protection").
+"""End-to-end protection of the contract (docs/spec/e2e.md).
 
 One implementation used by both the sender (restbus) and the receiver (monitor), so that
 sending and checking can never disagree (the opendbc packer/parser idea).

@@ -16,7 +16,7 @@ from bench import e2e
 from bench.codec import Codebook, DecodeError, MessageCodec
 from bench.errors import BenchError
 
-TIMEOUT_CYCLES = 3   # k-matrix.md: a message not seen for 3 x its cycle time is timed out
+TIMEOUT_CYCLES = 3   # docs/spec/k-matrix.md: a message not seen for 3 x its cycle time is timed out
 TIME_EPS = 1e-9      # s: bench times are sums of ticks; equal times must compare equal
 # Memory stays flat in long runs: each list keeps at most its cap (trimmed in halves, amortised), and
 # counts what it dropped so that queries reaching before the retained data fail loudly, never silently.

@@ -5,7 +5,7 @@ check in a test case); the kernel's BCM sends a cyclic frame on its own timer, h
 and costs the process nothing per frame. python-can exposes it as `bus.send_periodic(msgs, period)`; a
 sequence of frames becomes one BCM task that sends them in turn (`nframes`).
 
-How (k-matrix.md "End-to-end protection": AliveCounter +1 per transmission, 15 -> 0; Checksum over it):
+How (docs/spec/e2e.md: AliveCounter +1 per transmission, 15 -> 0; Checksum over it):
 - A message whose payload (every byte but the AliveCounter nibble and the Checksum) is unchanged for
   STABLE_CYCLES cycles is handed to the kernel as 16 frames carrying AliveCounter c, c+1, ... c+15 (mod 16),
   each with its Checksum: one whole counter cycle, so the kernel's walk through the frames is the counter

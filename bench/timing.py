@@ -10,7 +10,7 @@ Cycle time, per message: p50, p99 and max of all its frame intervals in the run 
 received, valid or not, as the monitor's intervals), against the DBC cycle time (GenMsgCycleTime).
 Intervals are counted in bins of BIN s (exact on the virtual-time bus, whose times are whole ticks); the
 max is exact. Over the whole run, so the gaps a case makes on purpose (stop_sending, injected faults) are
-in the max; they are counted as gaps (intervals ≥ 3 × the cycle, the timeout of k-matrix.md) and the
+in the max; they are counted as gaps (intervals ≥ 3 × the cycle, the timeout of docs/spec/k-matrix.md) and the
 verdict uses the robust figures only, with the bounds of `Case.check_cycle_times`: p50 within ±5 % and
 p99 ≤ 1.5 × the DBC cycle.
 

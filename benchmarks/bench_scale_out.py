@@ -1,7 +1,7 @@
 """Target 6: scale-out — the same virtual-time sweep in one process and with `bench run -n 2` (pytest-xdist).
 
 The sweep: benchmarks/cases/test_sweep_rotation_centres.py, N random rotation centres (full 200, quick 40),
-each checked against formulas.md §2. Measured: wall time of `bench run -n 2 <sweep>` (two workers, each with
+each checked against docs/spec/formulas.md §2. Measured: wall time of `bench run -n 2 <sweep>` (two workers, each with
 its own in-process virtual-time bus and MCAP log; the controller merges one report); baseline in the same
 run: `bench run <sweep>` (one process, no xdist). Speed-up = baseline wall / measured wall (the whole
 command: start-up, the cases, the reports). With --with-n1 also `-n 1` (the cost of xdist itself).

@@ -1,7 +1,7 @@
 """A stand-alone driver: only python-can, cantools and the contract DBC.
 
 It plays the DRIVER node towards a plant or a real vehicle: sends DRV_Steering, DRV_Pedals and
-DRV_MotionRequest every cycle with AliveCounter and CRC-8/SAE-J1850 Checksum per k-matrix.md,
+DRV_MotionRequest every cycle with AliveCounter and CRC-8/SAE-J1850 Checksum per docs/spec/k-matrix.md,
 requests a rotation about a pivot, and prints the last WHL_Status_* of each wheel as JSON.
 
     python examples/drive_pivot.py --interface udp_multicast --channel 239.74.163.2 --pivot 5 -2 --speed 1

@@ -5,17 +5,17 @@ It plays node VCU the way a real ECU would, so that the bench can judge it as an
 
 - reads DRV_MotionRequest (DriveMode, PivotX, PivotY, TargetSpeed), DRV_Steering (HandWheelAngle) and the four
   WHL_Status_xx (wheel faults; angles and speeds for the speed estimate), checking each frame's length,
-  AliveCounter, CRC-8/SAE-J1850 Checksum and signal ranges (k-matrix.md "End-to-end protection");
-- every 5 ms computes the wheel commands by formulas.md §2 (rotation about a point, seed 000 eq. 1-10 with
-  erratum E1 corrected) and §3 (the curvature angle X of seed 002), written here from the formulas;
+  AliveCounter, CRC-8/SAE-J1850 Checksum and signal ranges (docs/spec/e2e.md);
+- every 5 ms computes the wheel commands by docs/spec/formulas.md §2 (rotation about a point, [P0] eq. 1-10 with
+  erratum E1 corrected) and §3 (the curvature angle X of [P2]), written here from the formulas;
 - sends VCU_WheelCmd_FL/FR/RL/RR every 10 ms, VCU_VehicleState and VCU_RotationCentre every 20 ms, each with
   AliveCounter and Checksum.
 
-Modes (vehicles.md A; every one a rotation about a point S, seed 000 §1.2):
+Modes (docs/spec/vehicles.md A; every one a rotation about a point S, [P0] §1.2):
   PIVOT     S = (PivotX, PivotY), v_o = TargetSpeed (positive: clockwise about S).
   NORMAL    X = HandWheelAngle / 15 at the front-axle centre, S on the rear-axle line y = -L: x = 2L / tan X.
-  ADAPTIVE  below 20 km/h: X as above, S on y = 0 (rear wheels opposite to the front, seed 000 §3): x = L / tan X.
-            Above 20 km/h seed 003's rear-steering laws apply; this example does not implement them and
+  ADAPTIVE  below 20 km/h: X as above, S on y = 0 (rear wheels opposite to the front, [P0] §3): x = L / tan X.
+            Above 20 km/h [P3]'s rear-steering laws apply; this example does not implement them and
             answers REQUEST_INVALID.
   LATERAL   every wheel +90° (-90° for a negative TargetSpeed), equal speeds |v| (positive: to the right).
   In NORMAL and ADAPTIVE a positive TargetSpeed drives forward: v_o = v · sign(x); X = 0 drives straight.
@@ -44,11 +44,11 @@ import cantools
 
 DBC = Path(__file__).resolve().parent.parent / "dbc" / "chassis.dbc"
 
-# The vehicle (vehicles.md A; seed 000 §3): 2K = track, 2L = wheelbase, r = wheel radius.
+# The vehicle (docs/spec/vehicles.md A; [P0] §3): 2K = track, 2L = wheelbase, r = wheel radius.
 K, L, R = 1.11 / 2, 2.76 / 2, 0.281
-WHEELS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}   # formulas.md §1, +x right, +y forward
-HAND_WHEEL_RATIO = 15.0          # vehicles.md A (NORMAL / ADAPTIVE: X = HandWheelAngle / 15)
-LOW_SPEED_LIMIT = 20.0 / 3.6     # m/s: ADAPTIVE's opposite-phase range (vehicles.md A)
+WHEELS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}   # docs/spec/formulas.md §1, +x right, +y forward
+HAND_WHEEL_RATIO = 15.0          # docs/spec/vehicles.md A (NORMAL / ADAPTIVE: X = HandWheelAngle / 15)
+LOW_SPEED_LIMIT = 20.0 / 3.6     # m/s: ADAPTIVE's opposite-phase range (docs/spec/vehicles.md A)
 MAX_RPM = 1500.0                 # the hub motors' limit (the bench's vehicle file: hub_motor_max_speed)
 MAX_YAW = 120.0                  # deg/s the VCU accepts (the bench's vehicle file: max_yaw_rate)
 TOLERANCE = 0.01                 # m: a centre this close to the origin or a contact point is on it
@@ -60,7 +60,7 @@ OK, AT_ORIGIN, ON_WHEEL, OVER_90, INVALID, TIMEOUT, WHEEL_FAULT = range(7)
 INPUTS = ("DRV_MotionRequest", "DRV_Steering", "WHL_Status_FL", "WHL_Status_FR", "WHL_Status_RL", "WHL_Status_RR")
 
 
-# -- end-to-end protection (k-matrix.md) --------------------------------------------------------------------
+# -- end-to-end protection (docs/spec/k-matrix.md) --------------------------------------------------------------------
 def _crc_table() -> list[int]:
     table = []
     for byte in range(256):
@@ -89,12 +89,12 @@ def protect(frame_id: int, payload: bytes, counter: int) -> bytes:
     return bytes(data)
 
 
-# -- formulas.md §2 and §3 ----------------------------------------------------------------------------------
+# -- docs/spec/formulas.md §2 and §3 ----------------------------------------------------------------------------------
 def wheel_command(x: float, y: float, v_o: float, px: float, py: float) -> tuple[float, float]:
     """Angle (deg, in (-90, 90]) and speed (rpm) of the wheel at (px, py) for a rotation about S = (x, y).
 
     Wheel velocity ω × (P - S) with ω = v_o / r_o clockwise: (ω (py - y), ω (x - px)). Heading at angle β
-    (0 = +y, clockwise): tan β = (py - y) / (x - px) (seed 000 eq. 1-4), speed along it
+    (0 = +y, clockwise): tan β = (py - y) / (x - px) ([P0] eq. 1-4), speed along it
     n = 30 v_o (x - px) / (π r r_o cos β) (eq. 7-10, E1 corrected); x = px gives +90° with the speed of
     ω (py - y) (the paper's -90° is +90° rolling backwards)."""
     r_o = math.hypot(x, y)
@@ -150,7 +150,7 @@ def plan_for(mode: int, px: float, py: float, v: float, hand_wheel: float) -> tu
     elif mode in (NORMAL, ADAPTIVE):
         x_deg = hand_wheel / HAND_WHEEL_RATIO
         if mode == ADAPTIVE and abs(v) >= LOW_SPEED_LIMIT:
-            return INVALID, None                       # seed 003's laws: not in this example
+            return INVALID, None                       # [P3]'s laws: not in this example
         if abs(x_deg) >= 90.0:
             return OVER_90, None
         if x_deg == 0.0:
@@ -199,7 +199,7 @@ class Input:
 
     def __init__(self, message: cantools.database.can.Message) -> None:
         self.message = message
-        self.timeout = 3 * message.cycle_time / 1000.0       # k-matrix.md: 3 x the cycle time
+        self.timeout = 3 * message.cycle_time / 1000.0       # docs/spec/k-matrix.md: 3 x the cycle time
         self.t_valid = -math.inf                             # time of the last valid frame
         self.counter: int | None = None
         self.valid = False                                   # the last frame passed the checks

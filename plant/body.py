@@ -1,14 +1,14 @@
 """Planar rigid-body motion of the 4WIS EV from its four wheels, and the PLANT node (ground truth).
 
-Kinematic, no tyre slip: seed 000's manoeuvres are low-speed rotations about a point, where each
-wheel rolls along its heading (formulas.md §2). The body's velocity is the least-squares rigid motion
+Kinematic, no tyre slip: [P0]'s manoeuvres are low-speed rotations about a point, where each
+wheel rolls along its heading (docs/spec/formulas.md §2). The body's velocity is the least-squares rigid motion
 (v_x, v_y, omega) of the geometric centre that best matches the four wheel contact velocities
 (speed * r along the wheel heading); when the wheels agree (a §2 command) the fit is exact, when they
 disagree (mid-transient) it is the compromise the tyres would scrub towards. Dynamics at speed is
 another model's job (single_track).
 
 World frame: X right and Y forward of the start pose, heading 0 along +Y, positive clockwise
-(formulas.md §1); body frame as formulas.md §1 (x right, y forward, origin at the geometric centre).
+(docs/spec/formulas.md §1); body frame as docs/spec/formulas.md §1 (x right, y forward, origin at the geometric centre).
 """
 
 from __future__ import annotations
@@ -152,7 +152,7 @@ class PlanarBody:
         return self.x + bx * c + by * s, self.y - bx * s + by * c
 
     def wheel_positions(self) -> dict[str, tuple[float, float]]:
-        """World positions of the four contact points (for the U-turn top view of seed 000 §3)."""
+        """World positions of the four contact points (for the U-turn top view of [P0] §3)."""
         return {c: self.to_world(px, py) for c, (px, py) in zip(CORNERS, self.geometry.wheel_positions)}
 
 

@@ -1,4 +1,4 @@
-"""Brake hydraulics of the A-class car (vehicles.md B): master cylinder, four wheel circuits with an ABS
+"""Brake hydraulics of the A-class car (docs/spec/vehicles.md B): master cylinder, four wheel circuits with an ABS
 inlet and outlet valve each, finite pressure rates, brake torque.
 
 Why orifice flow: the pressure rate of a valve is set by the flow through its orifice, which grows with the

@@ -3,12 +3,12 @@
 
 Inputs (io.latest; a timed-out message keeps its last value, the driver does not vanish with a frame):
   - DRV_Steering.HandWheelAngle (the hand-wheel sensor, positive right): road-wheel angle of both front wheels
-    = HandWheelAngle / hand_wheel_ratio (18, seed 004 §4), a rigid mechanical linkage (no lag; the stimulus
+    = HandWheelAngle / hand_wheel_ratio (18, [P4] §4), a rigid mechanical linkage (no lag; the stimulus
     shapes the steering). BENCH_SteeringRobot is not used by this vehicle.
   - DRV_Pedals: brake demand (plant/brakes.py: BrakePressure, else BrakePedal x 1.5 bar/%), AccelPedal x
     max_drive_torque on the front axle.
   - BENCH_AbsStimulus (dbc/bench.dbc): CruiseSpeed > 0: a drive robot holds that speed (km/h, true speed)
-    with the accelerator while the master pressure is below 0.5 bar (steady-state circular tests, seed 004
+    with the accelerator while the master pressure is below 0.5 bar (steady-state circular tests, [P4]
     §4); ValveBypass = 1: the hydraulic unit ignores the ABS valves (the locked-wheel reference run).
   - BENCH_Control: a change of ScenarioId (the first one seen included) resets the world and every linked
     behaviour (the in-process ABS ECU): straight ahead at InitialSpeed, wheels free rolling, brakes
@@ -16,9 +16,9 @@ Inputs (io.latest; a timed-out message keeps its last value, the driver does not
     then and whenever they change. PLANT_Status.ScenarioIdAck echoes the id (plant/body.py does the same).
 
 Ground truth (dbc/bench.dbc): PLANT_Position (geometric centre = mid-point of the axles, start frame of
-formulas.md §1), PLANT_Motion (Heading, Speed of the geometric centre, YawRate positive right),
+docs/spec/formulas.md §1), PLANT_Motion (Heading, Speed of the geometric centre, YawRate positive right),
 PLANT_Dynamics (Sideslip at the CoG positive right, LatAccel positive right, LongAccel), PLANT_Status
-(Vehicle 2 = ACLASS_ABS), and seed 004's truth: PLANT_AbsVehicle (CoG speed over ground in km/h, front
+(Vehicle 2 = ACLASS_ABS), and [P4]'s truth: PLANT_AbsVehicle (CoG speed over ground in km/h, front
 road-wheel angle positive right, master pressure, bypass) and PLANT_AbsWheel_xx (true circumferential
 speed, braking slip positive when braking, wheel pressure, normal load). All clamped to the DBC ranges, and
 sampled every 10 ms at the ABS ECU's update instants (PUBLISH_MS), plus at once after a scenario reset.
@@ -43,7 +43,7 @@ CRUISE_RELEASE_BAR = 0.5
 #: ECU updates its outputs (plant/ecus/abs.py), so truth and estimate are compared at the same instant; every
 #: PLANT message has a cycle of 10 ms or more (dbc/bench.dbc)
 PUBLISH_MS = 10
-#: DBC ranges of the seed 004 truth messages (dbc/bench.dbc; checked by tests/test_abs_estimator.py)
+#: DBC ranges of the [P4] truth messages (dbc/bench.dbc; checked by tests/test_abs_estimator.py)
 TRUTH_SPEED = (0.0, 250.0)          # PLANT_AbsVehicle.VehicleSpeed, km/h
 TRUTH_ANGLE = (-90.0, 90.0)         # PLANT_AbsVehicle.FrontWheelAngle, deg
 TRUTH_PRESSURE = (0.0, 400.0)       # PLANT_AbsVehicle.MasterPressure, PLANT_AbsWheel_xx.BrakePressure, bar

@@ -1,14 +1,14 @@
-"""Braking-capable planar vehicle (vehicles.md B, the A-class car of seed 004): longitudinal, lateral and yaw
+"""Braking-capable planar vehicle (docs/spec/vehicles.md B, the A-class car of [P4]): longitudinal, lateral and yaw
 motion of the body, four wheel-spin degrees of freedom, Magic Formula tyres with combined slip
 (plant/tyre.py), static and dynamic load transfer, brake torques from plant/brakes.py, front-wheel drive.
 
-Internal frame (the vehicle-dynamics textbook one, chosen because seed 004's formulas are written in it):
+Internal frame (the vehicle-dynamics textbook one, chosen because [P4]'s formulas are written in it):
 x forward, y LEFT, yaw rate r positive counter-clockwise (left turn), road-wheel angle delta positive left,
-origin at the centre of gravity. The bus convention (formulas.md §1: angles, yaw rate and lateral
+origin at the centre of gravity. The bus convention (docs/spec/formulas.md §1: angles, yaw rate and lateral
 acceleration positive to the RIGHT) is applied only by the properties named *_bus and by the PLANT node.
 
 Wheels i = FL, FR, RL, RR at (a, B/2), (a, -B/2), (-b, B/2), (-b, -B/2). Both front wheels steer by the same
-delta (seed 004 §2 assumes delta1 = delta2; no Ackermann linkage is modelled).
+delta ([P4] §2 assumes delta1 = delta2; no Ackermann linkage is modelled).
 
     m (u' - v r) = sum Fx_i          m (v' + u r) = sum Fy_i          I_z r' = sum (x_i Fy_i - y_i Fx_i)
     J omega_i'   = T_drive_i - T_brake_i - R Fx_wheel_i
@@ -83,14 +83,14 @@ class VehicleSpec:
         return w * self.cog_to_rear_axle / 2.0, w * self.cog_to_front_axle / 2.0
 
 
-#: Longitudinal Magic Formula shapes of vehicles.md B and their friction D.
+#: Longitudinal Magic Formula shapes of docs/spec/vehicles.md B and their friction D.
 DRY = (Shape(10.0, 1.9, 0.97), 1.0)
 WET = (Shape(12.0, 2.3, 1.0), 0.82)
 
 
 def road_shape(mu: float, dry: tuple[Shape, float] = DRY, wet: tuple[Shape, float] = WET) -> Shape:
     """The curve shape for a road friction mu (BENCH_Control.RoadMu): the dry set from the midpoint of the
-    two sets' D upwards (0.91), the wet set below; D = mu in both cases (so 1.0 is vehicles.md's dry set
+    two sets' D upwards (0.91), the wet set below; D = mu in both cases (so 1.0 is docs/spec/vehicles.md's dry set
     and 0.82 its wet set exactly; other values scale the nearer set's peak)."""
     return dry[0] if mu >= 0.5 * (dry[1] + wet[1]) else wet[0]
 
@@ -252,7 +252,7 @@ class BrakingVehicle:
 
     @property
     def speed(self) -> float:
-        """Speed of the centre of gravity over the ground, m/s (seed 004 §1: V)."""
+        """Speed of the centre of gravity over the ground, m/s ([P4] §1: V)."""
         return math.hypot(self.u, self.v)
 
     @property

@@ -2,9 +2,9 @@
 
 Modes (RobotMode value table): OFF = hands off (no torque, the hand wheel is free), ANGLE = the robot
 steers the hand wheel to RobotAngle, TORQUE = it applies RobotTorque at the rim. All bus signs
-(positive to the right, formulas.md §1); internally rad, rad/s, N·m.
+(positive to the right, docs/spec/formulas.md §1); internally rad, rad/s, N·m.
 
-ANGLE is a stiff position servo, so it imposes the hand-wheel angle (seed 001 eq. 1 then gives the torque
+ANGLE is a stiff position servo, so it imposes the hand-wheel angle ([P1] eq. 1 then gives the torque
 it has to apply): the target is rate limited (`robot_rate_limit`, an ISO 7401 step is steered at
 200-500 °/s) and smoothed by a critically damped second-order filter (`robot_bandwidth`), so the hand
 wheel has a continuous rate and a bounded acceleration even though the test runner updates RobotAngle only

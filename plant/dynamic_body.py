@@ -1,22 +1,22 @@
-"""Vehicle dynamics of the 4WIS EV at speed: the 2-DOF single-track model of formulas.md §5 with saturating
+"""Vehicle dynamics of the 4WIS EV at speed: the 2-DOF single-track model of docs/spec/formulas.md §5 with saturating
 lateral tyres, and the EV's body that switches between it and the kinematic body of plant/body.py.
 
-Why two models: seed 000's manoeuvres (PIVOT, LATERAL, U-turns) are slow rotations about a point with wheel
+Why two models: [P0]'s manoeuvres (PIVOT, LATERAL, U-turns) are slow rotations about a point with wheel
 angles up to ±90°, where the wheels roll without slip and the kinematic rigid-body fit of plant/body.py is
-exact; seed 003's manoeuvres (steps, lane changes, slalom at 40-100 km/h) need tyre slip, sideslip and a
+exact; [P3]'s manoeuvres (steps, lane changes, slalom at 40-100 km/h) need tyre slip, sideslip and a
 finite yaw response, which the kinematic fit cannot produce. One vehicle, two regimes (`VehicleBody`):
 
 - KINEMATIC (plant/body.py, unchanged): below DYNAMIC_ON_SPEED, or any wheel beyond DYNAMIC_ON_ANGLE, or any
   wheel rolling backwards.
 - DYNAMIC (`LateralDynamics`): entered when the centre's forward speed reaches DYNAMIC_ON_SPEED = 5.0 m/s
-  (18 km/h, just below ADAPTIVE's 20 km/h law switch of vehicles.md A, so seed 003's laws always act on
+  (18 km/h, just below ADAPTIVE's 20 km/h law switch of docs/spec/vehicles.md A, so [P3]'s laws always act on
   the dynamic body) with every wheel within ±DYNAMIC_ON_ANGLE = 25° and rolling forward; left below
   DYNAMIC_OFF_SPEED = 4.5 m/s (16.2 km/h) or beyond DYNAMIC_OFF_ANGLE = 30° (hysteresis: no chattering).
-  Seed 000's cases run at most 4 m/s: always kinematic. All four thresholds "chosen".
+  [P0]'s cases run at most 4 m/s: always kinematic. All four thresholds "chosen".
   The switch carries the motion over: entering, the lateral velocity and yaw rate start from the kinematic
   motion; leaving, the kinematic fit restarts from the wheels without a finite-difference acceleration spike.
 
-Dynamic regime, formulas.md §5 in the bus frame of §1 (x right, y forward, angles/rates positive clockwise;
+Dynamic regime, docs/spec/formulas.md §5 in the bus frame of §1 (x right, y forward, angles/rates positive clockwise;
 the §5 equations keep their form when every angle, rate and force flips sign together):
 
     m (ẇ + u ω) = F_f + F_r                     w: lateral velocity of the CoG (right), ω: yaw rate
@@ -70,7 +70,7 @@ DYNAMIC_OFF_ANGLE = 30.0       # deg: a wheel beyond this leaves it (chosen)
 
 
 def ev_single_track(p: Ev4wisParams) -> SingleTrackParams:
-    """vehicles.md A as the §5 model's parameters (a, b from the CoG at the geometric centre)."""
+    """docs/spec/vehicles.md A as the §5 model's parameters (a, b from the CoG at the geometric centre)."""
     return SingleTrackParams(p.mass, p.yaw_inertia, p.cog_to_front_axle, p.cog_to_rear_axle,
                              p.cornering_stiffness_front, p.cornering_stiffness_rear)
 

@@ -1,12 +1,12 @@
-"""Kinematics of the 4WIS EV: rotation about a point (formulas.md §2) and Ackermann (formulas.md §3).
+"""Kinematics of the 4WIS EV: rotation about a point (docs/spec/formulas.md §2) and Ackermann (docs/spec/formulas.md §3).
 
-Pure functions on plain floats (they run every plant tick). Frame and signs: formulas.md §1 (seed 000
+Pure functions on plain floats (they run every plant tick). Frame and signs: docs/spec/formulas.md §1 ([P0]
 §2.1): origin at the geometric centre, +x right, +y forward; wheels FL (-K, L), FR (K, L), RL (-K, -L),
 RR (K, -L); every angle 0 along +y and positive clockwise (to the right); v_o > 0 turns the vehicle
 clockwise about the centre S = (x, y).
 
 Road-wheel angles are returned in (-90°, +90°]: the paper's "denominator 0 and numerator negative ->
--90°" (eq. 1-4) is the same wheel pose as +90° rolling backwards, and formulas.md §1 fixes the range,
+-90°" (eq. 1-4) is the same wheel pose as +90° rolling backwards, and docs/spec/formulas.md §1 fixes the range,
 so that case is reported as +90° with the wheel speed negated (the physical command is identical).
 """
 
@@ -27,7 +27,7 @@ _HALF_PI = math.pi / 2.0
 
 @dataclass(frozen=True, slots=True)
 class Geometry:
-    """The wheel layout of seed 000 §2.1: K = half the track, L = half the wheelbase, r = wheel radius."""
+    """The wheel layout of [P0] §2.1: K = half the track, L = half the wheelbase, r = wheel radius."""
 
     half_track: float
     half_wheelbase: float
@@ -35,13 +35,13 @@ class Geometry:
 
     @property
     def wheel_positions(self) -> tuple[tuple[float, float], ...]:
-        """Contact points (= steering axes, seed 000 §1.1) in CORNERS order."""
+        """Contact points (= steering axes, [P0] §1.1) in CORNERS order."""
         k, l = self.half_track, self.half_wheelbase
         return ((-k, l), (k, l), (-k, -l), (k, -l))
 
     @property
     def rpm_per_mps(self) -> float:
-        """Seed 000 eq. 6: n = 30 v / (pi r)."""
+        """[P0] eq. 6: n = 30 v / (pi r)."""
         return 30.0 / (math.pi * self.wheel_radius)
 
 
@@ -56,7 +56,7 @@ class Undefined(IntEnum):
 def _heading(num: float, den: float) -> tuple[float, float]:
     """Angle (deg, in (-90, 90]) and speed factor of a point whose velocity is Omega * (num, den).
 
-    Seed 000 eq. 1-4: beta = atan(num / den), den = 0 -> ±90°. The speed factor is the velocity's
+    [P0] eq. 1-4: beta = atan(num / den), den = 0 -> ±90°. The speed factor is the velocity's
     projection on the wheel heading per unit Omega: den / cos(beta) = sign(den) * hypot(num, den)
     (eq. 7-10), and num at den = 0.
     """
@@ -73,7 +73,7 @@ def _heading(num: float, den: float) -> tuple[float, float]:
 def rotation(x: float, y: float, v_o: float, g: Geometry) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Wheel angles (deg) and wheel speeds (rpm) for a rotation about S = (x, y) at centre speed v_o.
 
-    formulas.md §2, seed 000 eq. 1-4 and 7-10 with erratum E1 corrected (the paper prints x + K
+    docs/spec/formulas.md §2, [P0] eq. 1-4 and 7-10 with erratum E1 corrected (the paper prints x + K
     for the right-rear wheel; geometry gives x - K):
         beta_i = atan((y_i - y) / (x - x_i))               beta1 = atan((L - y)/(x + K)) ...
         n_i = 30 v_o (x - x_i) / (pi r r_o cos beta_i)     n4 = 30 v_o (x - K)/(pi r r_o cos beta4)
@@ -101,14 +101,14 @@ def rotation(x: float, y: float, v_o: float, g: Geometry) -> tuple[tuple[float, 
 
 
 def yaw_rate(x: float, y: float, v_o: float) -> float:
-    """Yaw rate (deg/s, positive clockwise) of a rotation about (x, y): v_o / r_o (seed 000 eq. 5); 0 at r_o = 0."""
+    """Yaw rate (deg/s, positive clockwise) of a rotation about (x, y): v_o / r_o ([P0] eq. 5); 0 at r_o = 0."""
     r_o = math.hypot(x, y)
     return v_o / r_o * _DEG if r_o > 0.0 else 0.0
 
 
 def classify_centre(x: float, y: float, v_o: float, g: Geometry, *, forward_only: bool = False,
                     tol: float = CENTRE_TOLERANCE_M) -> Undefined | None:
-    """Why a rotation about (x, y) cannot be commanded, or None when it can (formulas.md §2, undefined cases).
+    """Why a rotation about (x, y) cannot be commanded, or None when it can (docs/spec/formulas.md §2, undefined cases).
 
     - CENTRE_AT_ORIGIN: |S| < tol with v_o != 0 (with v_o = 0 the spin-in-place angles are defined).
     - CENTRE_ON_WHEEL: S within tol of a contact point, whatever v_o.
@@ -128,13 +128,13 @@ def classify_centre(x: float, y: float, v_o: float, g: Geometry, *, forward_only
     return None
 
 
-# -- Ackermann and the curvature angle (formulas.md §3, seed 002) --------------------------------------
+# -- Ackermann and the curvature angle (docs/spec/formulas.md §3, [P2]) --------------------------------------
 
 def curvature_angle(x: float, y: float, g: Geometry) -> float:
-    """Seed 002's curvature angle X (deg): the heading of the front-axle centre (0, L) rotating about (x, y).
+    """[P2]'s curvature angle X (deg): the heading of the front-axle centre (0, L) rotating about (x, y).
 
     tan X = (L - y) / x, folded into (-90°, 90°] like a wheel angle. For a centre on the rear-axle line
-    this is the angle between C-O and the rear axle of seed 002 §2. A centre exactly at the front-axle
+    this is the angle between C-O and the rear axle of [P2] §2. A centre exactly at the front-axle
     centre leaves that point still: no heading, reported as 0.
     """
     num = g.half_wheelbase - y
@@ -146,7 +146,7 @@ def curvature_angle(x: float, y: float, g: Geometry) -> float:
 def centre_x_on_rear_axle(curvature_deg: float, g: Geometry) -> float | None:
     """NORMAL: x of the centre on y = -L whose curvature angle is X: x = 2L / tan X; None when straight.
 
-    Seed 002 §2/§4 (the centre lies on the rear-axle line). |X| must be below 90°.
+    [P2] §2/§4 (the centre lies on the rear-axle line). |X| must be below 90°.
     """
     if curvature_deg == 0.0:
         return None
@@ -156,7 +156,7 @@ def centre_x_on_rear_axle(curvature_deg: float, g: Geometry) -> float | None:
 def centre_x_on_mid_axle(curvature_deg: float, g: Geometry) -> float | None:
     """ADAPTIVE at low speed: x of the centre on y = 0 whose curvature angle is X: x = L / tan X; None when straight.
 
-    Seed 000 §3 (the 4WS U-turn: rear angles mirror the front). |X| must be below 90°.
+    [P0] §3 (the 4WS U-turn: rear angles mirror the front). |X| must be below 90°.
     """
     if curvature_deg == 0.0:
         return None
@@ -180,7 +180,7 @@ def centre_from_axle_angles(front_deg: float, rear_deg: float, g: Geometry) -> t
 def ackermann_front(curvature_deg: float, g: Geometry) -> tuple[float, float]:
     """Outer and inner front-wheel angle magnitudes (deg) for curvature angle X, centre on the rear axle.
 
-    Seed 002 §4 in §2's symbols (2K track, 2L wheelbase): 1/tan(beta) - 1/tan(X) = K/(2L) for the outer
+    [P2] §4 in §2's symbols (2K track, 2L wheelbase): 1/tan(beta) - 1/tan(X) = K/(2L) for the outer
     wheel, 1/tan(X) - 1/tan(alpha) = K/(2L) for the inner one. 0 < |X| < atan(2L/K) (inner below 90°).
     """
     cot_x = 1.0 / math.tan(math.radians(abs(curvature_deg)))

@@ -1,10 +1,10 @@
-"""Steer-by-wire mechanics of seed 001 (eq. 1-10, formulas.md §4): hand wheel with torsion bar, road-feel
+"""Steer-by-wire mechanics of [P1] (eq. 1-10, docs/spec/formulas.md §4): hand wheel with torsion bar, road-feel
 motor with its worm gear, steering actuator DC motor, rack and pinion with dry friction and aligning torque.
 
 Coordinates: every angle is a hand-wheel angle in rad, positive to the right (bus convention,
-formulas.md §1): the hand wheel θ_h, the column below the torsion bar θ_c = θ_m / r_m (θ_m the road-feel
+docs/spec/formulas.md §1): the hand wheel θ_h, the column below the torsion bar θ_c = θ_m / r_m (θ_m the road-feel
 motor's angle, r_m its gear ratio) and the pinion θ_p (the road wheels turn θ_p / i_s, i_s =
-`steering_ratio`). Seed 001's equations, written at the column and at the pinion:
+`steering_ratio`). [P1]'s equations, written at the column and at the pinion:
 
     (1) F_h = J_h θ̈_h + B_h θ̇_h + F_m                  hand wheel, F_h the driver's (robot's) torque
     (2) F_m = K_h (θ_h − θ_m / r_m)                     torsion bar (the driver-torque sensor)
@@ -80,7 +80,7 @@ class HandWheelDriver(Protocol):
 
 
 class SbwMechanics:
-    """State and substep of seed 001's SBW system (see the module docstring)."""
+    """State and substep of [P1]'s SBW system (see the module docstring)."""
 
     def __init__(self, p: SbwParams) -> None:
         self.p = p

@@ -1,4 +1,4 @@
-"""Wheel-speed sensors of the ABS (seed 004 §3: "wheel speeds are disturbed by road roughness, braking and
+"""Wheel-speed sensors of the ABS ([P4] §3: "wheel speeds are disturbed by road roughness, braking and
 driving"): true circumferential speed + road-roughness disturbance + white sensor noise, quantised.
 
 - noise: white, standard deviation BENCH_Control.SensorNoise (km/h) per sample, independent per wheel;

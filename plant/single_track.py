@@ -1,15 +1,15 @@
-"""Linear 2-DOF single-track ("bicycle") model with front and rear steering (formulas.md §5, seed 003).
+"""Linear 2-DOF single-track ("bicycle") model with front and rear steering (docs/spec/formulas.md §5, [P3]).
 
 State: sideslip angle β at the centre of gravity and yaw rate r; inputs: front and rear road-wheel
 angles δ_f, δ_r; the speed u is held constant (set it with `reset` or `set_speed`). Equations
-(formulas.md §5, ISO 8855 left-positive, as in the seed):
+(docs/spec/formulas.md §5, ISO 8855 left-positive, as in [P3]):
 
     m u (β̇ + r) = C_f (δ_f − β − a r/u) + C_r (δ_r − β + b r/u)
     I_z ṙ       = a C_f (δ_f − β − a r/u) − b C_r (δ_r − β + b r/u)
     a_y         = u (β̇ + r)
 
 Everything in this module is ISO (angles, yaw rate and lateral acceleration positive to the LEFT);
-the bus convention of formulas.md §1 (positive to the right) is the caller's business: flip every sign.
+the bus convention of docs/spec/formulas.md §1 (positive to the right) is the caller's business: flip every sign.
 
 Why exact discretisation: with the input held over a step (zero-order hold), x⁺ = Φ x + Γ δ with
 Φ = e^{A h}, Γ = ∫₀ʰ e^{A τ} dτ B is exact for any h, so the model is stable at low speed (where A is
@@ -29,7 +29,7 @@ KINEMATIC_SPEED = 1.0
 
 @dataclass(frozen=True)
 class SingleTrackParams:
-    """Parameters of formulas.md §5 (SI): mass m, yaw inertia I_z, CoG to front/rear axle a/b,
+    """Parameters of docs/spec/formulas.md §5 (SI): mass m, yaw inertia I_z, CoG to front/rear axle a/b,
     axle cornering stiffnesses C_f/C_r (N/rad, > 0)."""
 
     mass: float
@@ -52,7 +52,7 @@ class SingleTrackParams:
 
     @property
     def stability_factor(self) -> float:
-        """K_s = m/L² (b/C_f − a/C_r), s²/m² (formulas.md §5; > 0 understeer, 0 neutral)."""
+        """K_s = m/L² (b/C_f − a/C_r), s²/m² (docs/spec/formulas.md §5; > 0 understeer, 0 neutral)."""
         return self.mass / self.wheelbase ** 2 * (self.b / self.cf - self.a / self.cr)
 
     @property
@@ -62,7 +62,7 @@ class SingleTrackParams:
         return 1.0 / math.sqrt(k) if k > 0.0 else math.inf
 
     def yaw_rate_gain(self, u: float) -> float:
-        """Steady-state r/δ_f of the 2WS car, 1/s: (u/L)/(1 + K_s u²) (formulas.md §5)."""
+        """Steady-state r/δ_f of the 2WS car, 1/s: (u/L)/(1 + K_s u²) (docs/spec/formulas.md §5)."""
         return (u / self.wheelbase) / (1.0 + self.stability_factor * u * u)
 
     def steady_state(self, u: float, delta_f: float, delta_r: float = 0.0) -> tuple[float, float, float]:
@@ -167,7 +167,7 @@ class SingleTrack:
 
     # -- dynamics --------------------------------------------------------------------------------------
     def derivatives(self, beta: float, yaw_rate: float, delta_f: float, delta_r: float = 0.0) -> tuple[float, float]:
-        """(β̇, ṙ) of formulas.md §5 at the current speed (dynamic regime only)."""
+        """(β̇, ṙ) of docs/spec/formulas.md §5 at the current speed (dynamic regime only)."""
         (a00, a01), (a10, a11) = self.params._a_matrix(self.speed)
         (b00, b01), (b10, b11) = self.params._b_matrix(self.speed)
         return (a00 * beta + a01 * yaw_rate + b00 * delta_f + b01 * delta_r,

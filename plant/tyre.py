@@ -1,14 +1,14 @@
-"""Magic Formula tyre (vehicles.md B): longitudinal and lateral pure slip, combined by normalised slip.
+"""Magic Formula tyre (docs/spec/vehicles.md B): longitudinal and lateral pure slip, combined by normalised slip.
 
 Pure slip (Pacejka's Magic Formula, per unit of normal load and friction):
 
     f(x) = sin(C atan(B x - E (B x - atan(B x))))          force = D * Fz * f(x), D = road friction
 
-Longitudinal x = slip ratio kappa = (omega R - V) / V (braking: kappa < 0). vehicles.md B gives the dry
+Longitudinal x = slip ratio kappa = (omega R - V) / V (braking: kappa < 0). docs/spec/vehicles.md B gives the dry
 set B = 10, C = 1.9, E = 0.97, D = mu = 1.0 (peak at kappa = 0.18) and the wet set B = 12, C = 2.3,
 E = 1.0, D = 0.82 (peak at kappa = 0.088). Lateral x = slip angle alpha (rad): shape C_y, E_y (chosen,
 plant/vehicles/abs.toml) and B_y per axle such that B_y C_y D Fz_static equals the axle cornering
-stiffness of vehicles.md B split over its two wheels, so the linear range is the car of vehicles.md B.
+stiffness of docs/spec/vehicles.md B split over its two wheels, so the linear range is the car of docs/spec/vehicles.md B.
 
 Combined slip (documented choice, a "normalised slip" weighting, not Pacejka's full G-functions):
 each slip is normalised by the slip at its own peak, s_x = kappa / kappa_peak, s_y = alpha / alpha_peak,
@@ -109,7 +109,7 @@ class CombinedSlipTyre:
 
 def lateral_b(axle_cornering_stiffness: float, static_wheel_load: float, c: float) -> float:
     """B_y such that one wheel's cornering stiffness B C D Fz (D = 1 at mu = 1) is half the axle's
-    (vehicles.md B gives C_f, C_r per axle)."""
+    (docs/spec/vehicles.md B gives C_f, C_r per axle)."""
     if not (axle_cornering_stiffness > 0.0 and static_wheel_load > 0.0 and c > 0.0):
         raise ValueError("lateral_b needs a positive cornering stiffness, wheel load and C")
     return axle_cornering_stiffness / 2.0 / (c * static_wheel_load)

@@ -1,4 +1,4 @@
-"""Shared steps of the ABS turning-state cases (test_abs_*.py, seed 004): scenario start, stimulus, samples of
+"""Shared steps of the ABS turning-state cases (test_abs_*.py, [P4]): scenario start, stimulus, samples of
 the ECU's outputs paired with the plant's ground truth, the report's plots and the paper's table.
 
 Only the bench's public API and DBC names: dbc/chassis.dbc (ABS_WheelSpeeds, ABS_SteerState, DRV_Steering,
@@ -56,7 +56,7 @@ def hold_speed(bench: Case, speed_kmh: float) -> None:
 
 
 def steer(bench: Case, hand_wheel_deg: float) -> None:
-    """Hand-wheel angle, bus sign (positive right, formulas.md §1)."""
+    """Hand-wheel angle, bus sign (positive right, docs/spec/formulas.md §1)."""
     bench.set("DRV_Steering", HandWheelAngle=hand_wheel_deg)
 
 
@@ -112,7 +112,7 @@ def error_stats(errors: np.ndarray) -> tuple[float, float]:
 
 
 def paper_angle_error(angle_est_bus: np.ndarray, angle_true_bus: np.ndarray) -> np.ndarray:
-    """delta error in the paper's sign (left positive; formulas.md §1 has the bus positive right)."""
+    """delta error in the paper's sign (left positive; docs/spec/formulas.md §1 has the bus positive right)."""
     return -(np.asarray(angle_est_bus) - np.asarray(angle_true_bus))
 
 
@@ -143,12 +143,12 @@ def plot_abs(bench: Case, label: str = "") -> None:
 
 
 def paper_table(bench: Case, test: str, rows: Sequence[tuple[str, int, float, float, float, float]]) -> None:
-    """The paper's row of `test` and the bench's rows beside it (seed 004 §4; delta errors in the paper's sign)."""
+    """The paper's row of `test` and the bench's rows beside it ([P4] §4; delta errors in the paper's sign)."""
     t, vm, vx, am, ax = oracle.PAPER_TABLE[test]
-    table = [["seed 004 (paper)", test, t, f"{vm:.2f}", f"{vx:.2f}", f"{am:+.2f}", f"{ax:.2f}"]]
+    table = [["[P4] (paper)", test, t, f"{vm:.2f}", f"{vx:.2f}", f"{am:+.2f}", f"{ax:.2f}"]]
     for name, turn, b_vm, b_vx, b_am, b_ax in rows:
         table.append([f"bench: {name}", test, turn, f"{b_vm:+.3f}", f"{b_vx:.3f}", f"{b_am:+.3f}", f"{b_ax:.3f}"])
-    bench.table(f"seed 004 accuracy table: the paper beside the bench ({test})",
+    bench.table(f"[P4] accuracy table: the paper beside the bench ({test})",
                 ["source", "test", "T", "V_f error mean km/h", "V_f max abs km/h", "delta error mean deg",
                  "delta max abs deg"], table)
 

@@ -1,4 +1,4 @@
-"""Shared steps of the four-wheel-steering cases (test_4ws_*.py, seed 003 §2 on the 4WIS EV of vehicles.md A).
+"""Shared steps of the four-wheel-steering cases (test_4ws_*.py, [P3] §2 on the 4WIS EV of docs/spec/vehicles.md A).
 
 Stimulus: BENCH_Control (Vehicle EV4WIS, InitialSpeed, RoadMu), BENCH_VcuConfig.RearSteerLaw (the reference
 VCU's law in ADAPTIVE above 20 km/h), DRV_MotionRequest (ADAPTIVE, TargetSpeed = the speed held) and
@@ -26,7 +26,7 @@ LAW = {"2WS": "OFF", "FEEDFORWARD": "FEEDFORWARD", "FEEDBACK": "FEEDBACK"}
 WHEELS = ("FL", "FR", "RL", "RR")
 SPEED_SETTLE_S = 3.0        # s the hub motors get to bring the speed back after the scenario start
 SPEED_TOL = 0.003           # relative: the speed counts as settled within 0.3 % of the target
-DRIVER_LAG = 0.07           # s: the driver's model of servo lag (50 ms, vehicles.md A) + network delay, chosen
+DRIVER_LAG = 0.07           # s: the driver's model of servo lag (50 ms, docs/spec/vehicles.md A) + network delay, chosen
 
 
 def start(bench: Case, speed_kmh: float, strategy: str, mu: float = 1.0) -> float:
@@ -52,7 +52,7 @@ def start(bench: Case, speed_kmh: float, strategy: str, mu: float = 1.0) -> floa
 
 def driver_model(strategy: str, u: float, v: oracle.Vehicle = oracle.EV, lag: float = DRIVER_LAG) -> CarModel:
     """The path driver's internal model of the car under a law (the driver knows the car, as a trained test
-    driver does): formulas.md §5 with vehicles.md A's numbers and the law's rear angle (oracle_4ws)."""
+    driver does): docs/spec/formulas.md §5 with docs/spec/vehicles.md A's numbers and the law's rear angle (oracle_4ws)."""
     rear = {"2WS": (0.0, 0.0), "FEEDFORWARD": (oracle.zero_sideslip_ratio(v, u), 0.0),
             "FEEDBACK": (-oracle.C1, oracle.c2(v) * u)}[strategy]
     return CarModel(v.m, v.iz, v.a, v.b, v.cf, v.cr, v.ratio, u, rear, lag)

@@ -2,9 +2,9 @@
 
 Every expected value of the 4WIS test cases comes from here. Nothing is read from `plant/`: the
 vehicle numbers are written below with their source, the formulas are typed from the formula sheet
-(`shared/spec/formulas.md`, "§n" below) and the seeds it cites. Plain floats, no bench.
+(`docs/spec/formulas.md`, "§n" below) and the papers it cites (`docs/spec/references.md`). Plain floats, no bench.
 
-Frame and signs (§1, seed 000 §2.1): origin at the geometric centre, +x right, +y forward; wheels
+Frame and signs (§1, [P0] §2.1): origin at the geometric centre, +x right, +y forward; wheels
 FL (-K, L), FR (K, L), RL (-K, -L), RR (K, -L); every angle 0 along +y, positive to the right
 (clockwise seen from above); road-wheel angles on the bus in (-90°, +90°]; positive rpm drives a wheel
 toward +y when its angle is 0; v_o > 0 turns the vehicle clockwise about the centre S = (x, y).
@@ -15,17 +15,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-# -- vehicle (vehicles.md A) ---------------------------------------------------------------------------
-TRACK = 1.11             # 2K, m: track between the steering pivots (vehicles.md A; seed 000 §3)
-WHEELBASE = 2.76         # 2L, m (vehicles.md A; seed 000 §3)
-WHEEL_RADIUS = 0.281     # r, m (vehicles.md A; seed 000 §3)
-HAND_WHEEL_RATIO = 15.0  # hand wheel : curvature angle X in NORMAL (vehicles.md A, "chosen"); the reference
+# -- vehicle (docs/spec/vehicles.md A) ---------------------------------------------------------------------------
+TRACK = 1.11             # 2K, m: track between the steering pivots (docs/spec/vehicles.md A; [P0] §3)
+WHEELBASE = 2.76         # 2L, m (docs/spec/vehicles.md A; [P0] §3)
+WHEEL_RADIUS = 0.281     # r, m (docs/spec/vehicles.md A; [P0] §3)
+HAND_WHEEL_RATIO = 15.0  # hand wheel : curvature angle X in NORMAL (docs/spec/vehicles.md A, "chosen"); the reference
                          # VCU uses the same ratio in ADAPTIVE (plant/README.md, "Reference VCU" table)
 K = TRACK / 2.0          # half track, m
 L = WHEELBASE / 2.0      # half wheelbase, m
 
 WHEELS: tuple[str, ...] = ("FL", "FR", "RL", "RR")
-#: contact points = steering axes (seed 000 §2.1, Fig. 4: A (-K, L), B (K, L), C (-K, -L), D (K, -L))
+#: contact points = steering axes ([P0] §2.1, Fig. 4: A (-K, L), B (K, L), C (-K, -L), D (K, -L))
 WHEEL_POSITION: dict[str, tuple[float, float]] = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
 
 # -- bus resolutions (dbc/chassis.dbc), so that requests are sent exactly -------------------------------
@@ -44,7 +44,7 @@ class WheelTarget:
 
 
 def rpm_from_speed(v: float) -> float:
-    """Seed 000 eq. 6: v = r · n · 2π/60, so n = 30 v / (π r)."""
+    """[P0] eq. 6: v = r · n · 2π/60, so n = 30 v / (π r)."""
     return 30.0 * v / (math.pi * WHEEL_RADIUS)
 
 
@@ -58,14 +58,14 @@ def on_grid(value: float, resolution: float) -> bool:
     return abs(value / resolution - round(value / resolution)) < 1e-9
 
 
-# -- §2: rotation about an arbitrary point (seed 000 eq. 1-10) ------------------------------------------
+# -- §2: rotation about an arbitrary point ([P0] eq. 1-10) ------------------------------------------
 
 def paper_angle(x: float, y: float, wheel: str) -> float:
-    """Seed 000 eq. 1-4 as printed: β = atan(numerator / denominator), deg, in [-90, 90].
+    """[P0] eq. 1-4 as printed: β = atan(numerator / denominator), deg, in [-90, 90].
 
         β1 = atan((L - y)/(x + K))   β2 = atan((L - y)/(x - K))
         β3 = atan((-L - y)/(x + K))  β4 = atan((-L - y)/(x - K))
-    Denominator 0: +90° if the numerator is positive, -90° if negative (seed 000 below eq. 4).
+    Denominator 0: +90° if the numerator is positive, -90° if negative ([P0] below eq. 4).
     """
     num, den = _num_den(x, y, wheel)
     if den == 0.0:
@@ -82,7 +82,7 @@ def _num_den(x: float, y: float, wheel: str) -> tuple[float, float]:
 
 
 def paper_rpm(x: float, y: float, v_o: float, wheel: str, *, erratum_e1_corrected: bool = True) -> float:
-    """Seed 000 eq. 7-10: n_i = 30 v_o (x ± K) / (π r r_o cos β_i), rpm, for the paper's angle β_i.
+    """[P0] eq. 7-10: n_i = 30 v_o (x ± K) / (π r r_o cos β_i), rpm, for the paper's angle β_i.
 
     The factor (x ± K) is the denominator of eq. 1-4 (x + K for the left wheels, x - K for the right ones).
     Erratum E1 (§2): eq. 10 prints x + K for RR; `erratum_e1_corrected=False` gives the printed formula.
@@ -123,12 +123,12 @@ def translation_targets(angle: float, v: float) -> dict[str, WheelTarget]:
 
 
 def yaw_rate(x: float, y: float, v_o: float) -> float:
-    """Seed 000 eq. 5: ω = v_o / r_o, deg/s, positive clockwise."""
+    """[P0] eq. 5: ω = v_o / r_o, deg/s, positive clockwise."""
     return v_o / math.hypot(x, y) * _DEG
 
 
 def curvature_angle(x: float, y: float) -> float | None:
-    """Seed 002's curvature angle X (DBC: a virtual wheel at the front-axle centre (0, L) about S), deg.
+    """[P2]'s curvature angle X (DBC: a virtual wheel at the front-axle centre (0, L) about S), deg.
 
     Eq. 1-4 for a wheel at (0, L): atan((L - y)/x), in the bus range (-90°, +90°]. None when S is the
     front-axle centre itself (that point does not move: no heading).
@@ -141,17 +141,17 @@ def curvature_angle(x: float, y: float) -> float | None:
     return math.atan(num / den) * _DEG
 
 
-# -- drive modes (vehicles.md A, k-matrix.md) -----------------------------------------------------------
+# -- drive modes (docs/spec/vehicles.md A, docs/spec/k-matrix.md) -----------------------------------------------------------
 
 def curvature_from_hand_wheel(hand_wheel: float) -> float:
-    """X = HandWheelAngle / ratio (vehicles.md A), deg."""
+    """X = HandWheelAngle / ratio (docs/spec/vehicles.md A), deg."""
     return hand_wheel / HAND_WHEEL_RATIO
 
 
 def normal_centre(hand_wheel: float) -> tuple[float, float] | None:
     """NORMAL: centre on the rear-axle line y = -L (§2 special cases) whose curvature angle is X.
 
-    tan X = (L - y)/x = 2L/x (seed 002 §2), so x = 2L / tan X. None when straight (X = 0).
+    tan X = (L - y)/x = 2L/x ([P2] §2), so x = 2L / tan X. None when straight (X = 0).
     """
     x_deg = curvature_from_hand_wheel(hand_wheel)
     if x_deg == 0.0:
@@ -160,7 +160,7 @@ def normal_centre(hand_wheel: float) -> tuple[float, float] | None:
 
 
 def adaptive_centre(hand_wheel: float) -> tuple[float, float] | None:
-    """ADAPTIVE at low speed: centre on y = 0 (§2: "low-speed 4WS U-turn = centre on y = 0", seed 000 §3).
+    """ADAPTIVE at low speed: centre on y = 0 (§2: "low-speed 4WS U-turn = centre on y = 0", [P0] §3).
 
     tan X = (L - 0)/x, so x = L / tan X. None when straight.
     """
@@ -171,7 +171,7 @@ def adaptive_centre(hand_wheel: float) -> tuple[float, float] | None:
 
 
 def forward_v_o(centre_x: float, v: float) -> float:
-    """NORMAL/ADAPTIVE: TargetSpeed v is positive forward (k-matrix.md). A forward drive about a centre on
+    """NORMAL/ADAPTIVE: TargetSpeed v is positive forward (docs/spec/k-matrix.md). A forward drive about a centre on
     the right (x > 0) is clockwise, so v_o = v; about a centre on the left it is counter-clockwise, v_o = -v."""
     return v if centre_x > 0.0 else -v
 
@@ -184,17 +184,17 @@ def car_mode_targets(centre: tuple[float, float] | None, v: float) -> dict[str, 
 
 
 def lateral_targets(v: float) -> dict[str, WheelTarget]:
-    """LATERAL (vehicles.md A): all wheels +90° (-90° for a negative speed), equal speeds |v|;
-    positive v = to the right (k-matrix.md). At +90° positive rpm drives toward +x, at -90° toward -x."""
+    """LATERAL (docs/spec/vehicles.md A): all wheels +90° (-90° for a negative speed), equal speeds |v|;
+    positive v = to the right (docs/spec/k-matrix.md). At +90° positive rpm drives toward +x, at -90° toward -x."""
     return translation_targets(90.0 if v >= 0.0 else -90.0, abs(v))
 
 
-# -- §3: Ackermann and the curvature angle (seed 002) ---------------------------------------------------
+# -- §3: Ackermann and the curvature angle ([P2]) ---------------------------------------------------
 
 def ackermann_front(x_deg: float) -> tuple[float, float]:
     """Outer and inner front-wheel angle magnitudes (deg) for curvature angle X, centre on the rear axle.
 
-    Seed 002 in its own symbols (K = full track, L = full wheelbase):
+    [P2] in its own symbols (K = full track, L = full wheelbase):
         1/tan β - 1/tan X = K/(2L)   (outer, β)        1/tan X - 1/tan α = K/(2L)   (inner, α)
     """
     cot_x = 1.0 / math.tan(math.radians(abs(x_deg)))
@@ -203,7 +203,7 @@ def ackermann_front(x_deg: float) -> tuple[float, float]:
 
 
 def ackermann_residual(outer_deg: float, inner_deg: float, k_over_l: float) -> float:
-    """1/tan β - 1/tan α - K/L (seed 002): 0 when the two front angles satisfy Ackermann."""
+    """1/tan β - 1/tan α - K/L ([P2]): 0 when the two front angles satisfy Ackermann."""
     return 1.0 / math.tan(math.radians(abs(outer_deg))) - 1.0 / math.tan(math.radians(abs(inner_deg))) - k_over_l
 
 
@@ -219,7 +219,7 @@ def outer_front_speed_geometric(v_outer_rear: float, outer_deg: float) -> float:
 
 
 def outer_front_speed_printed_e2(v_outer_rear: float, outer_deg: float) -> float:
-    """Erratum E2 (seed 002 §4) as printed: V_b = V_d × cos β."""
+    """Erratum E2 ([P2] §4) as printed: V_b = V_d × cos β."""
     return v_outer_rear * math.cos(math.radians(outer_deg))
 
 
@@ -251,7 +251,7 @@ def angle_between(u: tuple[float, float], w: tuple[float, float]) -> float:
     return math.degrees(math.atan2(abs(u[0] * w[1] - u[1] * w[0]), u[0] * w[0] + u[1] * w[1]))
 
 
-# -- U-turn (seed 000 §3, formulas.md §2 "U-turn experiment") -------------------------------------------
+# -- U-turn ([P0] §3, docs/spec/formulas.md §2 "U-turn experiment") -------------------------------------------
 
 PAPER_UTURN = {
     #         FL     FR     RL    RR    max trajectory width (m)
@@ -259,12 +259,12 @@ PAPER_UTURN = {
     "ADAPTIVE": (-37.0, -25.0, 37.0, 25.0, 6.3),
 }
 PAPER_WIDTH_RATIO = 0.61          # 6.3 / 10.3 as the formula sheet states it
-LANE_WIDTH = 3.5                  # m (seed 000 §3: a two-way four-lane road)
+LANE_WIDTH = 3.5                  # m ([P0] §3: a two-way four-lane road)
 MEDIAN_WIDTH = 1.0                # m
 
 
 def uturn_centre_from_fl(mode: str, fl_deg: float) -> tuple[float, float]:
-    """The centre that puts FL at fl_deg: NORMAL on y = -L, ADAPTIVE on y = 0 (formulas.md §2).
+    """The centre that puts FL at fl_deg: NORMAL on y = -L, ADAPTIVE on y = 0 (docs/spec/formulas.md §2).
 
     Eq. 1: tan β1 = (L - y)/(x + K), so x = (L - y)/tan β1 - K.
     """

@@ -1,7 +1,7 @@
-"""Test oracle of the four-wheel-steering cases (seed 003 §2, formulas.md §5): closed forms and course
-geometry, written here independently of `plant/` (own numbers typed from vehicles.md, own formulas).
+"""Test oracle of the four-wheel-steering cases ([P3] §2, docs/spec/formulas.md §5): closed forms and course
+geometry, written here independently of `plant/` (own numbers typed from docs/spec/vehicles.md, own formulas).
 
-Signs: formulas.md §5 is ISO left-positive; every formula below is odd in the angles and rates, so it holds
+Signs: docs/spec/formulas.md §5 is ISO left-positive; every formula below is odd in the angles and rates, so it holds
 unchanged in the bus convention of §1 (positive to the right) with every angle, rate and acceleration flipped
 together, which is how the cases use it. Units SI (rad, rad/s) unless a name says deg.
 """
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Vehicle:
-    """The linear 2-DOF model's numbers (formulas.md §5): mass m, yaw inertia I_z, CoG to front/rear axle a/b,
+    """The linear 2-DOF model's numbers (docs/spec/formulas.md §5): mass m, yaw inertia I_z, CoG to front/rear axle a/b,
     axle cornering stiffnesses C_f/C_r, hand-wheel ratio."""
 
     name: str
@@ -31,13 +31,13 @@ class Vehicle:
         return self.a + self.b
 
 
-#: vehicles.md A (the 4WIS EV): CoG at the geometric centre, a = b = 2L/2 = 1.38 m; ratio 15 (NORMAL and the
+#: docs/spec/vehicles.md A (the 4WIS EV): CoG at the geometric centre, a = b = 2L/2 = 1.38 m; ratio 15 (NORMAL and the
 #: reference VCU's ADAPTIVE front angle).
 EV = Vehicle("EV4WIS", 900.0, 1100.0, 1.38, 1.38, 45000.0, 55000.0, 15.0)
-#: vehicles.md B (the A-class car).
+#: docs/spec/vehicles.md B (the A-class car).
 ACLASS = Vehicle("ACLASS", 1350.0, 2050.0, 1.06, 1.59, 85000.0, 120000.0, 15.0)
 
-C1 = 1.0   # seed 003 §2: rear opposite to front 1:1 at very low speed
+C1 = 1.0   # [P3] §2: rear opposite to front 1:1 at very low speed
 
 
 def kmh(u: float) -> float:
@@ -48,7 +48,7 @@ def mps(speed_kmh: float) -> float:
     return speed_kmh / 3.6
 
 
-# -- formulas.md §5 ---------------------------------------------------------------------------------------
+# -- docs/spec/formulas.md §5 ---------------------------------------------------------------------------------------
 
 def stability_factor(v: Vehicle) -> float:
     """K_s = m/L² (b/C_f − a/C_r), s²/m²."""
@@ -72,7 +72,7 @@ def sign_change_speed(v: Vehicle) -> float:
 
 
 def c2(v: Vehicle) -> float:
-    """The feedback gain C2 = m b/(C_f L) + m a/(C_r L), s²/m (the seed's garbled "(mb/kfl)+(ma/k。1)" read as
+    """The feedback gain C2 = m b/(C_f L) + m a/(C_r L), s²/m ([P3]'s garbled "(mb/kfl)+(ma/k。1)" read as
     m b/(k_f l) + m a/(k_r l)). Derivation: with δ_r = −C1 δ_f + C2 u r and the steady state
     r = (u/L)(δ_f − δ_r)/(1 + K u²), zero sideslip (δ_r = k(u) δ_f) needs C2 = m b/(C_f L) + m a/(C_r L) +
     (a − b)/u²; the last term is 0 for the EV (a = b), so this C2 zeroes its sideslip at every speed."""
@@ -103,7 +103,7 @@ def yaw_gain_feedforward(v: Vehicle, u: float) -> float:
 
 
 def yaw_gain_feedback(v: Vehicle, u: float, c1: float = C1, gain_c2: float | None = None) -> float:
-    """r/δ_f with δ_r = −C1 δ_f + C2 u r: (u/L)(1 + C1)/(1 + K u² + C2 u²/L), 1/s (formulas.md §5)."""
+    """r/δ_f with δ_r = −C1 δ_f + C2 u r: (u/L)(1 + C1)/(1 + K u² + C2 u²/L), 1/s (docs/spec/formulas.md §5)."""
     g = c2(v) if gain_c2 is None else gain_c2
     return u / v.wheelbase * (1.0 + c1) / (1.0 + stability_factor(v) * u * u + g * u * u / v.wheelbase)
 
@@ -118,9 +118,9 @@ def yaw_gain(v: Vehicle, strategy: str, u: float) -> float:
     return {"2WS": yaw_gain_2ws, "FEEDFORWARD": yaw_gain_feedforward, "FEEDBACK": yaw_gain_feedback}[strategy](v, u)
 
 
-# -- rotation about a point (formulas.md §2), for the common centre of the four wheels ---------------------
+# -- rotation about a point (docs/spec/formulas.md §2), for the common centre of the four wheels ---------------------
 
-EV_HALF_TRACK = 1.11 / 2.0       # K, m (vehicles.md A)
+EV_HALF_TRACK = 1.11 / 2.0       # K, m (docs/spec/vehicles.md A)
 EV_HALF_WHEELBASE = 2.76 / 2.0   # L (§2's half wheelbase), m
 EV_WHEELS = {"FL": (-EV_HALF_TRACK, EV_HALF_WHEELBASE), "FR": (EV_HALF_TRACK, EV_HALF_WHEELBASE),
              "RL": (-EV_HALF_TRACK, -EV_HALF_WHEELBASE), "RR": (EV_HALF_TRACK, -EV_HALF_WHEELBASE)}
@@ -159,8 +159,8 @@ DLC_SECTIONS = (15.0, 30.0, 25.0, 25.0, 15.0)
 DLC_LANE_FACTORS = (1.1, 1.2, 1.3)
 DLC_LANE_ALLOWANCE = 0.25
 DLC_OFFSET = 3.5
-#: the EV's width w: contact-patch centres 1.11 m apart (vehicles.md A) plus one tyre width. The tyre is
-#: chosen as 145/80 R13 (radius 0.5·330.2 mm + 0.8·145 mm = 281 mm, the wheel radius of seed 000 §3), so w =
+#: the EV's width w: contact-patch centres 1.11 m apart (docs/spec/vehicles.md A) plus one tyre width. The tyre is
+#: chosen as 145/80 R13 (radius 0.5·330.2 mm + 0.8·145 mm = 281 mm, the wheel radius of [P0] §3), so w =
 #: 1.11 + 0.145 = 1.255 m (tyre outer edges; the EV's body is not specified).
 EV_TYRE_WIDTH = 0.145
 EV_WIDTH = 1.11 + EV_TYRE_WIDTH
@@ -272,7 +272,7 @@ def lane_margin(corners: list[tuple[float, float]], lanes: tuple[Lane, ...]) -> 
 
 # -- slalom --------------------------------------------------------------------------------------------------
 
-#: Cone spacing of the slalom: 30 m, GB/T 6323-2014 (snake test) for passenger cars (seed 003 names the test
+#: Cone spacing of the slalom: 30 m, GB/T 6323-2014 (snake test) for passenger cars ([P3] names the test
 #: "蛇行" without a layout); the cones stand on the course's centre line.
 SLALOM_SPACING = 30.0
 SLALOM_CONES = 7

@@ -1,8 +1,8 @@
-"""The test oracle of the ABS turning-state cases (seed 004, formulas.md §6), written independently of `plant/`.
+"""The test oracle of the ABS turning-state cases ([P4], docs/spec/formulas.md §6), written independently of `plant/`.
 
-The formulas are typed from formulas.md §6 and vehicles.md B; nothing is read from plant/. Plain floats.
+The formulas are typed from docs/spec/formulas.md §6 and docs/spec/vehicles.md B; nothing is read from plant/. Plain floats.
 Signs as in the paper: wheels 1-4 = FL, FR, RL, RR; a left turn has V_w2 > V_w1 and V_w4 > V_w3; T = 1 left,
--1 right, 0 straight (formulas.md §1 keeps that exception on the bus).
+-1 right, 0 straight (docs/spec/formulas.md §1 keeps that exception on the bus).
 """
 
 from __future__ import annotations
@@ -12,15 +12,15 @@ import math
 KMH = 3.6
 G = 9.81
 
-# -- vehicles.md B (A-class car) and seed 004 §4 --------------------------------------------------------------
+# -- docs/spec/vehicles.md B (A-class car) and [P4] §4 --------------------------------------------------------------
 TRACK = 1.55                 # B, m
 WHEELBASE = 2.65             # L = a + b, m
-HAND_WHEEL_RATIO = 18.0      # i_w of seed 004's tests (§4): delta_f = theta / i_w
-#: tyre for braking, Magic Formula (B, C, D, E): dry and wet (vehicles.md B)
+HAND_WHEEL_RATIO = 18.0      # i_w of [P4]'s tests (§4): delta_f = theta / i_w
+#: tyre for braking, Magic Formula (B, C, D, E): dry and wet (docs/spec/vehicles.md B)
 TYRE_DRY = (10.0, 1.9, 1.0, 0.97)
 TYRE_WET = (12.0, 2.3, 0.82, 1.0)
 
-#: seed 004 §4, the paper's accuracy table (formulas.md §6): (T, V_f error mean, max abs in km/h,
+#: [P4] §4, the paper's accuracy table (docs/spec/formulas.md §6): (T, V_f error mean, max abs in km/h,
 #: delta error mean, max abs in deg). Left turn, hand wheel about 180 deg, i_w = 18.
 PAPER_TABLE = {
     "steady-state circular (Fig. 3-5)": (1, 0.16, 0.88, -0.56, 1.2),
@@ -29,14 +29,14 @@ PAPER_TABLE = {
 
 
 def front_wheel_angle_from_hand_wheel(hand_wheel_deg: float) -> float:
-    """Seed 004 §4: the reference front-wheel angle delta_f = theta / i_w, deg (sign as given)."""
+    """[P4] §4: the reference front-wheel angle delta_f = theta / i_w, deg (sign as given)."""
     return hand_wheel_deg / HAND_WHEEL_RATIO
 
 
 # -- eq. 13 ------------------------------------------------------------------------------------------------
 
 def turn_corrected(dv1: float, dv2: float, ddv: float, v_l0: float, v_l1: float, v_l2: float) -> int:
-    """Eq. 13 with erratum E3 corrected (formulas.md §6): the ddV < V_l2 condition for both signs."""
+    """Eq. 13 with erratum E3 corrected (docs/spec/formulas.md §6): the ddV < V_l2 condition for both signs."""
     if v_l0 < dv1 < v_l1 and v_l0 < dv2 < v_l1 and ddv < v_l2:
         return 1
     if v_l0 < -dv1 < v_l1 and v_l0 < -dv2 < v_l1 and ddv < v_l2:
@@ -45,7 +45,7 @@ def turn_corrected(dv1: float, dv2: float, ddv: float, v_l0: float, v_l1: float,
 
 
 def turn_printed(dv1: float, dv2: float, ddv: float, v_l0: float, v_l1: float, v_l2: float) -> int:
-    """Eq. 13 as printed in seed 004: the right-turn branch asks -ddV < V_l2, always true as ddV = |...| >= 0."""
+    """Eq. 13 as printed in [P4]: the right-turn branch asks -ddV < V_l2, always true as ddV = |...| >= 0."""
     if v_l0 < dv1 < v_l1 and v_l0 < dv2 < v_l1 and ddv < v_l2:
         return 1
     if v_l0 < -dv1 < v_l1 and v_l0 < -dv2 < v_l1 and -ddv < v_l2:
@@ -59,7 +59,7 @@ def axle_differences(fl: float, fr: float, rl: float, rr: float) -> tuple[float,
     return dv1, dv2, abs(dv1 - dv2)
 
 
-# -- tyre (vehicles.md B) ----------------------------------------------------------------------------------
+# -- tyre (docs/spec/vehicles.md B) ----------------------------------------------------------------------------------
 
 def magic_formula(slip: float, tyre: tuple[float, float, float, float]) -> float:
     """Friction coefficient at a longitudinal slip: D sin(C atan(B s - E (B s - atan(B s))))."""

@@ -1,7 +1,7 @@
-"""Test oracle of the steer-by-wire cases: the linear 2-DOF model of formulas.md §5 and the ISO 7401 metrics,
+"""Test oracle of the steer-by-wire cases: the linear 2-DOF model of docs/spec/formulas.md §5 and the ISO 7401 metrics,
 written here independently of `plant/` (own numbers, own integrator, numpy only).
 
-Vehicle: vehicles.md B (the A-class car). Signs: formulas.md §5 is written ISO left-positive; a linear
+Vehicle: docs/spec/vehicles.md B (the A-class car). Signs: docs/spec/formulas.md §5 is written ISO left-positive; a linear
 model is odd, so the same formulas hold in the bus convention (positive to the right) for every angle,
 yaw rate and lateral acceleration together, which is how the cases use them.
 """
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# -- vehicles.md B ------------------------------------------------------------------------------------
+# -- docs/spec/vehicles.md B ------------------------------------------------------------------------------------
 MASS = 1350.0              # m, kg
 YAW_INERTIA = 2050.0       # I_z, kg·m²
 A = 1.06                   # CoG to front axle, m
@@ -27,12 +27,12 @@ _DEG = 180.0 / math.pi
 
 
 def stability_factor() -> float:
-    """K_s = m/L² (b/C_f − a/C_r), s²/m² (formulas.md §5); vehicles.md B quotes 1.90e-3."""
+    """K_s = m/L² (b/C_f − a/C_r), s²/m² (docs/spec/formulas.md §5); docs/spec/vehicles.md B quotes 1.90e-3."""
     return MASS / WHEELBASE ** 2 * (B / C_F - A / C_R)
 
 
 def yaw_gain(u: float) -> float:
-    """Steady r/δ_f = (u/L)/(1 + K_s u²), 1/s (formulas.md §5)."""
+    """Steady r/δ_f = (u/L)/(1 + K_s u²), 1/s (docs/spec/formulas.md §5)."""
     return (u / WHEELBASE) / (1.0 + stability_factor() * u * u)
 
 
@@ -43,7 +43,7 @@ def plain_yaw_per_hand_wheel(u: float) -> float:
 
 def hand_wheel_for_lat_accel(u: float, lat_accel: float) -> float:
     """Hand-wheel angle (deg) of the plain 15:1 car for a steady lateral acceleration: a_y = u r,
-    r = yaw_gain(u) δ_f, θ_h = 15 δ_f (vehicles.md B: about 48° for 3 m/s² at 50 km/h)."""
+    r = yaw_gain(u) δ_f, θ_h = 15 δ_f (docs/spec/vehicles.md B: about 48° for 3 m/s² at 50 km/h)."""
     return STEERING_RATIO * lat_accel / (u * yaw_gain(u)) * _DEG
 
 

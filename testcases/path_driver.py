@@ -4,11 +4,11 @@ vehicle. It runs as a test-node timer (`bench.every`, every DRV_Steering cycle),
 DRV_Steering.HandWheelAngle. Only the bench's public API and DBC names are used.
 
 Course frame = the world frame of the ground truth (the start pose: x right, y forward, headings clockwise
-from +y, formulas.md §1); a path is the lateral position x(y) of the vehicle's centre along the course.
+from +y, docs/spec/formulas.md §1); a path is the lateral position x(y) of the vehicle's centre along the course.
 
 Law: MacAdam's optimal preview control (C. C. MacAdam, "Application of an optimal preview control for
 simulation of closed-loop automobile driving", IEEE SMC 11(6), 1981), in its single-input form. The driver
-holds an internal model of the car (`CarModel`: the linear single-track model of formulas.md §5 with the
+holds an internal model of the car (`CarModel`: the linear single-track model of docs/spec/formulas.md §5 with the
 car's rear-steering law and the steering lag), predicts the lateral position at a few times over a preview
 window for the current state and a hand-wheel angle θ held from now, and takes the θ that minimises the summed
 squared distance of those predictions to the path. The predictions are linear in θ, so the choice is a closed
@@ -80,7 +80,7 @@ class CarModel:
     """The driver's internal model of the car, bus signs. State s = (x, ψ, w, r, δ_f, δ_r): lateral position (m),
     heading (rad), lateral velocity (m/s), yaw rate (rad/s), front and rear axle angles (rad); input θ, the
     hand-wheel angle (rad); speed u constant:
-        ẋ = u ψ + w,  ψ̇ = r,  m (ẇ + u r) = F_f + F_r,  I_z ṙ = a F_f − b F_r                    (formulas.md §5)
+        ẋ = u ψ + w,  ψ̇ = r,  m (ẇ + u r) = F_f + F_r,  I_z ṙ = a F_f − b F_r                    (docs/spec/formulas.md §5)
         F_f = C_f (δ_f − (w + a r)/u),  F_r = C_r (δ_r − (w − b r)/u)
         τ δ̇_f = θ/i − δ_f,  τ δ̇_r = k_θ θ/i + k_r r − δ_r      (the law: 2WS (0, 0), FEEDFORWARD (k(u), 0),
                                                                   FEEDBACK (−C1, C2 u))

@@ -1,7 +1,7 @@
-"""4WIS EV: Ackermann (formulas.md §3, seed 002) in NORMAL mode and the curvature angle X the VCU reports.
+"""4WIS EV: Ackermann (docs/spec/formulas.md §3, [P2]) in NORMAL mode and the curvature angle X the VCU reports.
 
-NORMAL puts the centre on the rear-axle line, so the front angles must satisfy seed 002's relations
-    1/tan β - 1/tan α = K/L            (seed 002's K = full track, L = full wheelbase: 1.11 / 2.76)
+NORMAL puts the centre on the rear-axle line, so the front angles must satisfy [P2]'s relations
+    1/tan β - 1/tan α = K/L            ([P2]'s K = full track, L = full wheelbase: 1.11 / 2.76)
     1/tan β - 1/tan X = K/(2L),   1/tan X - 1/tan α = K/(2L)
 with β the outer and α the inner front angle (magnitudes) and X the curvature angle at the front-axle centre;
 the rear wheels stay at 0; the wheel speeds follow V_b = V_d / cos β and V_a = V_b · sin β / sin α.
@@ -44,16 +44,16 @@ def test_ackermann_normal(bench, hand_wheel: float) -> None:
 
     x_vcu = bench.value("VCU_VehicleState", "CurvatureAngle")
     bench.expect("curvature angle X = HandWheelAngle / 15", x_vcu, x_cmd, abs_tol=ANGLE_TOL, unit="deg",
-                 detail="vehicles.md A: ratio 15 in NORMAL")
+                 detail="docs/spec/vehicles.md A: ratio 15 in NORMAL")
     outer, inner, outer_rear, inner_rear = _outer_inner(hand_wheel)
     beta = bench.value(f"WHL_Status_{outer}", "SteerAngle")
     alpha = bench.value(f"WHL_Status_{inner}", "SteerAngle")
     beta_exp, alpha_exp = oracle.ackermann_front(x_cmd)
     sign = math.copysign(1.0, x_cmd)
     bench.expect(f"outer front ({outer}) from X: 1/tan β = 1/tan X + K/(2L)", beta, sign * beta_exp,
-                 abs_tol=ANGLE_TOL, unit="deg", detail="seed 002, formulas.md §3")
+                 abs_tol=ANGLE_TOL, unit="deg", detail="[P2], docs/spec/formulas.md §3")
     bench.expect(f"inner front ({inner}) from X: 1/tan α = 1/tan X - K/(2L)", alpha, sign * alpha_exp,
-                 abs_tol=ANGLE_TOL, unit="deg", detail="seed 002, formulas.md §3")
+                 abs_tol=ANGLE_TOL, unit="deg", detail="[P2], docs/spec/formulas.md §3")
     for wheel in (outer_rear, inner_rear):
         bench.expect(f"{wheel} angle 0 (rear not steered in NORMAL)", bench.value(f"WHL_Status_{wheel}", "SteerAngle"),
                      0.0, abs_tol=ANGLE_TOL, unit="deg")
@@ -77,9 +77,9 @@ def test_ackermann_normal(bench, hand_wheel: float) -> None:
     v_b = bench.value(f"WHL_Status_{outer}", "WheelSpeed")
     v_a = bench.value(f"WHL_Status_{inner}", "WheelSpeed")
     bench.expect(f"V_b ({outer}) = V_d ({outer_rear}) / cos β", v_b, oracle.outer_front_speed_geometric(v_d, beta),
-                 abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm", detail="formulas.md §3 (E2 corrected)")
+                 abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm", detail="docs/spec/formulas.md §3 (E2 corrected)")
     bench.expect(f"V_a ({inner}) = V_b · sin β / sin α", v_a, oracle.inner_front_speed(v_b, beta, alpha),
-                 abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm", detail="formulas.md §3")
+                 abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm", detail="docs/spec/formulas.md §3")
     expect_clean_bus(bench)
     plot_wheels(bench)
 
@@ -104,10 +104,10 @@ def test_ackermann_difference_doubles_in_adaptive(bench, hand_wheel: float) -> N
     k_over_l = 2.0 * oracle.TRACK / oracle.WHEELBASE
     bench.expect("1/tan β - 1/tan α - 2 K/L (measured β, α)", oracle.ackermann_residual(beta, alpha, k_over_l), 0.0,
                  abs_tol=oracle.ackermann_residual_tolerance(beta, alpha, ANGLE_TOL),
-                 detail="formulas.md §3, centre on y = 0; tolerance = 0.05° on each angle")
+                 detail="docs/spec/formulas.md §3, centre on y = 0; tolerance = 0.05° on each angle")
     for front, rear in ((outer, outer_rear), (inner, inner_rear)):
         bench.expect(f"{rear} mirrors {front}", bench.value(f"WHL_Status_{rear}", "SteerAngle"),
                      -bench.value(f"WHL_Status_{front}", "SteerAngle"), abs_tol=2 * ANGLE_TOL, unit="deg",
-                     detail="seed 000 §3: rear angles mirror the front; each angle within 0.05° → 0.1° for the pair")
+                     detail="[P0] §3: rear angles mirror the front; each angle within 0.05° → 0.1° for the pair")
     expect_clean_bus(bench)
     plot_wheels(bench)

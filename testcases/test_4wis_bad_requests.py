@@ -1,4 +1,4 @@
-"""4WIS EV: bad requests (formulas.md §2 "undefined cases"; fault codes: VCU_VehicleState.VcuFault value table).
+"""4WIS EV: bad requests (docs/spec/formulas.md §2 "undefined cases"; fault codes: VCU_VehicleState.VcuFault value table).
 
 Each undefined or bad request must give its VcuFault, zero wheel-speed commands (and wheels that stop),
 wheel angles held at the last valid command (plant/README.md "On any fault": a wheel never swings on bad
@@ -80,7 +80,7 @@ def test_centre_at_origin_at_standstill_is_valid(bench) -> None:
     targets = {w: oracle.WheelTarget(oracle.paper_angle(0.0, 0.0, w), 0.0) for w in WHEELS}
     wait_for_targets(bench, targets)
     expect_fault(bench, "OK")
-    expect_wheels(bench, targets, "formulas.md §2 eq. 1-4 at S = (0, 0), v_o = 0")
+    expect_wheels(bench, targets, "docs/spec/formulas.md §2 eq. 1-4 at S = (0, 0), v_o = 0")
     expect_clean_bus(bench)
     plot_wheels(bench)
 
@@ -114,7 +114,7 @@ def test_request_no_wheel_can_execute(bench) -> None:
 
 
 def test_motion_request_timeout(bench) -> None:
-    """DRV_MotionRequest stops (k-matrix.md: timed out after 3 × 20 ms): REQUEST_TIMEOUT; when it comes back,
+    """DRV_MotionRequest stops (docs/spec/k-matrix.md: timed out after 3 × 20 ms): REQUEST_TIMEOUT; when it comes back,
     the VCU recovers on the next valid request."""
     held = _valid_first(bench)
     bench.stop_sending("DRV_MotionRequest")
@@ -140,7 +140,7 @@ def test_steering_timeout_in_normal(bench) -> None:
 
 def test_invalid_motion_request_frame(bench) -> None:
     """DRV_MotionRequest frames with a wrong checksum (bench.inject checksum_offset): the receiver treats them
-    as invalid (k-matrix.md) and the VCU answers REQUEST_INVALID while the last frame was invalid; once no valid
+    as invalid (docs/spec/k-matrix.md) and the VCU answers REQUEST_INVALID while the last frame was invalid; once no valid
     frame came for 3 × 20 ms the message is timed out and REQUEST_TIMEOUT follows (REQUEST_TIMEOUT is checked
     first, plant/README.md); a valid frame again recovers. The only invalid frames on the bus are the injected
     ones: the VCU and the wheels never send one.
@@ -201,7 +201,7 @@ def test_beyond_geometry_not_reachable_from_the_bus(bench, mode: str, hand_wheel
                f"wheel points within ±90° and rolls forward")
     bench.expect("RotationCentreX (the VCU steers about the oracle's centre)",
                  bench.value("VCU_RotationCentre", "RotationCentreX"), centre[0], abs_tol=CENTRE_ABS_TOL, unit="m")
-    expect_wheels(bench, targets, "formulas.md §2")
+    expect_wheels(bench, targets, "docs/spec/formulas.md §2")
     for w in WHEELS:
         n = bench.value(f"WHL_Status_{w}", "WheelSpeed")
         bench.expect_true(f"{w} rolls forward", n > 0, measured=n, expected="> 0 rpm")
@@ -218,7 +218,7 @@ def test_pivot_between_the_wheels_folds(bench) -> None:
     send_pivot(bench, x, y, v)
     wait_for_targets(bench, targets)
     expect_fault(bench, "OK")
-    expect_wheels(bench, targets, "formulas.md §2 (fold and reverse)")
+    expect_wheels(bench, targets, "docs/spec/formulas.md §2 (fold and reverse)")
     n_fr = bench.value("WHL_Status_FR", "WheelSpeed")
     bench.expect_true("FR reversed (negative rpm although the rotation is clockwise)", n_fr < 0, measured=n_fr,
                       expected="< 0 rpm")

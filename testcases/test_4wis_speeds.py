@@ -1,4 +1,4 @@
-"""4WIS EV: wheel speeds against formulas.md §2 (seed 000 eq. 6-10, E1 corrected), clockwise and counter-
+"""4WIS EV: wheel speeds against docs/spec/formulas.md §2 ([P0] eq. 6-10, E1 corrected), clockwise and counter-
 clockwise, an independent rigid-body check, LATERAL, and the errata E1 and E2.
 
 Rigid-body check (no paper formula): a rotation about S at ω = v_o / r_o (the definition of v_o, the
@@ -46,11 +46,11 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
     targets = oracle.rotation_targets(x, y, v_o)
     start(bench)
     send_pivot(bench, x, y, v_o)
-    bench.note(f"PIVOT about S = ({x:g}, {y:g}) m at v_o = {v_o:+g} m/s ({direction}, k-matrix.md: positive = "
+    bench.note(f"PIVOT about S = ({x:g}, {y:g}) m at v_o = {v_o:+g} m/s ({direction}, docs/spec/k-matrix.md: positive = "
                f"clockwise); §2 speeds: " + ", ".join(f"{w} {t.rpm:+.2f} rpm" for w, t in targets.items()))
     wait_for_targets(bench, targets, settle=True)
     expect_fault(bench, "OK")
-    expect_wheels(bench, targets, "formulas.md §2 eq. 7-10, E1 corrected", angles=False)
+    expect_wheels(bench, targets, "docs/spec/formulas.md §2 eq. 7-10, E1 corrected", angles=False)
     for w in WHEELS:
         measured = bench.value(f"WHL_Status_{w}", "WheelSpeed")
         same_sign = math.copysign(1, measured) == math.copysign(1, targets[w].rpm)
@@ -77,7 +77,7 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
     yaw = math.degrees(omega)
     bench.expect("ground truth yaw rate (PLANT_Motion.YawRate)", bench.value("PLANT_Motion", "YawRate"), yaw,
                  abs_tol=GROUND_TRUTH_YAW_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="deg/s",
-                 detail="positive clockwise; ω = v_o / r_o (seed 000 eq. 5); abs. tolerance from the 0.1 rpm "
+                 detail="positive clockwise; ω = v_o / r_o ([P0] eq. 5); abs. tolerance from the 0.1 rpm "
                         "resolution of the wheel-speed commands")
     vo = oracle.rigid_velocity((0.0, 0.0), centre, omega)
     direction = _fold(math.degrees(math.atan2(vo[0], vo[1])))
@@ -88,7 +88,7 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
                         f"(bus value {sideslip:g}°)")
     bench.expect("VCU VehicleSpeed (signed as TargetSpeed)", bench.value("VCU_VehicleState", "VehicleSpeed"), v_o,
                  abs_tol=SPEED_REL_TOL * abs(v_o) + 0.005, unit="m/s",
-                 detail="k-matrix.md; an estimate from the four WHL_Status: 0.5 % (the wheel-speed tolerance) "
+                 detail="docs/spec/k-matrix.md; an estimate from the four WHL_Status: 0.5 % (the wheel-speed tolerance) "
                         "+ half an LSB (0.005 m/s)")
     expect_clean_bus(bench)
     plot_wheels(bench)
@@ -96,14 +96,14 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
 
 @pytest.mark.parametrize("v", [1.5, -1.5], ids=["LATERAL right v=+1.5", "LATERAL left v=-1.5"])
 def test_lateral_speeds(bench, v: float) -> None:
-    """LATERAL (vehicles.md A): all wheels +90° (-90° for v < 0), equal speeds |v| (eq. 6); the body
+    """LATERAL (docs/spec/vehicles.md A): all wheels +90° (-90° for v < 0), equal speeds |v| (eq. 6); the body
     translates to the right for v > 0 without turning (ground truth)."""
     targets = oracle.lateral_targets(v)
     start(bench)
     bench.set("DRV_MotionRequest", DriveMode="LATERAL", TargetSpeed=v)
     wait_for_targets(bench, targets, settle=True)
     expect_fault(bench, "OK")
-    expect_wheels(bench, targets, "vehicles.md A LATERAL; eq. 6")
+    expect_wheels(bench, targets, "docs/spec/vehicles.md A LATERAL; eq. 6")
     since = bench.now
     bench.run(0.5)
     # Between the first and the last PLANT_Position frame of the 0.5 s, over the time between those frames
@@ -118,7 +118,7 @@ def test_lateral_speeds(bench, v: float) -> None:
     body_dx, body_dy = dx * math.cos(h) - dy * math.sin(h), dx * math.sin(h) + dy * math.cos(h)
     bench.expect(f"ground truth: travelled to the right in {span:.3f} s (body frame)", body_dx, span * v,
                  abs_tol=0.002, rel_tol=SPEED_REL_TOL, unit="m",
-                 detail="positive = right (k-matrix.md); 0.002 m = two LSB of PLANT_Position; the time is that "
+                 detail="positive = right (docs/spec/k-matrix.md); 0.002 m = two LSB of PLANT_Position; the time is that "
                         "between the first and last PLANT_Position frames of 0.5 s")
     bench.expect(f"ground truth: travelled forward in {span:.3f} s (body frame)", body_dy, 0.0, abs_tol=0.002,
                  unit="m",
@@ -136,7 +136,7 @@ E2_HAND_WHEEL = 450.0          # NORMAL, X = 30°: a right turn, outer wheels FL
 
 
 def test_errata_e1_e2(bench) -> None:
-    """E1 (seed 000 eq. 10 prints x + K for RR; geometry: x - K) and E2 (seed 002 §4 prints V_b = V_d × cos β
+    """E1 ([P0] eq. 10 prints x + K for RR; geometry: x - K) and E2 ([P2] §4 prints V_b = V_d × cos β
     and equal rear speeds; geometry: V_b = V_d / cos β, rear wheels differ). The bench checks the geometry:
     the wheel speeds must match it within 0.5 % or 0.2 rpm and differ from the printed formulas."""
     rows = []
@@ -187,7 +187,7 @@ def test_errata_e1_e2(bench) -> None:
     expect_clean_bus(bench)
     bench.table("Errata: printed formula vs geometry vs bench (reached WHL_Status speeds)",
                 ["erratum", "request", "quantity", "printed in the paper", "geometry (checked)", "bench"], rows)
-    bench.note("The bench checks the geometry: E1 corrected (n4 uses x - K, seed 000 eq. 10 prints x + K) and "
-               "E2 corrected (V_b = V_d / cos β, seed 002 §4 prints V_d × cos β; the rear wheels differ by the "
-               "track). formulas.md §2 and §3.")
+    bench.note("The bench checks the geometry: E1 corrected (n4 uses x - K, [P0] eq. 10 prints x + K) and "
+               "E2 corrected (V_b = V_d / cos β, [P2] §4 prints V_d × cos β; the rear wheels differ by the "
+               "track). docs/spec/formulas.md §2 and §3.")
     plot_wheels(bench, "E2 request (NORMAL, X = 30°)")

@@ -1,8 +1,8 @@
-"""4WIS EV: steering angles against formulas.md §2 (seed 000 eq. 1-4) for more than 50 rotation centres.
+"""4WIS EV: steering angles against docs/spec/formulas.md §2 ([P0] eq. 1-4) for more than 50 rotation centres.
 
 PIVOT centres in all four quadrants, on both axes, on the axle lines, near the wheel columns, between the
 wheels of an axle (§2 folds the angle and reverses the wheel) and far away (≥ 1 km); LATERAL; NORMAL and
-ADAPTIVE from the hand-wheel angle (vehicles.md A: X = HandWheelAngle / 15; NORMAL's centre on y = -L,
+ADAPTIVE from the hand-wheel angle (docs/spec/vehicles.md A: X = HandWheelAngle / 15; NORMAL's centre on y = -L,
 ADAPTIVE's on y = 0). Each wheel's commanded (VCU_WheelCmd_xx) and reached (WHL_Status_xx) angle within
 0.05° of the oracle; the wheel speeds of the same request within 0.5 % or 0.2 rpm; the VCU's curvature
 angle, rotation centre, yaw-rate target and mode.
@@ -66,16 +66,16 @@ def _expected(req: Request) -> tuple[dict[str, oracle.WheelTarget], tuple[float,
         x, y = req.centre
         v = speed_for(req.centre)
         return (oracle.rotation_targets(x, y, v), req.centre, v, oracle.curvature_angle(x, y),
-                oracle.yaw_rate(x, y, v), "formulas.md §2, eq. 1-4 and 7-10 (E1 corrected)")
+                oracle.yaw_rate(x, y, v), "docs/spec/formulas.md §2, eq. 1-4 and 7-10 (E1 corrected)")
     if req.mode == "LATERAL":
         return (oracle.lateral_targets(req.v), None, req.v, 90.0 if req.v >= 0 else -90.0, 0.0,
-                "vehicles.md A LATERAL: all ±90°, equal speeds; eq. 6")
+                "docs/spec/vehicles.md A LATERAL: all ±90°, equal speeds; eq. 6")
     centre = (oracle.normal_centre if req.mode == "NORMAL" else oracle.adaptive_centre)(req.hand_wheel)
     v = speed_for(centre)
     yaw = 0.0 if centre is None else oracle.yaw_rate(*centre, oracle.forward_v_o(centre[0], v))
     where = "y = -L" if req.mode == "NORMAL" else "y = 0"
     return (oracle.car_mode_targets(centre, v), centre, v, oracle.curvature_from_hand_wheel(req.hand_wheel), yaw,
-            f"vehicles.md A {req.mode}: X = HandWheelAngle/15, centre on {where}; formulas.md §2")
+            f"docs/spec/vehicles.md A {req.mode}: X = HandWheelAngle/15, centre on {where}; docs/spec/formulas.md §2")
 
 
 @pytest.mark.parametrize("req", REQUESTS, ids=[r.id for r in REQUESTS])
@@ -100,13 +100,13 @@ def test_steering_angles(bench, req: Request) -> None:
     expect_wheels(bench, targets, source)
     if x_angle is None:
         bench.note("curvature angle X not checked: the centre is the front-axle centre itself, whose heading "
-                   "is undefined (formulas.md and the DBC do not define X there)")
+                   "is undefined (docs/spec/formulas.md and the DBC do not define X there)")
     else:
         bench.expect("curvature angle X (VCU_VehicleState.CurvatureAngle)",
                      bench.value("VCU_VehicleState", "CurvatureAngle"), x_angle, abs_tol=ANGLE_TOL, unit="deg",
-                     detail="heading of a virtual wheel at the front-axle centre (0, L) about S (seed 002, DBC)")
+                     detail="heading of a virtual wheel at the front-axle centre (0, L) about S ([P2], DBC)")
     bench.expect("YawRateTarget = v_o / r_o", bench.value("VCU_VehicleState", "YawRateTarget"), yaw,
-                 abs_tol=YAW_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="deg/s", detail="seed 000 eq. 5")
+                 abs_tol=YAW_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="deg/s", detail="[P0] eq. 5")
     if centre is not None:
         bench.expect("RotationCentreX", bench.value("VCU_RotationCentre", "RotationCentreX"), centre[0],
                      abs_tol=CENTRE_ABS_TOL, unit="m")
@@ -125,7 +125,7 @@ _TRANSLATIONS = [("NORMAL straight", "NORMAL", 0.0), ("ADAPTIVE straight", "ADAP
 def test_rotation_centre_at_infinity(bench) -> None:
     """VCU_RotationCentre for a centre at infinity, as dbc/chassis.dbc defines it: "+/-5242.87 m (raw
     +/-524287, the range end) = centre at infinity = straight; the VCU saturates any farther centre to it"
-    (NORMAL/ADAPTIVE straight: X at the range end; LATERAL: Y at the range end); k-matrix.md: "out of
+    (NORMAL/ADAPTIVE straight: X at the range end; LATERAL: Y at the range end); docs/spec/k-matrix.md: "out of
     range = straight". A finite centre must never be reported for a translation."""
     end = 5242.87
     for label, mode, value in _TRANSLATIONS:

@@ -1,10 +1,10 @@
-"""4WIS EV: the U-turn experiment of seed 000 §3 (formulas.md §2, "U-turn experiment").
+"""4WIS EV: the U-turn experiment of [P0] §3 (docs/spec/formulas.md §2, "U-turn experiment").
 
 Paper: a two-way four-lane road, lanes 3.5 m, median 1 m; the vehicle starts in the middle of the left-turn
 lane. NORMAL with FL at -38° gives FR -31°, a trajectory 10.3 m wide that only reaches the far lane of the
 opposite carriageway; ADAPTIVE with FL at -37° gives FR -25°, RL 37°, RR 25°, 6.3 m wide, ending in the
 middle of the adjacent lane. The bench drives both, each from rest with the wheels steered at standstill
-(a 4WIS steers in place), at 4 m/s (14.4 km/h, below ADAPTIVE's 20 km/h low-speed range of vehicles.md A),
+(a 4WIS steers in place), at 4 m/s (14.4 km/h, below ADAPTIVE's 20 km/h low-speed range of docs/spec/vehicles.md A),
 until the heading has turned 180°.
 
 Trajectory: ground truth PLANT_Position (PosX, PosY of the geometric centre, start frame: +x right, +y
@@ -35,8 +35,8 @@ PAPER_ANGLE_TOL = 0.3          # deg (issue)
 WIDTH_REL_TOL = 0.06           # of the paper's width (issue)
 RATIO_ABS_TOL = 0.03           # (issue)
 OUTER_WHEEL = "FR"             # outer front wheel of a left turn
-FL_ANGLE = {"NORMAL": -38.0, "ADAPTIVE": -37.0}          # seed 000 §3
-#: the angles the issue asks for (formulas.md §2 from FL; the paper prints them rounded: -31°, -25°, 37°, 25°)
+FL_ANGLE = {"NORMAL": -38.0, "ADAPTIVE": -37.0}          # [P0] §3
+#: the angles the issue asks for (docs/spec/formulas.md §2 from FL; the paper prints them rounded: -31°, -25°, 37°, 25°)
 EXPECTED_ANGLES = {"NORMAL": {"FR": -30.7, "RL": 0.0, "RR": 0.0},
                    "ADAPTIVE": {"FR": -25.1, "RL": 37.0, "RR": 25.1}}
 
@@ -90,7 +90,7 @@ def _drive(bench, mode: str) -> dict[str, object]:
     hand_wheel = round(oracle.hand_wheel_for_centre(mode, oracle.uturn_centre_from_fl(mode, fl)), 1)
     centre = (oracle.normal_centre if mode == "NORMAL" else oracle.adaptive_centre)(hand_wheel)
     start(bench)
-    bench.note(f"{mode}: FL {fl:g}° needs the centre ({centre[0]:.3f}, {centre[1]:.3f}) m (formulas.md §2), "
+    bench.note(f"{mode}: FL {fl:g}° needs the centre ({centre[0]:.3f}, {centre[1]:.3f}) m (docs/spec/formulas.md §2), "
                f"hand wheel {hand_wheel:g}° (X = {hand_wheel / oracle.HAND_WHEEL_RATIO:.3f}°)")
 
     # 1. steer at standstill, check the paper's angles
@@ -102,7 +102,7 @@ def _drive(bench, mode: str) -> dict[str, object]:
                  detail=f"hand wheel {hand_wheel:g}° rounded to the 0.1° of HandWheelAngle")
     for wheel, expected in EXPECTED_ANGLES[mode].items():
         bench.expect(f"{mode}: {wheel} reached angle (paper table)", angles[wheel], expected,
-                     abs_tol=PAPER_ANGLE_TOL, unit="deg", detail="seed 000 §3 via formulas.md §2; issue: ±0.3°")
+                     abs_tol=PAPER_ANGLE_TOL, unit="deg", detail="[P0] §3 via docs/spec/formulas.md §2; issue: ±0.3°")
 
     # 2. drive forward until the heading has turned 180° (a left U-turn: the heading decreases)
     turn = _HeadingTurn(bench)
@@ -121,7 +121,7 @@ def _drive(bench, mode: str) -> dict[str, object]:
     end_x = float(traj["x"][-1])
     lane_name, lane = END_LANE[mode]
     bench.expect_between(f"{mode}: geometric centre ends in the {lane_name}", end_x, lane[0], lane[1], unit="m",
-                         detail="seed 000 §3's description of Fig. 7 / Fig. 8, lane placement in the module doc")
+                         detail="[P0] §3's description of Fig. 7 / Fig. 8, lane placement in the module doc")
     plot_wheels(bench, mode)
     bench.plot(f"{mode}: ground truth heading", [("PLANT_Motion", "Heading")], ylabel="deg")
     return {"mode": mode, "angles": angles, "traj": traj, "width": width, "end_x": end_x, "centre": centre,
@@ -151,7 +151,7 @@ def test_uturn_normal_vs_adaptive(bench) -> None:
     for run in runs:
         paper = oracle.PAPER_UTURN[run["mode"]][4]
         bench.expect(f"{run['mode']}: outer-wheel trajectory width", run["width"], paper, rel_tol=WIDTH_REL_TOL,
-                     unit="m", detail="max - min of x of the FR contact point over the U-turn; paper seed 000 §3")
+                     unit="m", detail="max - min of x of the FR contact point over the U-turn; paper [P0] §3")
     ratio = adaptive["width"] / normal["width"]
     bench.expect("width ratio ADAPTIVE / NORMAL", ratio, oracle.PAPER_WIDTH_RATIO, abs_tol=RATIO_ABS_TOL,
                  detail="paper 6.3 / 10.3 = 0.61")
@@ -196,4 +196,4 @@ def test_uturn_normal_vs_adaptive(bench) -> None:
                "R (1 + cos of its start angle), hence 10.04 m / 6.19 m from the geometry.")
     bench.note("Lanes: the vehicle starts at x = 0, the middle of the left-turn lane [-1.75, 1.75] m; median "
                "[-2.75, -1.75]; opposite carriageway inner lane [-6.25, -2.75], outer lane [-9.75, -6.25]; "
-               "road edges at +5.25 and -9.75 m (seed 000 §3: two-way four-lane road, 3.5 m lanes, 1 m median).")
+               "road edges at +5.25 and -9.75 m ([P0] §3: two-way four-lane road, 3.5 m lanes, 1 m median).")

@@ -1,11 +1,11 @@
-"""Cross-check of seed 003 §2's closed forms on the A-class car (vehicles.md B), the vehicle "ACLASS".
+"""Cross-check of [P3] §2's closed forms on the A-class car (docs/spec/vehicles.md B), the vehicle "ACLASS".
 
-ACLASS steers its front wheels only (steer-by-wire, seed 001), so 4WS itself cannot run on it; what can be
+ACLASS steers its front wheels only (steer-by-wire, [P1]), so 4WS itself cannot run on it; what can be
 cross-checked:
-1. testcases/oracle_4ws.py against the derived numbers vehicles.md B publishes for this car (computed there
+1. testcases/oracle_4ws.py against the derived numbers docs/spec/vehicles.md B publishes for this car (computed there
    independently): K = 1.90e-3 s²/m², characteristic speed 82.6 km/h, k(u) = −0.46 at 40 km/h and +0.22 at
    100 km/h, sign change at 67.7 km/h, yaw gain 3.84 1/s at 50 km/h. Tolerance: half a unit of the last digit
-   vehicles.md prints.
+   docs/spec/vehicles.md prints.
 2. On the bus, the 2WS steady state the 4WS closed forms are built from, on another implementation of §5
    (the ACLASS plant): after a hand-wheel step (steering robot, SBW in DIRECT: road wheel = pinion/15) at 40
    and 100 km/h, the measured r/δ_f and β/δ_f against (u/L)/(1 + K u²) and
@@ -21,7 +21,7 @@ from testcases import oracle_4ws as oracle
 from testcases.common_4ws import mean_since
 from testcases.stimulus import STIMULUS
 
-#: vehicles.md B, "Derived (linear 2-DOF)": value, printed decimals (tolerance = half a unit of the last one)
+#: docs/spec/vehicles.md B, "Derived (linear 2-DOF)": value, printed decimals (tolerance = half a unit of the last one)
 PUBLISHED = {"K [s²/m²]": (1.90e-3, 0.005e-3), "characteristic speed [km/h]": (82.6, 0.05),
              "k(40 km/h)": (-0.46, 0.005), "k(100 km/h)": (0.22, 0.005), "sign change of k [km/h]": (67.7, 0.05),
              "r/δ_f at 50 km/h [1/s]": (3.84, 0.005)}
@@ -41,10 +41,10 @@ def test_aclass_crosscheck_of_the_closed_forms(bench):
             "sign change of k [km/h]": oracle.kmh(oracle.sign_change_speed(v)),
             "r/δ_f at 50 km/h [1/s]": oracle.yaw_gain_2ws(v, oracle.mps(50.0))}
     for name, (published, tol) in PUBLISHED.items():
-        bench.expect(f"oracle_4ws {name} vs vehicles.md B", ours[name], published, abs_tol=tol,
-                     detail="vehicles.md B 'Derived (linear 2-DOF)'")
-    bench.table("vehicles.md B derived numbers against testcases/oracle_4ws.py",
-                ["quantity", "vehicles.md B", "oracle_4ws"], [[n, p, ours[n]] for n, (p, _) in PUBLISHED.items()])
+        bench.expect(f"oracle_4ws {name} vs docs/spec/vehicles.md B", ours[name], published, abs_tol=tol,
+                     detail="docs/spec/vehicles.md B 'Derived (linear 2-DOF)'")
+    bench.table("docs/spec/vehicles.md B derived numbers against testcases/oracle_4ws.py",
+                ["quantity", "docs/spec/vehicles.md B", "oracle_4ws"], [[n, p, ours[n]] for n, (p, _) in PUBLISHED.items()])
 
     rows = []
     for speed_kmh, hand_wheel in SPEEDS:
@@ -66,7 +66,7 @@ def test_aclass_crosscheck_of_the_closed_forms(bench):
                      detail=f"(u/L)/(1 + K u²), δ_f = {delta_f:.3f}° (PLANT_SbwAngles.PinionAngle / 15)")
         bench.expect(f"ACLASS {speed_kmh:g} km/h: steady β", beta, gain_beta * delta_f,
                      abs_tol=max(BETA_ABS_TOL, REL_TOL * abs(gain_beta * delta_f)), unit="deg",
-                     detail="(b − m a u²/(C_r L))/(L (1 + K u²)) δ_f, formulas.md §5 (bus signs)")
+                     detail="(b − m a u²/(C_r L))/(L (1 + K u²)) δ_f, docs/spec/formulas.md §5 (bus signs)")
         k_implied = -(beta / delta_f) / beta_per_rear
         k_expected = oracle.zero_sideslip_ratio(v, u)
         bench.expect(f"ACLASS {speed_kmh:g} km/h: rear/front ratio that cancels the measured β", k_implied,
@@ -78,7 +78,7 @@ def test_aclass_crosscheck_of_the_closed_forms(bench):
                 ["km/h", "hand wheel °", "δ_f °", "r/δ_f measured", "r/δ_f §5", "β measured °", "β §5 °",
                  "k implied", "k(u) §5"], rows)
     bench.note("ACLASS has no rear steering: the 4WS laws run on the EV (test_4ws_steady, _step, _lane_change, "
-               "_slalom). This case checks the oracle's closed forms against vehicles.md B and against the "
+               "_slalom). This case checks the oracle's closed forms against docs/spec/vehicles.md B and against the "
                "independent ACLASS plant; for a ≠ b the constant C2 = m b/(C_f L) + m a/(C_r L) leaves a steady "
                f"sideslip (zero-sideslip C2 + (a − b)/u²: {oracle.c2(v) + (v.a - v.b) / oracle.mps(40) ** 2:.5f} "
                f"at 40 km/h, {oracle.c2(v) + (v.a - v.b) / oracle.mps(100) ** 2:.5f} at 100 km/h against "

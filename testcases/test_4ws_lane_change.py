@@ -1,14 +1,14 @@
-"""ISO 3888-1 double lane change at 80 km/h (seed 003 §2, Fig. 6-7): 2WS, 4WS feedforward and 4WS feedback.
+"""ISO 3888-1 double lane change at 80 km/h ([P3] §2, Fig. 6-7): 2WS, 4WS feedforward and 4WS feedback.
 
 Course (testcases/oracle_4ws.dlc_lanes): sections of 15, 30, 25, 25 and 15 m; lanes 1.1 w + 0.25, 1.2 w + 0.25
 and 1.3 w + 0.25 wide with the EV's width w = 1.255 m (track 1.11 m between the contact-patch centres +
-one 145/80 R13 tyre, the size whose radius is seed 000's 0.281 m); the lane change goes to the left. The
+one 145/80 R13 tyre, the size whose radius is [P0]'s 0.281 m); the lane change goes to the left. The
 standard's 3.5 m offset is measured between the right-hand cone lines of sections 1 and 3 (the boundaries on
 the same side of the two lanes, so the lane centres are 3.5 + (w₃ − w₁)/2 = 3.56 m apart); section 5 shares
 section 1's right-hand boundary. Section 1 starts RUN_IN m after the point where the driver takes over.
 
 Driver: testcases/path_driver.PreviewDriver (the stimulus: MacAdam's optimal preview), the same for the three
-laws except its internal model of the car (formulas.md §5 with the law under test, as a trained test driver
+laws except its internal model of the car (docs/spec/formulas.md §5 with the law under test, as a trained test driver
 knows the car). Path: lane centres joined by half-cosine transitions from about the end of one gated section to
 just inside the next (PATH below). Speed held at 80 km/h by the hub motors (no throttle lift).
 
@@ -29,7 +29,7 @@ from testcases import oracle_4ws as oracle
 from testcases.common_4ws import STRATEGIES, Run, driver_model, plot_side_by_side, start
 from testcases.path_driver import Path, PreviewDriver, Transition
 
-SPEED_KMH = 80.0            # issue 5 / seed 003 Fig. 7
+SPEED_KMH = 80.0            # issue 5 / [P3] Fig. 7
 RUN_IN = 30.0               # m from the driver's take-over to section 1
 RUN_OUT = 30.0              # m driven after section 5
 CONES_PER_SIDE = 5
@@ -124,7 +124,7 @@ def test_double_lane_change_80_kmh(bench):
                 [[lane.name, lane.y_start, lane.y_end, lane.x_left, lane.x_right, lane.width] for lane in lanes0])
     bench.note(f"Lane widths {w1:.3f} / {w3:.3f} / {w5:.3f} m; offset 3.5 m between the right-hand cone lines of "
                f"sections 1 and 3. Driver: MacAdam optimal preview, window {HORIZON:g} s, {POINTS} points, its "
-               f"model of the car per law (formulas.md §5); path {PATH} (offsets from the lane centres and "
+               f"model of the car per law (docs/spec/formulas.md §5); path {PATH} (offsets from the lane centres and "
                "transition start/end relative to the gates, m).")
     top = _cone_lines(lanes0)
     if first is not None:

@@ -1,12 +1,12 @@
-"""4WS feedforward: the zero-sideslip ratio k(u) on the bus (seed 003 §2, formulas.md §5).
+"""4WS feedforward: the zero-sideslip ratio k(u) on the bus ([P3] §2, docs/spec/formulas.md §5).
 
 The reference VCU in ADAPTIVE with BENCH_VcuConfig.RearSteerLaw = FEEDFORWARD steers the rear axle by
 k(u) times the front axle above 20 km/h, about one common rotation centre. Measured: the axle angles (mean of
 the two wheels of an axle) commanded in VCU_WheelCmd_xx and reached in WHL_Status_xx, while TargetSpeed
-steps through a sweep; expected: k(u) = (−b + m a u²/(C_r L)) / (a + m b u²/(C_f L)) with vehicles.md A,
+steps through a sweep; expected: k(u) = (−b + m a u²/(C_r L)) / (a + m b u²/(C_f L)) with docs/spec/vehicles.md A,
 opposite phase below u_0 = √(b C_r L/(m a)) = 46.76 km/h and same phase above.
 Issue 5's checks: opposite phase at 40 km/h, same phase at 100 km/h, sign change within 1 km/h of u_0.
-Also: the four commanded angles are those of a rotation about the centre in VCU_RotationCentre (formulas.md §2).
+Also: the four commanded angles are those of a rotation about the centre in VCU_RotationCentre (docs/spec/formulas.md §2).
 """
 
 from __future__ import annotations
@@ -51,16 +51,16 @@ def test_feedforward_ratio_phase_and_sign_change(bench):
                               expected="< 0" if phase == "opposite" else "> 0",
                               detail=f"rear {rear:.3f}° / front {front:.3f}°")
             bench.expect(f"k({speed_kmh:g} km/h) ({source})", k, expected, abs_tol=RATIO_ABS_TOL,
-                         detail="formulas.md §5 k(u), vehicles.md A")
+                         detail="docs/spec/formulas.md §5 k(u), docs/spec/vehicles.md A")
             rows.append([f"{speed_kmh:g}", source, front, rear, k, expected])
-        # the four wheels about the centre the VCU reports (formulas.md §2)
+        # the four wheels about the centre the VCU reports (docs/spec/formulas.md §2)
         cx, cy = bench.value("VCU_RotationCentre", "RotationCentreX"), bench.value("VCU_RotationCentre", "RotationCentreY")
         for w in WHEELS:
             bench.expect(f"{w} commanded angle about VCU_RotationCentre at {speed_kmh:g} km/h",
                          bench.value(f"VCU_WheelCmd_{w}", "SteerAngleCmd"), oracle.wheel_angle_about(cx, cy, w),
-                         abs_tol=ANGLE_TOL, unit="deg", detail=f"centre ({cx:.2f}, {cy:.2f}) m, formulas.md §2")
+                         abs_tol=ANGLE_TOL, unit="deg", detail=f"centre ({cx:.2f}, {cy:.2f}) m, docs/spec/formulas.md §2")
     bench.table("k(u) at 40 and 100 km/h (front/rear = axle means, deg)",
-                ["km/h", "source", "front", "rear", "k measured", "k(u) formulas.md §5"], rows)
+                ["km/h", "source", "front", "rear", "k measured", "k(u) docs/spec/formulas.md §5"], rows)
 
     # -- coarse sweep and fine scan around u_0 (commanded angles) --------------------------------------------
     sweep_u, sweep_k = [], []
@@ -91,18 +91,18 @@ def test_feedforward_ratio_phase_and_sign_change(bench):
                         "the previous one")
     worst = max(abs(k - oracle.zero_sideslip_ratio(v, oracle.mps(s))) for s, k in zip(sweep_u, sweep_k))
     bench.expect("k(u) over 25-120 km/h, worst deviation", worst, 0.0, abs_tol=RATIO_ABS_TOL,
-                 detail="commanded axle angles vs formulas.md §5")
+                 detail="commanded axle angles vs docs/spec/formulas.md §5")
     curve_u = [20.0 + i for i in range(101)]
-    bench.plot_series("k(u): rear/front axle angle commanded by the VCU (FEEDFORWARD) vs formulas.md §5",
-                      [Series("k(u) formulas.md §5", curve_u, [oracle.zero_sideslip_ratio(v, oracle.mps(s))
+    bench.plot_series("k(u): rear/front axle angle commanded by the VCU (FEEDFORWARD) vs docs/spec/formulas.md §5",
+                      [Series("k(u) docs/spec/formulas.md §5", curve_u, [oracle.zero_sideslip_ratio(v, oracle.mps(s))
                                                                for s in curve_u]),
                        Series("VCU sweep (VCU_WheelCmd)", sweep_u, sweep_k),
                        Series("VCU scan near u_0", scan_u, scan_k)],
                       xlabel="TargetSpeed [km/h]", ylabel="k = δ_r/δ_f [-]")
     bench.table("sign change of k(u)", ["quantity", "value"],
-                [["u_0 = √(b C_r L/(m a)) (formulas.md §5, vehicles.md A)", f"{oracle.kmh(u0):.2f} km/h"],
+                [["u_0 = √(b C_r L/(m a)) (docs/spec/formulas.md §5, docs/spec/vehicles.md A)", f"{oracle.kmh(u0):.2f} km/h"],
                  ["sign change measured on the bus", f"{crossing:.2f} km/h"],
-                 ["k(40 km/h), k(100 km/h) (formulas.md §5)",
+                 ["k(40 km/h), k(100 km/h) (docs/spec/formulas.md §5)",
                   f"{oracle.zero_sideslip_ratio(v, 40 / 3.6):.4f}, {oracle.zero_sideslip_ratio(v, 100 / 3.6):.4f}"]])
     bench.plot("axle angles during the sweep", [(f"VCU_WheelCmd_{w}", "SteerAngleCmd", f"{w} commanded")
                                                 for w in WHEELS], ylabel="deg")

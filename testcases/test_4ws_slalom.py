@@ -1,15 +1,15 @@
-"""Slalom at 40 km/h on a low-friction road, μ = 0.3 (seed 003 §2, Fig. 8): 2WS, 4WS feedforward and 4WS
+"""Slalom at 40 km/h on a low-friction road, μ = 0.3 ([P3] §2, Fig. 8): 2WS, 4WS feedforward and 4WS
 feedback side by side.
 
 Course (testcases/oracle_4ws.slalom_cones): SLALOM_CONES cones on the course's centre line every 30 m (GB/T
-6323-2014's spacing for passenger cars; the seed gives no layout), the first one RUN_IN m after the driver's
+6323-2014's spacing for passenger cars; [P3] gives no layout), the first one RUN_IN m after the driver's
 take-over. Driver: testcases/path_driver.PreviewDriver (MacAdam's optimal preview, its internal model of the
-car per law, formulas.md §5) on a sinusoid through ±AMPLITUDE at the cones (passing the first cone on its
+car per law, docs/spec/formulas.md §5) on a sinusoid through ±AMPLITUDE at the cones (passing the first cone on its
 right). The path asks a_y ≈ A (π/S)² u² = 2.0 m/s², 0.69 μ g: well beyond the tyres' linear range (0.5 μ g),
 short of their limit. Road friction: BENCH_Control.RoadMu = 0.3. Speed held by the hub motors.
 
 Pass: no cone ever inside the vehicle's footprint (1.255 m × 3.322 m, the tyres' outer rectangle) for each law
-(issue 5: the three strategies side by side). Seed 003's claim that 4WS lowers the sideslip against 2WS is
+(issue 5: the three strategies side by side). [P3]'s claim that 4WS lowers the sideslip against 2WS is
 checked on the peak |β| through the cones. Reported: peak |β|, |r|, |a_y| (also against μ g), the hand-wheel
 work, the smallest cone clearance and the path error, side by side.
 """
@@ -25,7 +25,7 @@ from testcases import oracle_4ws as oracle
 from testcases.common_4ws import STRATEGIES, Run, driver_model, plot_side_by_side, start
 from testcases.path_driver import Path, PreviewDriver, Transition
 
-SPEED_KMH = 40.0          # issue 5 / seed 003 Fig. 8
+SPEED_KMH = 40.0          # issue 5 / [P3] Fig. 8
 MU = 0.3                  # issue 5 (low friction)
 AMPLITUDE = 1.5           # m: lateral position of the centre at a cone (clearance 0.87 m to the tyres), chosen
 RUN_IN = 35.0             # m from the take-over to the first cone (the path's entry transition is one spacing)
@@ -90,7 +90,7 @@ def test_slalom_40_kmh_low_friction(bench):
         runs.append(run)
     for strategy in ("FEEDFORWARD", "FEEDBACK"):
         bench.expect_between(f"peak |β| through the cones: {strategy} ≤ 2WS", peaks[strategy], 0.0, peaks["2WS"],
-                             unit="deg", detail="seed 003 §2 / §3: 4WS lowers the sideslip angle against 2WS")
+                             unit="deg", detail="[P3] §2 / §3: 4WS lowers the sideslip angle against 2WS")
     bench.table(f"slalom {SPEED_KMH:g} km/h, μ = {MU:g}, cones every {oracle.SLALOM_SPACING:g} m, side by side",
                 ["law", "min cone clearance m", "peak |β| °", "peak |r| °/s", "peak |a_y| m/s²", "peak |a_y| / μ g",
                  "peak |hand wheel| °", "max |path error| m", "mean speed km/h"], rows)

@@ -1,7 +1,7 @@
-"""4WS steady state after a hand-wheel step (seed 003 §2, formulas.md §5), the 4WIS EV in ADAPTIVE.
+"""4WS steady state after a hand-wheel step ([P3] §2, docs/spec/formulas.md §5), the 4WIS EV in ADAPTIVE.
 
 - FEEDFORWARD (δ_r = k(u) δ_f): steady sideslip |β| < 0.05° after angle steps at 40, 80 and 100 km/h (issue 5),
-  and the steady yaw gain r/δ_f = (u/L)(1 − k(u))/(1 + K u²) (formulas.md §5 with δ_r = k δ_f).
+  and the steady yaw gain r/δ_f = (u/L)(1 − k(u))/(1 + K u²) (docs/spec/formulas.md §5 with δ_r = k δ_f).
 - FEEDBACK (δ_r = −C1 δ_f + C2 u r, C1 = 1, C2 = m b/(C_f L) + m a/(C_r L) = 0.01818 s²/m): steady yaw gain
   within 3 % of (u/L)(1 + C1)/(1 + K u² + C2 u²/L) (issue 5) at the same speeds; its sideslip is reported
   (the derivation of C2 in oracle_4ws.c2 makes it zero for the EV's a = b).
@@ -52,7 +52,7 @@ def _step(bench, strategy: str, speed_kmh: float) -> tuple[dict[str, float], Run
 def _report(bench, strategy: str, results: list[dict[str, float]], runs: list[Run]) -> None:
     bench.table(f"{strategy}: steady state after the hand-wheel step",
                 ["km/h", "hand wheel °", "δ_f °", "δ_r °", "δ_r/δ_f", "r °/s", "r/δ_f measured 1/s",
-                 "r/δ_f formulas.md §5 1/s", "β °", "β of 2WS at this δ_f °", "a_y m/s²"],
+                 "r/δ_f docs/spec/formulas.md §5 1/s", "β °", "β of 2WS at this δ_f °", "a_y m/s²"],
                 [[f"{oracle.kmh(x['u']):.1f}", x["hand_wheel"], x["front"], x["rear"], x["rear"] / x["front"], x["r"],
                   x["gain"], x["expected_gain"], x["beta"], x["beta_2ws"], x["ay"]] for x in results])
     plot_side_by_side(bench, runs, f"{strategy} steps", t_from=-0.2, xlabel="time since the hand-wheel step [s]")
@@ -67,7 +67,7 @@ def test_feedforward_zero_sideslip(bench):
                                                 f"issue 5")
         bench.expect(f"steady yaw gain at {speed:g} km/h (FEEDFORWARD)", x["gain"], x["expected_gain"],
                      rel_tol=YAW_GAIN_REL_TOL, unit="1/s",
-                     detail="(u/L)(1 − k(u))/(1 + K u²), formulas.md §5; tolerance chosen as issue 5's feedback one")
+                     detail="(u/L)(1 − k(u))/(1 + K u²), docs/spec/formulas.md §5; tolerance chosen as issue 5's feedback one")
         results.append(x)
         runs.append(run)
     _report(bench, "FEEDFORWARD", results, runs)
@@ -80,13 +80,13 @@ def test_feedback_steady_yaw_gain(bench):
         x, run = _step(bench, "FEEDBACK", speed)
         bench.expect(f"steady yaw gain at {speed:g} km/h (FEEDBACK)", x["gain"], x["expected_gain"],
                      rel_tol=YAW_GAIN_REL_TOL, unit="1/s",
-                     detail=f"(u/L)(1 + C1)/(1 + K u² + C2 u²/L), C1 = 1, C2 = {c2:.6f} s²/m (formulas.md §5; issue 5)")
+                     detail=f"(u/L)(1 + C1)/(1 + K u² + C2 u²/L), C1 = 1, C2 = {c2:.6f} s²/m (docs/spec/formulas.md §5; issue 5)")
         bench.expect_between(f"steady |β| at {speed:g} km/h (FEEDBACK)", abs(x["beta"]), 0.0, SIDESLIP_MAX,
                              unit="deg", detail=f"β = {x['beta']:+.4f}°; C2 zeroes it for a = b "
                                                 f"(oracle_4ws.c2); limit as the feedforward one")
         results.append(x)
         runs.append(run)
     _report(bench, "FEEDBACK", results, runs)
-    bench.note(f"C2 = m b/(C_f L) + m a/(C_r L) = {c2:.6f} s²/m (vehicles.md A), the seed's garbled "
+    bench.note(f"C2 = m b/(C_f L) + m a/(C_r L) = {c2:.6f} s²/m (docs/spec/vehicles.md A), [P3]'s garbled "
                "'(mb/kfl)+(ma/k。1)' read as m b/(k_f l) + m a/(k_r l); zero steady sideslip at every speed needs "
                "C2 + (a − b)/u², and a = b for the EV.")

@@ -1,10 +1,10 @@
-"""4WS against 2WS: hand-wheel step at 80 km/h (seed 003 §2: "4WS lowers the sideslip angle against 2WS").
+"""4WS against 2WS: hand-wheel step at 80 km/h ([P3] §2: "4WS lowers the sideslip angle against 2WS").
 
 The same hand-wheel step (HAND_WHEEL at STEER_RATE, an ISO 7401 step-steer rate) for the three rear-steering
 laws of the reference VCU (BENCH_VcuConfig.RearSteerLaw: OFF = 2WS, FEEDFORWARD, FEEDBACK), each from steady
 straight running at 80 km/h on the dry road. Issue 5: the peak sideslip of 4WS at most half of 2WS; the yaw-rate
 response time (ISO 7401: from 50 % of the hand-wheel input to 90 % of the steady yaw rate) reported for both.
-The steady yaw rates are checked against formulas.md §5 for each law (3 %, as issue 5's feedback check).
+The steady yaw rates are checked against docs/spec/formulas.md §5 for each law (3 %, as issue 5's feedback check).
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ def test_step_at_80_kmh_sideslip_and_response_time(bench):
         r_ss = mean_since(bench, "PLANT_Motion", "YawRate", since)
         expected = oracle.yaw_gain(v, strategy, u) * front
         bench.expect(f"{strategy}: steady yaw rate", r_ss, expected, rel_tol=YAW_REL_TOL, unit="deg/s",
-                     detail=f"r/δ_f of formulas.md §5 ({strategy}) × δ_f = {front:.3f}°")
+                     detail=f"r/δ_f of docs/spec/formulas.md §5 ({strategy}) × δ_f = {front:.3f}°")
         keep = run.t["yaw"] >= 0.0
         t_resp = oracle.response_time(run.t["yaw"][keep].tolist(), run.v["yaw"][keep].tolist(), 0.0, r_ss)
         bench.expect_true(f"{strategy}: yaw rate reaches 90 % of its steady value", math.isfinite(t_resp),
@@ -69,9 +69,9 @@ def test_step_at_80_kmh_sideslip_and_response_time(bench):
         bench.expect_between(f"peak |β| {strategy} / peak |β| 2WS", peaks[strategy] / peaks["2WS"], 0.0, PEAK_RATIO_MAX,
                              detail=f"{peaks[strategy]:.3f}° vs {peaks['2WS']:.3f}° (issue 5: at most half)")
     bench.table(f"hand-wheel step {HAND_WHEEL:g}° at {STEER_RATE:g} °/s, {SPEED_KMH:g} km/h",
-                ["law", "δ_f °", "r steady °/s", "r formulas.md §5 °/s", "yaw response time s (ISO 7401)",
+                ["law", "δ_f °", "r steady °/s", "r docs/spec/formulas.md §5 °/s", "yaw response time s (ISO 7401)",
                  "yaw overshoot %", "peak |β| °", "steady β °", "peak |a_y| m/s²"], rows)
-    bench.note("Time origin of the plots: the hand-wheel command at 50 % of the step (ISO 7401). Seed 003 Fig. 4-5: "
+    bench.note("Time origin of the plots: the hand-wheel command at 50 % of the step (ISO 7401). [P3] Fig. 4-5: "
                "the feedforward and feedback laws change lateral acceleration and yaw rate little against each "
                "other and both lower the sideslip against the front-steered car.")
     plot_side_by_side(bench, runs, f"step {HAND_WHEEL:g}° at {SPEED_KMH:g} km/h", t_from=-0.3,

@@ -1,14 +1,14 @@
-"""ABS turning-state identification: hand-wheel angle step while braking under ABS on a dry road (seed 004 §4,
-Fig. 6-8; §3.2 the identification during ABS control; formulas.md §6).
+"""ABS turning-state identification: hand-wheel angle step while braking under ABS on a dry road ([P4] §4,
+Fig. 6-8; §3.2 the identification during ABS control; docs/spec/formulas.md §6).
 
-Scenario (chosen: seed 004 gives no speed or pressure): 60 km/h straight on a dry road (RoadMu 1.0), wheel-speed
+Scenario (chosen: [P4] gives no speed or pressure): 60 km/h straight on a dry road (RoadMu 1.0), wheel-speed
 noise on; at 0.3 s the driver brakes with 80 bar (DRV_Pedals.BrakePressure): the lightly loaded rear axle comes
 under ABS control while the car still brakes straight; at 1.2 s (about 35 km/h) the hand wheel steps to 180 deg
 (i_w 18: delta about 10 deg) left or right, and stays there until the car stops.
 
 Checks: the ABS is active at the step; TurnDirection reaches the turn's value (1 left) within step_latency_max
 and never the opposite value (the latency is reported); over the window from the first published
-FrontWheelAngleEst after the identification (seed 004 §4: delta-bar is computed after T is identified) until
+FrontWheelAngleEst after the identification ([P4] §4: delta-bar is computed after T is identified) until
 the true speed falls below step_window_min_speed, RefVehicleSpeed - true CoG speed and FrontWheelAngleEst -
 true angle against the paper's mean and max (limits [abs] step_*, the paper's table).
 """
@@ -23,7 +23,7 @@ from testcases import abs_common as common
 SPEED = 60.0            # km/h
 PRESSURE = 80.0         # bar
 T_BRAKE, T_STEP = 0.3, 1.2
-HAND_WHEEL = 180.0      # deg (seed 004 §4)
+HAND_WHEEL = 180.0      # deg ([P4] §4)
 RUN_AFTER_STEP = 2.4    # s: the car stops
 TEST = "angle step while braking under ABS (Fig. 6-8)"
 
@@ -37,7 +37,7 @@ def test_abs_angle_step_under_abs(bench, side: str) -> None:
     common.brake(bench, PRESSURE)
     bench.run(T_STEP - T_BRAKE)
     bench.expect("ABS active before the step (AbsActive)", bench.value("ABS_SteerState", "AbsActive"), 1,
-                 detail="seed 004 §4: the angle step comes during straight-line ABS braking")
+                 detail="[P4] §4: the angle step comes during straight-line ABS braking")
     bench.expect("TurnDirection straight before the step", bench.value("ABS_SteerState", "TurnDirection"), 0)
     common.steer(bench, hand_wheel)
     t_step = bench.elapsed
@@ -79,5 +79,5 @@ def test_abs_angle_step_under_abs(bench, side: str) -> None:
     bench.note(f"{side} step of the hand wheel to {hand_wheel:+g} deg (bus sign) at {t_step:.2f} s while braking with "
                f"{PRESSURE:g} bar from {SPEED:g} km/h on RoadMu 1.0, SensorNoise {common.NOMINAL_NOISE} km/h. The "
                f"reference ECU releases the rear axle once the turn is identified and takes delta from it (its "
-               f"documented strategy for seed 004 §3.2 step 3); delta errors in the paper's sign (left positive).")
+               f"documented strategy for [P4] §3.2 step 3); delta errors in the paper's sign (left positive).")
     common.plot_abs(bench)

@@ -1,4 +1,4 @@
-"""Erratum E3 of seed 004 eq. 13 (formulas.md §6), shown on the bench.
+"""Erratum E3 of [P4] eq. 13 (docs/spec/formulas.md §6), shown on the bench.
 
 Printed: T = -1 if V_l0 < -dV1, -dV2 < V_l1 and -ddV < V_l2. With ddV = |dV1 - dV2| >= 0, "-ddV < V_l2" is
 always true, so the right-turn branch never applies the axle-consistency check the left-turn branch applies.
@@ -57,9 +57,9 @@ def test_abs_erratum_e3(bench) -> None:
                       measured=f"left {results['left'][0]}, right {results['right'][0]}", expected="left 0, right -1")
     bench.expect_true("the corrected eq. 13 treats them alike", results["left"][1] == -results["right"][1],
                       measured=f"left {results['left'][1]}, right {results['right'][1]}", expected="mirror images")
-    bench.table("Erratum E3 (seed 004 eq. 13): printed vs corrected rule on the bus wheel speeds, and the bench",
+    bench.table("Erratum E3 ([P4] eq. 13): printed vs corrected rule on the bus wheel speeds, and the bench",
                 ["turn", "hand wheel deg", "dV1 km/h", "dV2 km/h", "ddV km/h", "T printed", "T corrected (checked)",
                  "TurnDirection (median)"], rows)
     bench.note(f"V_l0 {l0:g}, V_l1 {l1:g}, V_l2 {l2:g} km/h (the reference ECU's calibration). In a tight turn "
                f"ddV = B r (1 - cos delta) grows beyond V_l2; the printed right-turn branch would still report a "
-               f"right turn while the left-turn branch rejects the mirror image. formulas.md §6 erratum E3.")
+               f"right turn while the left-turn branch rejects the mirror image. docs/spec/formulas.md §6 erratum E3.")

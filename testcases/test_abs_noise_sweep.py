@@ -1,4 +1,4 @@
-"""What eq. 13's thresholds buy: false turn detections per minute against the wheel-speed noise (seed 004
+"""What eq. 13's thresholds buy: false turn detections per minute against the wheel-speed noise ([P4]
 §3.1: "wheel speeds are disturbed by road roughness, braking and driving; the identification uses
 anti-interference thresholds").
 

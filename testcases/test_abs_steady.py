@@ -1,10 +1,10 @@
-"""ABS turning-state identification in steady-state circular driving (seed 004 §4, Fig. 3-5; formulas.md §6).
+"""ABS turning-state identification in steady-state circular driving ([P4] §4, Fig. 3-5; docs/spec/formulas.md §6).
 
 Hand wheel 180 deg at i_w = 18 (delta about 10 deg), left and right, at two speeds, wheel-speed noise on
 (BENCH_Control.SensorNoise 0.1 km/h); the drive robot holds the speed (BENCH_AbsStimulus.CruiseSpeed), no
-braking: the ABS identifies the turn before braking (seed 004 §3.1: eq. 5-13). After steady_settle s the
+braking: the ABS identifies the turn before braking ([P4] §3.1: eq. 5-13). After steady_settle s the
 checks, over steady_window s of ABS_SteerState frames, each paired with the truth of the same instant:
-TurnDirection correct (1 = left for a negative, i.e. left, hand-wheel angle; formulas.md §1) in at least
+TurnDirection correct (1 = left for a negative, i.e. left, hand-wheel angle; docs/spec/formulas.md §1) in at least
 99 % of the samples; RefVehicleSpeed - true CoG speed and FrontWheelAngleEst - true front-wheel angle within
 the paper's mean and max (limits [abs] steady_*, the paper's table). The paper's delta_f = theta / i_w is
 checked against the plant's true angle too (the reference the paper used).
@@ -18,7 +18,7 @@ import pytest
 from testcases import abs_common as common
 from testcases import oracle_abs as oracle
 
-HAND_WHEEL = 180.0      # deg (seed 004 §4)
+HAND_WHEEL = 180.0      # deg ([P4] §4)
 SPEEDS = (25.0, 40.0)   # km/h (chosen: a_y about 2.6 and 6.6 m/s^2 at delta 10 deg)
 WINDOW = 5.0            # s of samples after settling
 CASES = [(v, side) for v in SPEEDS for side in ("left", "right")]
@@ -28,7 +28,7 @@ TEST = "steady-state circular (Fig. 3-5)"
 @pytest.mark.parametrize("speed,side", CASES, ids=[f"{v:g} km/h {s}" for v, s in CASES])
 def test_abs_steady_circular(bench, speed: float, side: str) -> None:
     hand_wheel = -HAND_WHEEL if side == "left" else HAND_WHEEL     # bus: positive right
-    expected_turn = 1 if side == "left" else -1                   # TurnDirection: 1 = left (seed 004)
+    expected_turn = 1 if side == "left" else -1                   # TurnDirection: 1 = left ([P4])
     common.start(bench, speed)
     common.hold_speed(bench, speed)
     common.steer(bench, hand_wheel)
@@ -55,7 +55,7 @@ def test_abs_steady_circular(bench, speed: float, side: str) -> None:
                              detail=common.source(name))
     # the paper's reference angle theta / i_w against the plant's true angle (mechanical steering)
     reference = oracle.front_wheel_angle_from_hand_wheel(hand_wheel)
-    bench.expect("true front-wheel angle = theta / i_w (seed 004 §4)", float(np.mean(d["angle_true"])), reference,
+    bench.expect("true front-wheel angle = theta / i_w ([P4] §4)", float(np.mean(d["angle_true"])), reference,
                  abs_tol=0.01, unit="deg", detail="PLANT_AbsVehicle.FrontWheelAngle; 0.01 deg = its resolution")
     bench.expect_true("no AbsFault", bool(np.all(bench.history("ABS_SteerState", "AbsFault")[1] == 0)),
                       measured=int(np.max(bench.history("ABS_SteerState", "AbsFault")[1])), expected=0)

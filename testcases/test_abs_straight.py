@@ -1,4 +1,4 @@
-"""Straight-line ABS braking on dry and wet asphalt (issue 6; vehicles.md B tyres): TurnDirection stays 0, the
+"""Straight-line ABS braking on dry and wet asphalt (issue 6; docs/spec/vehicles.md B tyres): TurnDirection stays 0, the
 slip stays in the documented band, and the stop is compared with locked wheels.
 
 Each case brakes twice from 80 km/h with 150 bar (DRV_Pedals.BrakePressure), wheel-speed noise on: once with
@@ -9,7 +9,7 @@ reference run). Checks:
   [slip_band_low, slip_band_high] for at least slip_band_fraction_min of the samples, and no wheel stays
   beyond 0.5 (near locked) for longer than lock_time_max;
 - adhesion utilisation epsilon = mean deceleration from 70 to 20 km/h / (mu_peak g) >= 0.75 (UN R13-H Annex 6),
-  mu_peak of vehicles.md B's Magic Formula (testcases/oracle_abs.py);
+  mu_peak of docs/spec/vehicles.md B's Magic Formula (testcases/oracle_abs.py);
 - locked run: with all four wheels locked the deceleration is mu_locked g (the Magic Formula at slip 1);
 - the ABS stop is not longer than the locked one (reported beside the oracle's v^2 / (2 g mu_locked)).
 """
@@ -90,7 +90,7 @@ def test_abs_straight_braking(bench, road: str) -> None:
     bench.expect_between("ABS: adhesion utilisation epsilon = z / (mu_peak g)", epsilon,
                          common.limit("adhesion_utilisation_min"), 1.0,
                          detail=f"mean deceleration 70 -> 20 km/h {z:.2f} m/s^2, mu_peak {peak:.3f} "
-                                f"(vehicles.md B); {common.source('adhesion_utilisation_min')}")
+                                f"(docs/spec/vehicles.md B); {common.source('adhesion_utilisation_min')}")
     all_locked = np.ones_like(locked["t"], dtype=bool)
     for w in common.WHEELS:
         all_locked &= locked[f"slip_{w}"] >= 0.999
@@ -101,7 +101,7 @@ def test_abs_straight_braking(bench, road: str) -> None:
     decel = -float(np.mean(locked["ax"][idx])) if idx.size else float("nan")
     bench.expect("locked: deceleration with four locked wheels = mu_locked g", decel, sliding * oracle.G,
                  rel_tol=common.limit("locked_decel_rel_tol"), unit="m/s^2",
-                 detail=f"{idx.size} samples; mu_locked {sliding:.4f} (Magic Formula at slip 1, vehicles.md B); "
+                 detail=f"{idx.size} samples; mu_locked {sliding:.4f} (Magic Formula at slip 1, docs/spec/vehicles.md B); "
                         f"{common.source('locked_decel_rel_tol')}")
     bench.expect_true("ABS stop not longer than the locked-wheel stop", abs_run["distance"] <= locked["distance"],
                       measured=round(float(abs_run["distance"]), 2), expected=f"<= {locked['distance']:.2f} m")

@@ -1,7 +1,7 @@
 """Fault injection into the restbus: the bench's monitor detects every fault within its bound, and the
 reference ECUs react safely (issue "Reliability and bad input").
 
-Bounds (k-matrix.md "End-to-end protection"): a timeout is declared 3 cycles after the last valid frame,
+Bounds (docs/spec/e2e.md): a timeout is declared 3 cycles after the last valid frame,
 so a fault that silences a message is detected within 3 cycles + 1 cycle of its start (the last frame
 before the fault may have left up to one cycle earlier); an end-to-end fault (checksum, counter) is
 detected at the first or second affected frame: within 2 cycles + one 1 ms tick.

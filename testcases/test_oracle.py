@@ -1,7 +1,7 @@
 """The oracle against the formula sheet's worked numbers and against itself (no bench needed).
 
 If the oracle were wrong, every 4WIS case would check the wrong thing; these checks pin it to the numbers
-formulas.md §2 prints for the U-turn and to the independent rigid-body formulation.
+docs/spec/formulas.md §2 prints for the U-turn and to the independent rigid-body formulation.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from testcases.oracle import WHEEL_POSITION, WHEELS
 
 
 def test_uturn_numbers_of_the_formula_sheet() -> None:
-    """formulas.md §2: "FL -38° puts S at x = -4.088 m on y = -L and gives FR -30.7°; FL -37° with S on y = 0
+    """docs/spec/formulas.md §2: "FL -38° puts S at x = -4.088 m on y = -L and gives FR -30.7°; FL -37° with S on y = 0
     gives S at x = -2.386 m and FR -25.1°. The outer front wheel's path diameter is 10.80 m and 6.50 m ...
     the ratio 0.60"."""
     normal = oracle.uturn_centre_from_fl("NORMAL", -38.0)

@@ -1,9 +1,9 @@
 """SBW road feel at 50 km/h: driver torque against lateral acceleration in a slow ramp, and the hand wheel's
-return when the driver lets go (seed 001 §2.3: the force-control / position-deviation structure gives the
+return when the driver lets go ([P1] §2.3: the force-control / position-deviation structure gives the
 driver the torque that steers the road wheels and "takes care of the return"; issue 4).
 
 The robot turns the hand wheel slowly (constant rate) from 0 to the angle that gives the plain 15:1 car about
-4 m/s² (formulas.md §5), holds it, then lets go (RobotMode OFF). Checks: the driver torque the SBW measures
+4 m/s² (docs/spec/formulas.md §5), holds it, then lets go (RobotMode OFF). Checks: the driver torque the SBW measures
 (SBW_HandWheel.DriverTorque) grows monotonically with the lateral acceleration (IMU_Motion.LatAccel) — the
 means of consecutive lateral-acceleration bins never fall by more than one LSB —; after `return_time` hands
 off, the hand-wheel angle is at most `return_fraction_max` of the angle at release. Limits: testcases/limits.toml.
@@ -18,7 +18,7 @@ from testcases import oracle_sbw as oracle
 from testcases.sbw_common import Limits, expect_clean_bus, plot_steering, robot_angle, signal, start
 
 SPEED_KMH = 50.0
-RAMP_LAT_ACCEL = 4.0     # m/s², end of the ramp for the plain car (formulas.md §5)
+RAMP_LAT_ACCEL = 4.0     # m/s², end of the ramp for the plain car (docs/spec/formulas.md §5)
 RAMP_TIME = 6.0          # s
 HOLD = 1.0               # s at the end of the ramp before letting go
 

@@ -1,10 +1,10 @@
-"""SBW continuous sine steer at 50 km/h, 30° amplitude, 0.5 Hz and 1 Hz (seed 001 §4.2; issue 4).
+"""SBW continuous sine steer at 50 km/h, 30° amplitude, 0.5 Hz and 1 Hz ([P1] §4.2; issue 4).
 
 The robot steers a sine at the hand wheel (RobotAngle every 10 ms). Over the whole periods after the first:
 the pinion's phase lag behind the hand wheel (least-squares sine fit of SBW_HandWheel and SBW_Pinion at the
 steering frequency) ≤ 5°, and the RMS and peak tracking error (hand wheel − pinion, the pinion interpolated
 onto the hand-wheel frames). The yaw rate and lateral acceleration are shown next to the linear 2-DOF model
-(formulas.md §5) driven by the measured hand wheel through a mechanical 15:1 steering, with their amplitudes
+(docs/spec/formulas.md §5) driven by the measured hand wheel through a mechanical 15:1 steering, with their amplitudes
 and phases side by side. Limits: testcases/limits.toml [sbw].
 """
 

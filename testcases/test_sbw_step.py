@@ -1,7 +1,7 @@
-"""SBW hand-wheel angle step at 50 km/h (seed 001 §4.1, formulas.md §4; issue 4).
+"""SBW hand-wheel angle step at 50 km/h ([P1] §4.1, docs/spec/formulas.md §4; issue 4).
 
 The robot steps the hand wheel to the angle that gives the plain 15:1 car a steady lateral acceleration of
-3 m/s² (formulas.md §5: θ_h = 15 a_y / (u · r/δ_f), about 48°). Checks: the steady lateral acceleration
+3 m/s² (docs/spec/formulas.md §5: θ_h = 15 a_y / (u · r/δ_f), about 48°). Checks: the steady lateral acceleration
 (3 ± 0.3 m/s²); the pinion follows the hand wheel with a steady error ≤ 0.5° and reaches 90 % at most
 50 ms after the hand wheel does; the yaw rate's ISO 7401 figures (response time to 90 %, peak response time,
 overshoot, from the instant the hand wheel reaches 50 %) next to the linear 2-DOF model's prediction for a
@@ -28,7 +28,7 @@ def test_sbw_step_50kmh(bench) -> None:
     u = start(bench, lim["step_speed"])
     target = round(oracle.hand_wheel_for_lat_accel(u, lim["step_lat_accel"]), 2)
     bench.note(f"u = {u} m/s (BENCH_Control.InitialSpeed); hand-wheel step to {target}° "
-               f"(formulas.md §5: 15 · a_y / (u · r/δ_f), r/δ_f = {oracle.yaw_gain(u):.4f} 1/s, "
+               f"(docs/spec/formulas.md §5: 15 · a_y / (u · r/δ_f), r/δ_f = {oracle.yaw_gain(u):.4f} 1/s, "
                f"K_s = {oracle.stability_factor():.3e} s²/m²)")
     robot_angle(bench, 0.0)
     bench.run(HOLD_BEFORE)

@@ -1,11 +1,11 @@
-"""Yaw-rate feedback with an ideal steering ratio (seed 003 §1.1) and its combined yaw-rate and lateral-
-acceleration variant (§1.2), at 40, 60, 80 and 100 km/h (formulas.md §5; issue 4).
+"""Yaw-rate feedback with an ideal steering ratio ([P3] §1.1) and its combined yaw-rate and lateral-
+acceleration variant (§1.2), at 40, 60, 80 and 100 km/h (docs/spec/formulas.md §5; issue 4).
 
 An ideal steering ratio makes the steady yaw rate per hand-wheel angle a constant G_r at every speed
 (BENCH_SbwConfig.IdealYawGain, default 0.28 1/s). For each speed the robot holds the hand wheel at a fixed
 angle; the steady r/θ_h (IMU_Motion.YawRate / SBW_HandWheel.HandWheelAngle) must be within 5 % of G_r with
 the feedback. The plain 15:1 car (DIRECT) is run beside the §1.1 variant: its r/θ_h follows the closed form
-(u/L)/(1 + K_s u²)/15 of formulas.md §5 and varies with speed by far more, as the tables show (the §1.2 case
+(u/L)/(1 + K_s u²)/15 of docs/spec/formulas.md §5 and varies with speed by far more, as the tables show (the §1.2 case
 lists the closed form of the plain car beside its own figures).
 Limits: testcases/limits.toml [sbw].
 """
@@ -24,7 +24,7 @@ from testcases.sbw_common import (SBW_FAULT, Limits, expect_clean_bus, plot_stee
 SPEEDS_KMH = (40.0, 60.0, 80.0, 100.0)
 HAND_WHEEL = 30.0     # deg held at every speed (a_y from 1.3 to 4.1 m/s², inside the linear range)
 SETTLE = 2.0          # s after the hand wheel reaches its angle; the feedback settles in about 1 s
-VARIANTS = {"YAW_RATE": "seed 003 §1.1", "YAW_RATE_LAT_ACCEL": "seed 003 §1.2"}
+VARIANTS = {"YAW_RATE": "[P3] §1.1", "YAW_RATE_LAT_ACCEL": "[P3] §1.2"}
 
 
 def _steady_gain(bench, speed_kmh: float, mode: str, g_r: float) -> tuple[float, float, float]:
@@ -49,7 +49,7 @@ def test_sbw_yaw_gain_across_speeds(bench, variant: str) -> None:
         if measure_plain:
             _, plain, _ = _steady_gain(bench, speed, "DIRECT", g_r)
             lim.relative(f"plain 15:1 car at {speed:g} km/h: r/θ_h vs (u/L)/(1 + K_s u²)/15", "plain_gain_rel_tol",
-                         plain, closed_form, "1/s", detail="formulas.md §5")
+                         plain, closed_form, "1/s", detail="docs/spec/formulas.md §5")
         _, fb, fault = _steady_gain(bench, speed, variant, g_r)
         lim.relative(f"{variant} at {speed:g} km/h: r/θ_h vs G_r", "yaw_gain_rel_tol", fb, g_r, "1/s",
                      detail=f"{VARIANTS[variant]}; G_r sent in BENCH_SbwConfig.IdealYawGain")
@@ -63,11 +63,11 @@ def test_sbw_yaw_gain_across_speeds(bench, variant: str) -> None:
     rows.append(["spread (max − min) / G_r", "", "", f"{(max(plain_gains) - min(plain_gains)) / g_r:.1%}", "",
                  f"{(max(fb_gains) - min(fb_gains)) / g_r:.1%}"])
     bench.table(f"steady yaw rate per hand-wheel angle r/θ_h [1/s]: plain 15:1 car vs {variant} (G_r = {g_r:g} 1/s)",
-                ["speed [km/h]", "plain, formulas.md §5", "plain, measured", "plain vs G_r", f"{variant}, measured",
+                ["speed [km/h]", "plain, docs/spec/formulas.md §5", "plain, measured", "plain vs G_r", f"{variant}, measured",
                  f"{variant} vs G_r"], rows)
     speeds = list(SPEEDS_KMH)
     series = [Series("G_r (ideal steering ratio)", speeds, [g_r] * len(speeds)),
-              Series("plain 15:1, formulas.md §5", speeds,
+              Series("plain 15:1, docs/spec/formulas.md §5", speeds,
                      [oracle.plain_yaw_per_hand_wheel(round(s / 3.6, 2)) for s in speeds])]
     if measure_plain:
         series.append(Series("plain 15:1, measured", speeds, plain_gains))

@@ -1,5 +1,5 @@
 """Independent references the bench's tests check it against: written from the contract's catalogue
-parameters (k-matrix.md "End-to-end protection"), never from bench.e2e."""
+parameters (docs/spec/e2e.md), never from bench.e2e."""
 
 from __future__ import annotations
 

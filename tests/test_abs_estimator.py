@@ -1,5 +1,5 @@
-"""The ABS turning-state estimator without the bus (plant/ecus/abs_estimator.py, seed 004 eq. 5-14,
-formulas.md §6): eq. 13 with erratum E3 corrected, eq. 11/12, the wheel selection, identification before and
+"""The ABS turning-state estimator without the bus (plant/ecus/abs_estimator.py, [P4] eq. 5-14,
+docs/spec/formulas.md §6): eq. 13 with erratum E3 corrected, eq. 11/12, the wheel selection, identification before and
 during ABS control on synthetic wheel speeds of the four-wheel model, and the mirrors of the DBC ranges."""
 
 from __future__ import annotations
@@ -23,13 +23,13 @@ from plant.vehicles import AbsParams, load_file, load_vehicle
 
 CAR, PARAMS = load_vehicle("ACLASS"), load_vehicle("ACLASS_ABS")
 CONFIG = estimator_config(PARAMS, CAR)
-B, L, A, K = 1.55, 2.65, 1.06, 1.90e-3          # vehicles.md B
+B, L, A, K = 1.55, 2.65, 1.06, 1.90e-3          # docs/spec/vehicles.md B
 L0, L1, L2 = CONFIG.v_l0, CONFIG.v_l1, CONFIG.v_l2
 KMH = 3.6
 
 
 def wheel_speeds(x_kmh: float, delta: float) -> list[float]:
-    """Four-wheel model (seed 004 eq. 4 with small angles, eq. 11 for r): FL, FR, RL, RR in km/h; delta rad, left +."""
+    """Four-wheel model ([P4] eq. 4 with small angles, eq. 11 for r): FL, FR, RL, RR in km/h; delta rad, left +."""
     x = x_kmh / KMH
     r = x * delta / L / (1 + K * x * x)
     return [(x + (A * delta - B / 2) * r) * KMH, (x + (A * delta + B / 2) * r) * KMH,
@@ -72,7 +72,7 @@ def test_nth_largest() -> None:
     assert nth_largest([3.0, 1.0, 4.0, 2.0], 2) == 3.0 and nth_largest([3.0, 1.0, 4.0, 2.0], 3) == 2.0
 
 
-# -- before ABS control (seed 004 §3.1) ------------------------------------------------------------------------
+# -- before ABS control ([P4] §3.1) ------------------------------------------------------------------------
 
 def run(estimator: TurnStateEstimator, speeds: list[float], n: int, *, states=(INCREASE,) * 4, active=False,
         braking=False):
@@ -110,7 +110,7 @@ def test_no_turn_below_the_minimum_speed_and_inside_the_thresholds() -> None:
     assert run(est, [60.0, 60.0 + L0 / 2, 60.0, 60.0 + L0 / 2], 50).turn == 0
 
 
-# -- during ABS control (seed 004 §3.2, §3.3) --------------------------------------------------------------------
+# -- during ABS control ([P4] §3.2, §3.3) --------------------------------------------------------------------
 
 def test_identification_under_abs_and_delta_on_the_released_rear_axle() -> None:
     est = TurnStateEstimator(CONFIG)
@@ -195,7 +195,7 @@ def test_parameter_file_errors_name_the_key(tmp_path: Path) -> None:
 def test_estimator_uses_the_car_of_vehicles_md_b() -> None:
     assert (CONFIG.track, CONFIG.wheelbase, CONFIG.cog_to_front_axle) == pytest.approx((B, L, A))
     assert CONFIG.stability_factor == pytest.approx(K)
-    # K of formulas/vehicles.md B from the car's own numbers: m / L^2 (b / C_f - a / C_r)
+    # K of docs/spec/vehicles.md B from the car's own numbers: m / L^2 (b / C_f - a / C_r)
     k = CAR.mass / CAR.wheelbase ** 2 * (CAR.cog_to_rear_axle / CAR.cornering_stiffness_front
                                          - CAR.cog_to_front_axle / CAR.cornering_stiffness_rear)
     assert k == pytest.approx(K, rel=0.01)

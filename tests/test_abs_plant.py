@@ -61,7 +61,7 @@ def test_locked_wheels_decelerate_at_the_sliding_friction(mu: float, bcde: tuple
         v.step(DT)
     assert all(w == 0.0 for w in v.omega)
     assert -v.ax == pytest.approx(mf(1.0, *bcde) * G, rel=1e-6)
-    # load transfer to the front: m a h / L (vehicles.md B, h_cg 0.55 m), after the suspension lag
+    # load transfer to the front: m a h / L (docs/spec/vehicles.md B, h_cg 0.55 m), after the suspension lag
     shift = CAR.mass * -v.ax * CAR.cog_height / CAR.wheelbase
     static_front = CAR.mass * G * CAR.cog_to_rear_axle / CAR.wheelbase
     assert v.fz[0] + v.fz[1] == pytest.approx(static_front + shift, rel=1e-3)
@@ -74,8 +74,8 @@ def test_steady_turn_matches_the_linear_2dof_gain_at_low_lateral_acceleration() 
         v.drive_torque = max(0.0, 400.0 * (25.0 - v.speed * 3.6))
         v.step(DT)
     x = v.u
-    k = 1.90e-3                                      # vehicles.md B
-    expected = x / CAR.wheelbase / (1 + k * x * x) * v.delta      # formulas.md §6 eq. 11
+    k = 1.90e-3                                      # docs/spec/vehicles.md B
+    expected = x / CAR.wheelbase / (1 + k * x * x) * v.delta      # docs/spec/formulas.md §6 eq. 11
     assert v.r == pytest.approx(expected, rel=0.02)
     assert v.r > 0 and v.ay > 0                      # left turn positive in the internal frame
 

@@ -2,7 +2,7 @@
 ABS_SteerState and DRV_Pedals back from the MCAP log (bench.logread.read_decoded), feed the estimator
 (plant/ecus/abs_estimator.py, no bus) and get the same TurnDirection as the ECU produced live.
 
-The scenario covers both identification paths: a steady left turn before braking (seed 004 §3.1), back to
+The scenario covers both identification paths: a steady left turn before braking ([P4] §3.1), back to
 straight, then straight ABS braking with a right angle step (§3.2, the released rear axle).
 
 How the log is read (plant/ecus/abs.py documents the timing): the ECU updates at bench times that are

@@ -1,6 +1,6 @@
-"""The DBCs against the contract (shared/spec/k-matrix.md).
+"""The DBCs against the contract (docs/spec/k-matrix.md).
 
-The expected names, ids, senders, cycle times and units below are copied from k-matrix.md by hand,
+The expected names, ids, senders, cycle times and units below are copied from docs/spec/k-matrix.md by hand,
 not read back from the DBC: if the database drifts from the contract, these tests say where.
 Real ECUs are built against chassis.dbc, so every structural rule is checked on every message.
 """
@@ -48,7 +48,7 @@ CONTRACT: list[tuple[int, str, str, int, dict[str, str | None]]] = [
       **{f"PressureState{w}": ENUM for w in WHEELS}}),
 ]
 
-# (message, signal): value table; k-matrix.md's enumerations plus the project's fault codes
+# (message, signal): value table; docs/spec/k-matrix.md's enumerations plus the project's fault codes
 PRESSURE = {0: "HOLD", 1: "INCREASE", 2: "DECREASE"}
 ENUMS: dict[tuple[str, str], dict[int, str] | None] = {
     ("DRV_MotionRequest", "DriveMode"): MODES,

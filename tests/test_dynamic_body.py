@@ -1,7 +1,7 @@
-"""The EV's dynamics at speed (plant/dynamic_body.py) and seed 003's rear-steering laws (plant/ecus/rear_steer.py,
+"""The EV's dynamics at speed (plant/dynamic_body.py) and [P3]'s rear-steering laws (plant/ecus/rear_steer.py,
 the VCU's ADAPTIVE mode), without the bus.
 
-Expected values are the closed forms of formulas.md §5 written out here, and plant/single_track.py (another
+Expected values are the closed forms of docs/spec/formulas.md §5 written out here, and plant/single_track.py (another
 implementation of §5: exact zero-order-hold discretisation) for the transient.
 """
 
@@ -56,7 +56,7 @@ class FakeIO:
         pass
 
 P = load_vehicle("EV4WIS")
-M, IZ, A, B, CF, CR = 900.0, 1100.0, 1.38, 1.38, 45000.0, 55000.0      # vehicles.md A
+M, IZ, A, B, CF, CR = 900.0, 1100.0, 1.38, 1.38, 45000.0, 55000.0      # docs/spec/vehicles.md A
 WB = A + B
 KS = M / WB ** 2 * (B / CF - A / CR)                                      # §5 stability factor
 RPM_PER_MPS = 30.0 / (math.pi * 0.281)
@@ -161,7 +161,7 @@ def _straight(v: float, angle: float = 0.0) -> tuple[list[float], list[float]]:
 def test_regime_switching_with_hysteresis() -> None:
     body = VehicleBody(P)
     body.advance(*_straight(4.0), DT)
-    assert not body.dynamic                                             # seed 000's U-turn speed: kinematic
+    assert not body.dynamic                                             # [P0]'s U-turn speed: kinematic
     body.advance(*_straight(DYNAMIC_ON_SPEED), DT)
     assert body.dynamic
     body.advance(*_straight(0.5 * (DYNAMIC_ON_SPEED + DYNAMIC_OFF_SPEED)), DT)
@@ -217,10 +217,10 @@ def test_road_mu_is_taken_at_scenario_start() -> None:
     assert plant.body.dynamics.front.mu == MU_MIN
 
 
-# -- seed 003 §2 laws --------------------------------------------------------------------------------------
+# -- [P3] §2 laws --------------------------------------------------------------------------------------
 
 def k_of_u(u: float) -> float:
-    """formulas.md §5: k(u) = (−b + m a u²/(C_r L)) / (a + m b u²/(C_f L))."""
+    """docs/spec/formulas.md §5: k(u) = (−b + m a u²/(C_r L)) / (a + m b u²/(C_f L))."""
     return (-B + M * A * u * u / (CR * WB)) / (A + M * B * u * u / (CF * WB))
 
 
@@ -239,7 +239,7 @@ def test_feedforward_ratio_and_feedback_gain() -> None:
 @pytest.mark.parametrize("kmh", [30.0, 60.0, 100.0])
 def test_feedback_law_zeroes_sideslip_and_gives_the_closed_loop_gain(kmh: float) -> None:
     """δ_r = −δ_f + C2 u r in closed loop with the model (no delay): steady β = 0 (a = b) and
-    r/δ_f = (u/L)(1 + C1)/(1 + K u² + C2 u²/L) (formulas.md §5)."""
+    r/δ_f = (u/L)(1 + C1)/(1 + K u² + C2 u²/L) (docs/spec/formulas.md §5)."""
     u = kmh / 3.6
     laws = SeedLaws(P)
     model = LateralDynamics(ev_single_track(P))

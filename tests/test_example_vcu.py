@@ -5,7 +5,7 @@ simulates every node but the VCU, the example plays the VCU, and `bench run --ex
 4WIS campaign (testcases/test_4wis_*.py), whose expected values come from testcases/oracle.py. The vcan half
 needs the campaign lane (scripts/vcan-lane --example-vcu), which this machine's emulated guest cannot run in
 real time (docs/vcan-lane.md). A second test checks the example's kinematics without a bus against the
-rigid-body definition of formulas.md §2 (independent of the paper's eq. 1-10 the example implements).
+rigid-body definition of docs/spec/formulas.md §2 (independent of the paper's eq. 1-10 the example implements).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from bench.paths import ROOT
 EXAMPLE = ROOT / "examples" / "vcu_ecu.py"
 BENCH = [sys.executable, "-m", "bench"]
 #: The whole 4WIS campaign (every testcases/test_4wis_*.py: 106 cases, about 2 minutes in real time) and the
-#: bench's own mini campaign; expected values come from testcases/oracle.py (formulas.md), not from the example.
+#: bench's own mini campaign; expected values come from testcases/oracle.py (docs/spec/formulas.md), not from the example.
 CASES = [ROOT / "tests" / "fixtures" / "cases" / "test_mini.py", *sorted((ROOT / "testcases").glob("test_4wis_*.py"))]
 
 
@@ -90,14 +90,14 @@ def _load_example():
 
 
 VCU = _load_example()
-WHEELS = {"FL": (-0.555, 1.38), "FR": (0.555, 1.38), "RL": (-0.555, -1.38), "RR": (0.555, -1.38)}  # vehicles.md A
+WHEELS = {"FL": (-0.555, 1.38), "FR": (0.555, 1.38), "RL": (-0.555, -1.38), "RR": (0.555, -1.38)}  # docs/spec/vehicles.md A
 RADIUS = 0.281
 
 
 @settings(max_examples=300, deadline=None)
 @given(x=st.floats(-50, 50), y=st.floats(-50, 50), v=st.floats(-2, 2))
 def test_example_kinematics_are_a_rigid_rotation(x: float, y: float, v: float) -> None:
-    """formulas.md §2 without the paper: each wheel's velocity is ω × (P - S) with ω = v_o / r_o (clockwise);
+    """docs/spec/formulas.md §2 without the paper: each wheel's velocity is ω × (P - S) with ω = v_o / r_o (clockwise);
     its heading must be perpendicular to P - S (angle in (-90°, 90°]) and its speed the projection."""
     fault, plan = VCU.plan_for(VCU.PIVOT, x, y, v, 0.0)
     r_o = math.hypot(x, y)
@@ -136,7 +136,7 @@ def test_example_car_modes_put_the_centre_where_vehicles_md_says() -> None:
         assert fault == VCU.OK and plan.curvature == x_deg
         cx, cy = plan.centre
         assert math.isclose(cy, y_centre) and math.isclose(cx, factor * 1.38 / math.tan(math.radians(x_deg)))
-        # the front-axle centre (0, L) heads at X about S (seed 002's curvature angle)
+        # the front-axle centre (0, L) heads at X about S ([P2]'s curvature angle)
         assert math.isclose(math.degrees(math.atan((1.38 - cy) / cx)), x_deg)
         assert all(n > 0 for n in plan.rpm)                     # forward: every wheel rolls forward
     assert VCU.plan_for(VCU.ADAPTIVE, 0.0, 0.0, 6.0, 300.0)[0] == VCU.INVALID     # above 20 km/h: not here
@@ -146,7 +146,7 @@ def test_example_car_modes_put_the_centre_where_vehicles_md_says() -> None:
 
 
 def test_example_checksum_is_the_contracts() -> None:
-    """k-matrix.md: CRC-8/SAE-J1850, check value 0x4B over '123456789' (init 0xFF, final XOR 0xFF)."""
+    """docs/spec/k-matrix.md: CRC-8/SAE-J1850, check value 0x4B over '123456789' (init 0xFF, final XOR 0xFF)."""
     crc = 0xFF
     for byte in b"123456789":
         crc = VCU.CRC_TABLE[crc ^ byte]

@@ -1,5 +1,5 @@
 """Issue: with the plant alone on udp_multicast, a stand-alone python-can + cantools driver
-(examples/drive_pivot.py) gets wheel angles and speeds that match formulas.md §2."""
+(examples/drive_pivot.py) gets wheel angles and speeds that match docs/spec/formulas.md §2."""
 
 from __future__ import annotations
 
@@ -13,13 +13,13 @@ import time
 
 from bench.paths import ROOT
 
-# vehicles.md A (seed 000 §3): 2K = 1.11 m, 2L = 2.76 m, r = 0.281 m
+# docs/spec/vehicles.md A ([P0] §3): 2K = 1.11 m, 2L = 2.76 m, r = 0.281 m
 K, L, R = 1.11 / 2, 2.76 / 2, 0.281
 WHEELS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
 
 
 def expected(x: float, y: float, v_o: float) -> dict[str, tuple[float, float]]:
-    """formulas.md §2 for the wheel at P: beta = atan((Py - y)/(x - Px)), n = 30 v_o (x - Px)/(pi r r_o cos beta)
+    """docs/spec/formulas.md §2 for the wheel at P: beta = atan((Py - y)/(x - Px)), n = 30 v_o (x - Px)/(pi r r_o cos beta)
     (FL: Px = -K gives atan((L - y)/(x + K)), as printed)."""
     r_o = math.hypot(x, y)
     out = {}

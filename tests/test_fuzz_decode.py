@@ -2,7 +2,7 @@
 `bench dbc check`. None may raise anything but the bench's own errors, whatever bytes arrive.
 
 Oracles are independent of the code under test: cantools decodes the same payload, the E2E checksum is
-written here from its catalogue parameters (k-matrix.md "End-to-end protection"), and the DBC ranges
+written here from its catalogue parameters (docs/spec/e2e.md), and the DBC ranges
 come from cantools' parse of the file.
 """
 

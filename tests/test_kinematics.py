@@ -1,4 +1,4 @@
-"""plant.kinematics against hand-computed cases, formulas.md §2-3 and an independent vector check."""
+"""plant.kinematics against hand-computed cases, docs/spec/formulas.md §2-3 and an independent vector check."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from plant.kinematics import (CENTRE_TOLERANCE_M, Geometry, Undefined, ackermann
                               centre_x_on_mid_axle, centre_x_on_rear_axle, classify_centre, curvature_angle,
                               rotation, translation, yaw_rate)
 
-EV = Geometry(half_track=1.11 / 2, half_wheelbase=2.76 / 2, wheel_radius=0.281)   # vehicles.md A
+EV = Geometry(half_track=1.11 / 2, half_wheelbase=2.76 / 2, wheel_radius=0.281)   # docs/spec/vehicles.md A
 UNIT = Geometry(half_track=1.0, half_wheelbase=2.0, wheel_radius=30.0 / math.pi)   # 1 rpm per m/s
 K, L = EV.half_track, EV.half_wheelbase
 
@@ -107,7 +107,7 @@ def test_classify_centre(x, y, v, forward_only, expected):
     assert classify_centre(x, y, v, EV, forward_only=forward_only) == expected
 
 
-# -- seed 000 §3 U-turn numbers (formulas.md §2) -----------------------------------------------------------
+# -- [P0] §3 U-turn numbers (docs/spec/formulas.md §2) -----------------------------------------------------------
 
 def test_uturn_normal_mode():
     # FL -38 deg with S on the rear-axle line y = -L.
@@ -144,7 +144,7 @@ def test_ackermann_relations(x_deg):
     angles, speeds = rotation(cx, -L, 1.0, EV)
     beta, alpha = abs(angles[0]), abs(angles[1])     # right turn: FL outer, FR inner
     cot = lambda d: 1.0 / math.tan(math.radians(d))  # noqa: E731
-    track, wheelbase = 2 * K, 2 * L                  # seed 002's K and L
+    track, wheelbase = 2 * K, 2 * L                  # [P2]'s K and L
     assert cot(beta) - cot(alpha) == pytest.approx(track / wheelbase)
     assert cot(beta) - cot(x_deg) == pytest.approx(track / (2 * wheelbase))
     assert cot(x_deg) - cot(alpha) == pytest.approx(track / (2 * wheelbase))

@@ -3,7 +3,7 @@
 Two layers. Without CAN in the kernel (this host), a fake kernel stands in for SocketCAN: BCM tasks that send
 their frames in turn on a timer, raw sockets with CAN_RAW_FILTER (inverted, joined) and loopback to the other
 sockets. A station runs on it tick by tick through stable values, a single change, a ramp, stop_sending and
-a fault plan; the frames "on the wire" must keep the contract (k-matrix.md: AliveCounter +1 per transmission,
+a fault plan; the frames "on the wire" must keep the contract (docs/spec/k-matrix.md: AliveCounter +1 per transmission,
 CRC-8/SAE-J1850 Checksum, the DBC cycle) across every hand-over, and the station's log must hold exactly the
 wire's frames. With CAN in the kernel (the vcan lane: scripts/vcan-lane --command 'python -m pytest
 tests/test_periodic.py'), the same checks run against the real BCM on vcan0.

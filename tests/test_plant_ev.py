@@ -93,7 +93,7 @@ class Rig:
 
 
 def expected_pivot(x: float, y: float, v_o: float) -> dict[str, tuple[float, float]]:
-    """seed 000 eq. 1-10 (E1 corrected), written out here independently of plant.kinematics."""
+    """[P0] eq. 1-10 (E1 corrected), written out here independently of plant.kinematics."""
     r_o = math.hypot(x, y)
     out = {}
     for c, (px, py) in POSITIONS.items():
@@ -144,7 +144,7 @@ def test_pivot_wheels_converge_and_body_rotates_about_centre():
     assert imu["LongAccel"] == pytest.approx(omega ** 2 * sy, rel=1e-2)
 
 
-# -- seed 000 §3 U-turn with the closed loop ------------------------------------------------------------
+# -- [P0] §3 U-turn with the closed loop ------------------------------------------------------------
 
 def _outer_wheel_diameter(rig: Rig, seconds: float) -> float:
     points: list[tuple[float, float]] = []
@@ -437,7 +437,7 @@ def test_vehicle_file_values_and_sources():
     assert (p.track, p.wheelbase, p.wheel_radius, p.steer_limit) == (1.11, 2.76, 0.281, 90.0)
     assert (p.mass, p.yaw_inertia, p.cornering_stiffness_front, p.cornering_stiffness_rear) == (900, 1100, 45000, 55000)
     assert p.hand_wheel_ratio == 15 and p.servo_rate_limit == 120 and p.servo_lag == 0.05 and p.hub_motor_lag == 0.1
-    assert p.sources["track"].startswith("seed 000") and p.sources["mass"].startswith("chosen")
+    assert p.sources["track"].startswith("[P0]") and p.sources["mass"].startswith("chosen")
     assert p.geometry.half_track == pytest.approx(K)
 
 

@@ -1,6 +1,6 @@
 """The ACLASS plant with its SBW (plant/sbw.py, plant/driver.py, plant/ecus/sbw.py, plant/assemblies/aclass.py)
-on a fake NodeIO at dt = 1 ms, no bus: seed 001's mechanics, the bilateral control, the yaw-rate feedback of
-seed 003 §1, the sensor-fault detection and reactions, the DBC ranges, scenario reset and the tick cost."""
+on a fake NodeIO at dt = 1 ms, no bus: [P1]'s mechanics, the bilateral control, the yaw-rate feedback of
+[P3] §1, the sensor-fault detection and reactions, the DBC ranges, scenario reset and the tick cost."""
 
 from __future__ import annotations
 
@@ -106,7 +106,7 @@ class Rig:
 
 def test_parameter_file_values_units_and_sources() -> None:
     assert P.steering_ratio == 15.0 and P.ideal_yaw_gain == 0.28 and P.control_rate >= 1000.0
-    assert P.sources["steering_ratio"].startswith("vehicles.md") and P.sources["assist_gain"].startswith("chosen")
+    assert P.sources["steering_ratio"].startswith("docs/spec/vehicles.md") and P.sources["assist_gain"].startswith("chosen")
     assert all(P.sources[name] for name in P.sources)
 
 
@@ -212,7 +212,7 @@ def test_external_sbw_takes_the_road_wheel_angle_from_sbw_pinion() -> None:
     assert rig.v("PLANT_Motion", "YawRate") == pytest.approx(gain * 30.0 / 15.0, rel=1e-3)
 
 
-# -- mechanics (seed 001 eq. 1-10) --------------------------------------------------------------------------------
+# -- mechanics ([P1] eq. 1-10) --------------------------------------------------------------------------------
 
 class _Volts:
     def __init__(self, u_m: float = 0.0, u_M: float = 0.0) -> None:
@@ -299,7 +299,7 @@ def test_robot_torque_off_and_invalid_commands() -> None:
 # -- bilateral control ------------------------------------------------------------------------------------------------
 
 def test_steady_twist_is_aligning_torque_over_assist_times_torsion_bar() -> None:
-    """Seed 001's force control: at rest, G·T_d balances the aligning torque, so the hand wheel leads the
+    """[P1]'s force control: at rest, G·T_d balances the aligning torque, so the hand wheel leads the
     pinion by T_a/(G K_h) within the dry-friction band T_f/(G K_h)."""
     rig = Rig(50.0)
     rig.robot(ANGLE, 48.0)
@@ -329,7 +329,7 @@ def test_hand_wheel_returns_when_released() -> None:
     assert 0.0 <= rig.v("SBW_HandWheel", "HandWheelAngle") < 0.2 * 60.0
 
 
-# -- yaw-rate feedback (seed 003 §1) ----------------------------------------------------------------------------------
+# -- yaw-rate feedback ([P3] §1) ----------------------------------------------------------------------------------
 
 @settings(max_examples=6, deadline=None)
 @given(kmh=st.sampled_from([30.0, 45.0, 70.0, 90.0, 120.0]), mode=st.sampled_from([1, 2]),

@@ -1,10 +1,10 @@
-"""plant/single_track.py: the linear 2-DOF model of formulas.md §5.
+"""plant/single_track.py: the linear 2-DOF model of docs/spec/formulas.md §5.
 
-- Cross-check against commonroad-vehicle-models' single-track model ST (vehicles.md B, "Independent
+- Cross-check against commonroad-vehicle-models' single-track model ST (docs/spec/vehicles.md B, "Independent
   cross-checks"): BMW 320i (vehicle 2), 50 km/h, road-wheel step 0.040107 rad; with its cornering stiffnesses
   per unit load equal front and rear the car is neutral (K = 0) and the ST model is the same linear model:
   the yaw rates agree within 1e-4 relative over 2 s (they do to about 1e-8).
-- Steady-state gains against the closed forms of §5 for K ≠ 0 (the A-class car of vehicles.md B), typed here
+- Steady-state gains against the closed forms of §5 for K ≠ 0 (the A-class car of docs/spec/vehicles.md B), typed here
   independently of the plant, and the 4WS steady state (rear input) as another engineer will use it.
 - Exactness and stability of the discretisation, the kinematic regime below 1 m/s, bad input.
 """
@@ -19,11 +19,11 @@ from hypothesis import strategies as st
 
 from plant.single_track import KINEMATIC_SPEED, SingleTrack, SingleTrackParams
 
-# vehicles.md B, written out (not read from plant/vehicles)
+# docs/spec/vehicles.md B, written out (not read from plant/vehicles)
 M, IZ, A, B, CF, CR = 1350.0, 2050.0, 1.06, 1.59, 85000.0, 120000.0
 L = A + B
 ACLASS = SingleTrackParams(M, IZ, A, B, CF, CR)
-K_ACLASS = M / L ** 2 * (B / CF - A / CR)      # formulas.md §5
+K_ACLASS = M / L ** 2 * (B / CF - A / CR)      # docs/spec/formulas.md §5
 
 
 def _rk4_reference(params: SingleTrackParams, u: float, delta_f: float, delta_r: float, t_end: float,
@@ -63,7 +63,7 @@ def test_commonroad_st_model_bmw320i_step_at_50kmh() -> None:
     cf = mu * c_s * p.m * g * p.b / wheelbase         # axle cornering stiffness = μ C_S × static axle load
     cr = mu * c_s * p.m * g * p.a / wheelbase
     params = SingleTrackParams(p.m, p.I_z, p.a, p.b, cf, cr)
-    assert params.stability_factor == pytest.approx(0.0, abs=1e-12)       # neutral steer (vehicles.md)
+    assert params.stability_factor == pytest.approx(0.0, abs=1e-12)       # neutral steer (docs/spec/vehicles.md)
 
     u, delta, duration, dt = 50.0 / 3.6, 0.040107, 2.0, 1e-3
     # the ST model's own right-hand side, integrated with RK4 at 0.1 ms (|λ| h ≈ 1e-3: error ~1e-13)
@@ -88,7 +88,7 @@ def test_commonroad_st_model_bmw320i_step_at_50kmh() -> None:
         model.step(dt, delta)
         worst = max(worst, abs(model.yaw_rate - r_ref) / abs(reference[-1]))
     assert worst < 1e-4, worst
-    # vehicles.md B's figures for this set: steady 0.21600 rad/s, a_y 3.000 m/s², 90 % at 0.148 s
+    # docs/spec/vehicles.md B's figures for this set: steady 0.21600 rad/s, a_y 3.000 m/s², 90 % at 0.148 s
     assert model.yaw_rate == pytest.approx(0.21600, abs=5e-5)
     assert model.lat_accel == pytest.approx(3.000, abs=2e-3)
     probe = SingleTrack(params, u)
@@ -103,15 +103,15 @@ def test_commonroad_st_model_bmw320i_step_at_50kmh() -> None:
 
 def test_aclass_stability_factor_and_vehicles_md_figures() -> None:
     assert ACLASS.stability_factor == pytest.approx(K_ACLASS)
-    assert ACLASS.stability_factor == pytest.approx(1.90e-3, rel=5e-3)               # vehicles.md B
-    assert ACLASS.characteristic_speed * 3.6 == pytest.approx(82.6, abs=0.1)         # vehicles.md B
-    assert ACLASS.yaw_rate_gain(50 / 3.6) == pytest.approx(3.84, abs=0.005)          # vehicles.md B
+    assert ACLASS.stability_factor == pytest.approx(1.90e-3, rel=5e-3)               # docs/spec/vehicles.md B
+    assert ACLASS.characteristic_speed * 3.6 == pytest.approx(82.6, abs=0.1)         # docs/spec/vehicles.md B
+    assert ACLASS.yaw_rate_gain(50 / 3.6) == pytest.approx(3.84, abs=0.005)          # docs/spec/vehicles.md B
 
 
 @settings(max_examples=40, deadline=None)
 @given(u=st.floats(2.0, 60.0), delta=st.floats(-0.1, 0.1).filter(lambda d: abs(d) > 1e-4))
 def test_steady_state_matches_closed_forms(u: float, delta: float) -> None:
-    """r/δ_f = (u/L)/(1 + K u²), β/δ_f = (b/L − m a u²/(C_r L²))/(1 + K u²), a_y = u r (formulas.md §5)."""
+    """r/δ_f = (u/L)/(1 + K u²), β/δ_f = (b/L − m a u²/(C_r L²))/(1 + K u²), a_y = u r (docs/spec/formulas.md §5)."""
     beta, r, ay = ACLASS.steady_state(u, delta)
     denominator = 1.0 + K_ACLASS * u * u
     assert r == pytest.approx(delta * (u / L) / denominator, rel=1e-9)
@@ -135,7 +135,7 @@ def test_stepping_settles_to_the_closed_form(kmh: float) -> None:
 @given(u=st.floats(3.0, 50.0), delta_f=st.floats(-0.08, 0.08), ratio=st.floats(-1.0, 1.0))
 def test_four_wheel_steering_steady_state(u: float, delta_f: float, ratio: float) -> None:
     """With a rear input the steady yaw rate depends on δ_f − δ_r only: r = u (δ_f − δ_r)/(L (1 + K u²))
-    (derived from §5), and the zero-sideslip ratio k(u) of formulas.md §5 gives β = 0."""
+    (derived from §5), and the zero-sideslip ratio k(u) of docs/spec/formulas.md §5 gives β = 0."""
     delta_r = ratio * delta_f
     beta, r, _ = ACLASS.steady_state(u, delta_f, delta_r)
     assert r == pytest.approx(u * (delta_f - delta_r) / (L * (1.0 + K_ACLASS * u * u)), rel=1e-9, abs=1e-15)
@@ -145,7 +145,7 @@ def test_four_wheel_steering_steady_state(u: float, delta_f: float, ratio: float
 
 
 def test_zero_sideslip_ratio_changes_sign_at_vehicles_md_speed() -> None:
-    """vehicles.md B: k = −0.46 at 40 km/h, +0.22 at 100 km/h, sign change at 67.7 km/h; checked on the model."""
+    """docs/spec/vehicles.md B: k = −0.46 at 40 km/h, +0.22 at 100 km/h, sign change at 67.7 km/h; checked on the model."""
     def k_from_model(kmh: float) -> float:
         u = kmh / 3.6
         b_f, _, _ = ACLASS.steady_state(u, 1.0, 0.0)

@@ -1,5 +1,5 @@
-"""Magic Formula tyre (plant/tyre.py, vehicles.md B): pure slip against the formula typed here, the peaks
-vehicles.md states, the slope, and the combined-slip properties the module documents."""
+"""Magic Formula tyre (plant/tyre.py, docs/spec/vehicles.md B): pure slip against the formula typed here, the peaks
+docs/spec/vehicles.md states, the slope, and the combined-slip properties the module documents."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from plant.tyre import CombinedSlipTyre, Shape, lateral_b
 
 
 def mf(x: float, b: float, c: float, d: float, e: float) -> float:
-    """vehicles.md B: D sin(C atan(B x - E (B x - atan(B x)))), typed independently of plant/tyre.py."""
+    """docs/spec/vehicles.md B: D sin(C atan(B x - E (B x - atan(B x)))), typed independently of plant/tyre.py."""
     return d * math.sin(c * math.atan(b * x - e * (b * x - math.atan(b * x))))
 
 
@@ -34,7 +34,7 @@ def test_pure_longitudinal_is_the_magic_formula(shape: Shape, bcde: tuple, slip:
 
 
 def test_peaks_where_vehicles_md_says() -> None:
-    # vehicles.md B: dry peak at slip 0.18; the wet curve (B 12, C 2.3, E 1) peaks at 0.088
+    # docs/spec/vehicles.md B: dry peak at slip 0.18; the wet curve (B 12, C 2.3, E 1) peaks at 0.088
     assert DRY[0].peak() == pytest.approx(0.18, abs=0.001)
     assert WET[0].peak() == pytest.approx(0.0882, abs=0.001)
     scan = max(range(1, 5000), key=lambda i: mf(i / 10000, *DRY_BCDE))
@@ -72,7 +72,7 @@ def test_pure_lateral_and_locked_wheel() -> None:
 
 
 def test_lateral_b_gives_the_axle_cornering_stiffness() -> None:
-    # vehicles.md B: C_f = 85 000 N/rad per axle; front static wheel load 1350 g 1.59 / 2.65 / 2
+    # docs/spec/vehicles.md B: C_f = 85 000 N/rad per axle; front static wheel load 1350 g 1.59 / 2.65 / 2
     fz = 1350 * 9.81 * 1.59 / 2.65 / 2
     b = lateral_b(85000.0, fz, 1.3)
     tyre = CombinedSlipTyre(DRY[0], Shape(b, 1.3, -1.0))

@@ -5,7 +5,7 @@ guest on machines without SocketCAN) and on any Linux host with vcan0 up. Elsewh
 the lane (VCAN_CHANNEL set), where a missing vcan0 is a failure: the lane must never pass by skipping.
 
 What is checked, from the kernel's receive timestamps of a receiver that only collects (and judges after):
-every frame of the plant keeps the contract (k-matrix.md: AliveCounter +1 per frame, CRC-8/SAE-J1850 over
+every frame of the plant keeps the contract (docs/spec/k-matrix.md: AliveCounter +1 per frame, CRC-8/SAE-J1850 over
 identifier and data, tests/reference.py), every message of the vehicle's network is there at its DBC cycle
 time (p50 within 5 %, as Case.check_cycle_times), no frame of another vehicle's network is on the bus, and the
 plant's own status line reports no invalid frame.

@@ -1,5 +1,5 @@
 """`bench dbc [FILE ...]`: list what a DBC carries (ids, senders, cycle times, signals with units),
-so an engineer can check a database against k-matrix.md at a glance without opening an editor.
+so an engineer can check a database against docs/spec/k-matrix.md at a glance without opening an editor.
 
 `bench dbc check [FILE ...]`: check databases against the bench's needs (`bench.dbccheck`) and print
 every finding with its file and line. Exit 0 when no file has an error (warnings allowed), 1 when one

@@ -2,8 +2,8 @@
 
 Each case asks the 4WIS EV for PIVOT about a random centre S = (x, y) (seeded; on the 0.02 m grid of
 PivotX/PivotY; |x| ≥ 1.2 m, so that S is never between the wheels of an axle and no wheel folds) and checks
-every wheel's reached angle and speed (WHL_Status_xx) against formulas.md §2 (seed 000 eq. 1-4 and 7-10,
-erratum E1 corrected), written out here. Vehicle: vehicles.md A / seed 000 §3 (2K = 1.11 m, 2L = 2.76 m,
+every wheel's reached angle and speed (WHL_Status_xx) against docs/spec/formulas.md §2 ([P0] eq. 1-4 and 7-10,
+erratum E1 corrected), written out here. Vehicle: docs/spec/vehicles.md A / [P0] §3 (2K = 1.11 m, 2L = 2.76 m,
 r = 0.281 m). Tolerances as the 4WIS issue: angle 0.05°, speed 0.5 % or 0.2 rpm (whichever is larger).
 benchmarks/bench_scale_out.py runs it with 1 process and with `bench run -n 2`.
 """
@@ -14,8 +14,8 @@ import random
 
 import pytest
 
-K, L, R = 1.11 / 2, 2.76 / 2, 0.281     # half track, half wheelbase, wheel radius (m), vehicles.md A
-WHEELS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}   # formulas.md §1
+K, L, R = 1.11 / 2, 2.76 / 2, 0.281     # half track, half wheelbase, wheel radius (m), docs/spec/vehicles.md A
+WHEELS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}   # docs/spec/formulas.md §1
 ANGLE_TOL, SPEED_REL, SPEED_ABS = 0.05, 0.005, 0.2
 GRID = 0.02          # m, PivotX/PivotY resolution
 CONVERGE_S = 3.0     # s of bench time the wheels get (≤ 180° at 120 °/s plus the servo and hub-motor lags)
@@ -32,7 +32,7 @@ def _centres(n: int, seed: int) -> list[tuple[float, float]]:
 
 
 def expected(x: float, y: float, v: float) -> dict[str, tuple[float, float]]:
-    """formulas.md §2: β_i = atan((P_iy − y)/(x − P_ix)), n_i = 30 v (x − P_ix)/(π r r_o cos β_i) [deg, rpm]."""
+    """docs/spec/formulas.md §2: β_i = atan((P_iy − y)/(x − P_ix)), n_i = 30 v (x − P_ix)/(π r r_o cos β_i) [deg, rpm]."""
     r_o = math.hypot(x, y)
     out = {}
     for wheel, (px, py) in WHEELS.items():

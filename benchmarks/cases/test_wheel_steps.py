@@ -1,7 +1,7 @@
 """Loop latency (issue 9, target 4): the four wheels' steering commands step BENCH_WHEEL_STEPS times.
 
 Each step asks the 4WIS EV for a new PIVOT centre (seeded, on the 0.02 m grid of PivotX/PivotY, to the
-right of the right wheels so that no wheel folds, formulas.md §2), so every VCU_WheelCmd_xx.SteerAngleCmd
+right of the right wheels so that no wheel folds, docs/spec/formulas.md §2), so every VCU_WheelCmd_xx.SteerAngleCmd
 changes at once; the case waits until every WHL_Status_xx.SteerAngle has reached its command (within 0.05°,
 the 4WIS issue's angle tolerance) and lets it rest, so that the next change starts from a status at rest
 (what bench/timing.py times). The latency itself is measured by the run's timing section (bench.toml

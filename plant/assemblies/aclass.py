@@ -1,5 +1,5 @@
-"""Vehicle "ACLASS": the A-class car of vehicles.md B with front steer-by-wire (seed 001) on the linear
-single-track model (formulas.md §5), as bus nodes.
+"""Vehicle "ACLASS": the A-class car of docs/spec/vehicles.md B with front steer-by-wire ([P1]) on the linear
+single-track model (docs/spec/formulas.md §5), as bus nodes.
 
 Behaviours, stepped in this order every plant tick:
 1. PLANT (`AclassPlant`): the physical world. It takes the steering robot's command (BENCH_SteeringRobot)
@@ -68,7 +68,7 @@ MESSAGES = frozenset({
 
 
 def single_track_params(p: AclassParams) -> SingleTrackParams:
-    """vehicles.md B as the §5 model's parameters."""
+    """docs/spec/vehicles.md B as the §5 model's parameters."""
     return SingleTrackParams(p.mass, p.yaw_inertia, p.cog_to_front_axle, p.cog_to_rear_axle,
                              p.cornering_stiffness_front, p.cornering_stiffness_rear)
 
@@ -99,7 +99,7 @@ class AclassPlant:
         self.robot.reset()
         self.scenario: int | None = None
         self._t0: float | None = None
-        self.x = self.y = 0.0               # world position of the CoG, m (start frame, formulas.md §1)
+        self.x = self.y = 0.0               # world position of the CoG, m (start frame, docs/spec/formulas.md §1)
         self._bus_pinion = 0.0              # deg, SBW_Pinion.PinionAngle when the SBW is external
 
     def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:

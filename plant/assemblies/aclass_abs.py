@@ -1,8 +1,8 @@
-"""Vehicle ACLASS_ABS: the A-class car of vehicles.md B with brake hydraulics, Magic Formula tyres, wheel-speed
-sensors and the reference ABS ECU of seed 004.
+"""Vehicle ACLASS_ABS: the A-class car of docs/spec/vehicles.md B with brake hydraulics, Magic Formula tyres, wheel-speed
+sensors and the reference ABS ECU of [P4].
 
 Parameters: plant/vehicles/aclass.toml (the car) and plant/vehicles/abs.toml (what braking adds; its
-hand_wheel_ratio 18 is seed 004's i_w and replaces the car's 15 for this vehicle).
+hand_wheel_ratio 18 is [P4]'s i_w and replaces the car's 15 for this vehicle).
 
 Step order (the returned list IS the order): PLANT, then ABS. The ABS reads the sensors and commands the
 valves of the plant by direct reference (its wires), so it sees the wheels of this very tick; its valve

@@ -1,4 +1,4 @@
-"""The 4WIS steer-by-wire EV (vehicles.md A) as bus nodes.
+"""The 4WIS steer-by-wire EV (docs/spec/vehicles.md A) as bus nodes.
 
 Step order within a tick: the returned list IS the order and must be stepped front to back:
 VCU, WHL_FL, WHL_FR, WHL_RL, WHL_RR, PLANT, IMU. The VCU and the wheels talk over the bus (their

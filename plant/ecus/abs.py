@@ -1,4 +1,4 @@
-"""Reference ABS ECU (node ABS, seed 004): wheel-speed sensing, Bosch-style pressure modulation
+"""Reference ABS ECU (node ABS, [P4]): wheel-speed sensing, Bosch-style pressure modulation
 (plant/ecus/abs_control.py), turning-state identification and reference speed (plant/ecus/abs_estimator.py);
 publishes ABS_WheelSpeeds and ABS_SteerState (dbc/chassis.dbc).
 
@@ -11,12 +11,12 @@ switch (DRV_Pedals, which the ABS receives per the contract), so a log replays t
 Control strategy (chosen, documented):
   - individual control of the front wheels, select-low on the rear axle (both rear circuits get the command
     of the rear wheel nearer to locking: the classic rear-axle stability choice); PressureStateXX reports each
-    wheel's own cycle phase (WheelController.cycle_state), the control states seed 004 §3.2 reads;
+    wheel's own cycle phase (WheelController.cycle_state), the control states [P4] §3.2 reads;
   - slip thresholds against the reference speed moved to each wheel by the four-wheel model (eq. 4, 14) with
     the estimator's yaw rate, so that the inner wheels of a turn are not taken for slipping ones;
   - in an identified braked turn (AbsActive and TurnDirection != 0) the rear axle is released (pressure dumped,
     the rear wheels roll freely: full rear side force, and the rear axle becomes the kinematic reference of
-    seed 004 eq. 5, 7, 9, 12 for the estimator's step 3) and the front wheels use the lower slip threshold
+    [P4] eq. 5, 7, 9, 12 for the estimator's step 3) and the front wheels use the lower slip threshold
     turn_front_slip_threshold (side force); the rear axle re-applies when the turn ends.
 
 Hardware it needs from the plant (direct references, no bus latency, like a real ECU's wires): the four
@@ -89,7 +89,7 @@ def brake_demand(pedals: Mapping[str, float], pedal_to_pressure: float) -> float
 
 
 def estimator_config(params: AbsParams, car: AclassParams) -> EstimatorConfig:
-    """The estimator of the reference ECU: geometry of vehicles.md B, calibration and thresholds of abs.toml."""
+    """The estimator of the reference ECU: geometry of docs/spec/vehicles.md B, calibration and thresholds of abs.toml."""
     return EstimatorConfig(track=car.track, wheelbase=car.wheelbase, cog_to_front_axle=car.cog_to_front_axle,
                            stability_factor=params.stability_factor, v_l0=params.v_l0, v_l1=params.v_l1,
                            v_l2=params.v_l2, t0=params.t0, t1=params.t1, period=OUTPUT_PERIOD_MS / 1000.0,

@@ -1,5 +1,5 @@
 """Pressure-modulation logic of the reference ABS: Bosch-style phases on wheel deceleration and slip, one
-phase machine per wheel (each wheel's own control state, which seed 004 §3.2's side pattern "Dec1, Dec3, Inc2,
+phase machine per wheel (each wheel's own control state, which [P4] §3.2's side pattern "Dec1, Dec3, Inc2,
 Inc4" reads; plant/ecus/abs.py combines the rear two select-low into one rear-axle command).
 
 The cycle (after the Bosch Automotive Handbook's ABS control cycle on high friction, simplified):
@@ -26,7 +26,7 @@ The cycle (after the Bosch Automotive Handbook's ABS control cycle on high frict
                 identified braked turn, plant/ecus/abs.py).
 
 Any phase -> OFF when the brake switch opens or the reference speed is below abs_min_speed. The end of
-HOLD_REACCEL (into REAPPLY) is the "hold -> increase switching point" of seed 004 §3.2-3.3; `cycle_state`
+HOLD_REACCEL (into REAPPLY) is the "hold -> increase switching point" of [P4] §3.2-3.3; `cycle_state`
 reports the phase so that it shows on the bus as DECREASE -> INCREASE.
 
 Thresholds (plant/vehicles/abs.toml, chosen): -a = 20 m/s^2 (a braked wheel on dry asphalt decelerates at
@@ -168,7 +168,7 @@ class WheelController:
         wheel recover), INCREASE while the pressure is rebuilt or follows the driver (phases 5-7 and OFF),
         HOLD for the hold before the first reduction (phase 2); a pause of the stepped increase (phase 7) is
         INCREASE. The end of the re-acceleration hold, DECREASE ->
-        INCREASE on the bus, is the hold->increase switching point of seed 004 §3.2-3.3."""
+        INCREASE on the bus, is the hold->increase switching point of [P4] §3.2-3.3."""
         phase = self.phase
         if phase in (Phase.DECREASE, Phase.HOLD_REACCEL, Phase.RELEASED):
             return Valve.DECREASE

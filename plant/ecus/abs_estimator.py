@@ -1,22 +1,22 @@
-"""Turning-state identification and reference speed of the ABS (seed 004 eq. 5-14, formulas.md §6), as a pure
+"""Turning-state identification and reference speed of the ABS ([P4] eq. 5-14, docs/spec/formulas.md §6), as a pure
 class: no bus, no plant. The reference ABS ECU (plant/ecus/abs.py) runs it on exactly what it publishes
 (ABS_WheelSpeeds, the PressureStateXX and AbsActive of ABS_SteerState, and its brake switch), so a replay of
 a recorded log gives the same flags (tests/test_abs_replay.py).
 
 Signs are the paper's: wheels 1-4 = FL, FR, RL, RR; yaw rate r > 0 and road-wheel angle delta > 0 for a LEFT
-turn; T = 1 left, -1 right, 0 straight (the exception of formulas.md §1, kept on the bus in TurnDirection).
+turn; T = 1 left, -1 right, 0 straight (the exception of docs/spec/formulas.md §1, kept on the bus in TurnDirection).
 The ECU negates delta for FrontWheelAngleEst (bus: positive right). Speeds in km/h, as on the bus.
 
-Before ABS control (seed 004 §3.1, "before braking" and "braking before ABS" merged as the paper does):
+Before ABS control ([P4] §3.1, "before braking" and "braking before ABS" merged as the paper does):
   - the wheel speeds are low-pass filtered (first order, speed_filter_time: the paper's "anti-interference
     measures"; eq. 13 on raw 10 ms samples would flag every noise burst);
   - dV1 = V2 - V1 (6), dV2 = V4 - V3 (7), ddV = |dV1 - dV2| (8) of the filtered speeds;
   - T from eq. 13 with erratum E3 corrected (ddV < V_l2 for BOTH signs); a new value is taken once it has
     held t1 (the same confirmation time as in ABS control); none below min_turn_speed;
   - delta from eq. 12 with x = the filtered rear mean (5) when T != 0, else 0;
-  - reference speed, seed 004 §3.3 wheel selection: not braking: rear mean (5, 10) in a turn, third-largest
+  - reference speed, [P4] §3.3 wheel selection: not braking: rear mean (5, 10) in a turn, third-largest
     wheel when straight; braking: second-largest wheel.
-During ABS control (seed 004 §3.2 and §3.3):
+During ABS control ([P4] §3.2 and §3.3):
   - a wheel's "hold->increase switching point" is, on the bus, its first sample in INCREASE after it was in
     DECREASE: the end of a pressure cycle, where the wheel has re-accelerated (the reference ECU reports the
     cycle's phase, plant/ecus/abs_control.py); a pause inside the stepped increase is not one;
@@ -29,16 +29,16 @@ During ABS control (seed 004 §3.2 and §3.3):
   - step 3 ("then identify delta and V_f as before ABS control"): the reference ECU releases the rear axle in
     an identified turn (both rear PressureStates DECREASE), so after rear_release_time the rear wheels roll
     freely and the method before ABS applies to them: V_f = rear mean (eq. 5, 10) and delta from eq. 12 with
-    the moving average (seed 004 §4: delta-bar) of dV2 over delta_average_points samples, published once
+    the moving average ([P4] §4: delta-bar) of dV2 over delta_average_points samples, published once
     the window is full (0 until then: "not identified yet"); the yaw rate of eq. 9 from the same window is
     given to the ECU for its wheel references; the turn ends when the averaged dV2 stays below V_l0 for t1;
-  - reference speed otherwise (seed 004 §3.3 interpolation): each switching point gives a point, the wheel's
+  - reference speed otherwise ([P4] §3.3 interpolation): each switching point gives a point, the wheel's
     speed times (1 + decel / (g k_s)) - at the end of its re-acceleration a wheel still carries its share of
     the braking, with a slip of about that (point_slip_stiffness k_s, chosen) - moved to the CoG by the
     four-wheel model (eq. 4, 14; r from eq. 11 with the identified delta; no correction when T = 0); the
     reference speed and its slope are the least-squares line through the points of the last point_window
     (the slope bounded to [-max_decel, 0]); between points it is extrapolated with that slope, and it is never
-    below the second-largest corrected wheel speed (seed 004: the second-largest wheel during braking).
+    below the second-largest corrected wheel speed ([P4]: the second-largest wheel during braking).
 Below min_delta_speed the published delta is held (eq. 12's gain grows as 1/x: it would amplify the noise).
 """
 
@@ -57,7 +57,7 @@ LEFT, STRAIGHT, RIGHT = 1, 0, -1            # ABS_SteerState.TurnDirection value
 
 
 def turn_direction(dv1: float, dv2: float, ddv: float, v_l0: float, v_l1: float, v_l2: float) -> int:
-    """Seed 004 eq. 13 with erratum E3 corrected (formulas.md §6): ddV < V_l2 for both signs.
+    """[P4] eq. 13 with erratum E3 corrected (docs/spec/formulas.md §6): ddV < V_l2 for both signs.
 
     T = 1 if V_l0 < dV1, dV2 < V_l1 and ddV < V_l2; T = -1 if V_l0 < -dV1, -dV2 < V_l1 and ddV < V_l2; else 0."""
     if ddv >= v_l2:
@@ -70,13 +70,13 @@ def turn_direction(dv1: float, dv2: float, ddv: float, v_l0: float, v_l1: float,
 
 
 def front_wheel_angle(dv2_kmh: float, x_kmh: float, wheelbase: float, track: float, k: float) -> float:
-    """Seed 004 eq. 12: delta = L (1 + K x^2) dV2 / (B x), rad (left positive); x and dV2 in km/h."""
+    """[P4] eq. 12: delta = L (1 + K x^2) dV2 / (B x), rad (left positive); x and dV2 in km/h."""
     x = x_kmh / KMH
     return wheelbase * (1.0 + k * x * x) * (dv2_kmh / KMH) / (track * x)
 
 
 def yaw_rate(delta: float, x_kmh: float, wheelbase: float, k: float) -> float:
-    """Seed 004 eq. 11: r = delta (x / L) / (1 + K x^2), rad/s (left positive)."""
+    """[P4] eq. 11: r = delta (x / L) / (1 + K x^2), rad/s (left positive)."""
     x = x_kmh / KMH
     return delta * x / wheelbase / (1.0 + k * x * x)
 
@@ -88,7 +88,7 @@ def nth_largest(values: Sequence[float], n: int) -> float:
 
 @dataclass(frozen=True)
 class EstimatorConfig:
-    """Vehicle geometry (vehicles.md B), the ECU's calibration and seed 004's thresholds (abs.toml)."""
+    """Vehicle geometry (docs/spec/vehicles.md B), the ECU's calibration and [P4]'s thresholds (abs.toml)."""
 
     track: float                 # B, m
     wheelbase: float             # L, m
@@ -138,7 +138,7 @@ class Estimate:
 
 
 class TurnStateEstimator:
-    """Seed 004's identification of P = {V, T, delta} (module doc). Call `update` every `config.period`."""
+    """[P4]'s identification of P = {V, T, delta} (module doc). Call `update` every `config.period`."""
 
     def __init__(self, config: EstimatorConfig) -> None:
         self.c = config
@@ -187,7 +187,7 @@ class TurnStateEstimator:
             r = yaw_rate(self.delta, self.ref_speed, c.wheelbase, c.stability_factor) if self.turn else 0.0
         return Estimate(self.turn, self.ref_speed, math.degrees(self.delta), r, self.slope)
 
-    # -- before ABS control (seed 004 §3.1) ----------------------------------------------------------------
+    # -- before ABS control ([P4] §3.1) ----------------------------------------------------------------
     def _free_update(self, speeds: Sequence[float], braking: bool) -> None:
         c = self.c
         f = self._filtered
@@ -222,7 +222,7 @@ class TurnStateEstimator:
         elif x >= c.min_delta_speed or not self.delta:
             self.delta = front_wheel_angle(dv2, x, c.wheelbase, c.track, c.stability_factor)
 
-    # -- during ABS control (seed 004 §3.2, §3.3) ----------------------------------------------------------
+    # -- during ABS control ([P4] §3.2, §3.3) ----------------------------------------------------------
     def _enter_abs(self, states: Sequence[int]) -> None:
         self._in_abs = True
         self._decreased = [False] * 4
@@ -243,7 +243,7 @@ class TurnStateEstimator:
         self.slope = self._bounded_slope(s)
 
     def _offsets(self) -> tuple[float, float, float, float]:
-        """Four-wheel model (seed 004 eq. 4, 14): wheel speed - CoG speed per unit yaw rate, km/h per rad/s."""
+        """Four-wheel model ([P4] eq. 4, 14): wheel speed - CoG speed per unit yaw rate, km/h per rad/s."""
         c = self.c
         half, ad = c.track / 2.0, c.cog_to_front_axle * self.delta
         return ((ad - half) * KMH, (ad + half) * KMH, -half * KMH, half * KMH)
@@ -280,8 +280,8 @@ class TurnStateEstimator:
 
         In an identified turn the reference ECU releases the rear axle (both rear PressureStates DECREASE for
         as long as the turn lasts); once rear_release_time has let the pressure go, the rear wheels roll
-        freely and seed 004 §3.2 step 3 applies the method before ABS to them: reference speed = rear mean
-        (eq. 5, 10); delta from eq. 12 with the moving average (seed 004 §4: delta-bar) of dV2 (eq. 7) and of
+        freely and [P4] §3.2 step 3 applies the method before ABS to them: reference speed = rear mean
+        (eq. 5, 10); delta from eq. 12 with the moving average ([P4] §4: delta-bar) of dV2 (eq. 7) and of
         the rear mean over the last delta_average_points samples, published once that window is full; the
         turn ends (T = 0) when the averaged dV2 has not been a turn of the identified side (beyond V_l0)
         for t1."""

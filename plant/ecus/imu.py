@@ -1,6 +1,6 @@
 """Reference IMU (node IMU): IMU_Motion from the body's true motion.
 
-Signs per formulas.md §1: YawRate positive clockwise, LatAccel positive to the right, LongAccel positive
+Signs per docs/spec/formulas.md §1: YawRate positive clockwise, LatAccel positive to the right, LongAccel positive
 forward; mounted at the geometric centre. The source is the in-process body (plant.body.PlanarBody) or,
 when the PLANT node runs elsewhere, its ground truth on the bus (PLANT_Motion.YawRate,
 PLANT_Dynamics.LatAccel/LongAccel; held when silent). Optional white noise, off by default and

@@ -1,10 +1,10 @@
-"""Reference SBW ECU (node SBW): seed 001's bilateral control and seed 003 §1's yaw-rate feedback.
+"""Reference SBW ECU (node SBW): [P1]'s bilateral control and [P3] §1's yaw-rate feedback.
 
-Bilateral strategy, "force control + position-deviation feedback" (seed 001 §2.3, Fig. 5-8; formulas.md §4):
+Bilateral strategy, "force control + position-deviation feedback" ([P1] §2.3, Fig. 5-8; docs/spec/formulas.md §4):
 - the driver's torque (torsion-bar sensor, eq. 2) commands the steering motor: target torque at the pinion
   G·(T_d + τ_d·Ṫ_d) − D·θ̇_p (G `assist_gain`; τ_d `torque_rate_gain`, whose derivative of the twist damps the
   hand-wheel/pinion loop without the ramp lag a damping on θ̇_p would add; D `pinion_damping_gain`, a mild
-  active damping for a clean return when the driver lets go: all chosen, the seed gives no gains)
+  active damping for a clean return when the driver lets go: all chosen, [P1] gives no gains)
   → target current → PID current loop (Fig. 8);
 - the deviation between the pinion and the hand wheel's column commands the road-feel motor through
   P (position, Fig. 7: target column speed K·(θ_p − Δ − θ_c), plus the pinion's own speed as feedforward)
@@ -17,11 +17,11 @@ publishes SBW_HandWheel and SBW_Pinion (sent every 10 ms by the restbus).
 
 Steering mode (BENCH_SbwConfig.SteeringMode, bench-private coding; DIRECT when the message is absent):
 - DIRECT: ratio 1 (pinion = hand wheel, the mechanical 15:1 car), Δ = 0.
-- YAW_RATE (seed 003 §1.1): an "ideal steering ratio": reference yaw rate r* = G_r·θ_h (G_r
+- YAW_RATE ([P3] §1.1): an "ideal steering ratio": reference yaw rate r* = G_r·θ_h (G_r
   BENCH_SbwConfig.IdealYawGain, default 0.28 1/s), through a first-order lag (`yaw_reference_lag`); the
   front wheels get the additional angle δ_fa = PI(r* − r) (gains `yaw_feedback_kp/ki`), the pinion the
   offset Δ = i_s·δ_fa from the hand wheel (limited to `additional_angle_limit` and `_rate`, road wheel).
-- YAW_RATE_LAT_ACCEL (seed 003 §1.2, whose formula the OCR lost): the same PI on the blended error
+- YAW_RATE_LAT_ACCEL ([P3] §1.2, whose formula the OCR lost): the same PI on the blended error
   (1 − w)(r* − r) + w (u r* − a_y)/u, w = `lat_accel_weight`; both terms vanish together in steady state.
 Inputs of the feedback: IMU_Motion (YawRate, LatAccel) and the speed u = mean of the rear wheels of
 ABS_WheelSpeeds; the feedback is off below `feedback_min_speed`.
@@ -256,7 +256,7 @@ class SbwEcu:
         return 0.5 * (rl + rr) * _KMH, r * _RAD, ay
 
     def _feedback(self, dt: float, inputs: tuple[float, float, float] | None) -> float:
-        """δ_fa target (rad, road wheel) of seed 003 §1.1/§1.2 for this tick; 0 and reset when off."""
+        """δ_fa target (rad, road wheel) of [P3] §1.1/§1.2 for this tick; 0 and reset when off."""
         p = self.p
         active = (self.mode != SteeringMode.DIRECT and inputs is not None and self.hand_fault == _OK
                   and not self.pinion_fault and inputs[0] >= p.feedback_min_speed * _KMH)

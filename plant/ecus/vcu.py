@@ -1,18 +1,18 @@
-"""Reference VCU (node VCU): the four drive modes of vehicles.md A as wheel commands (seed 000 §1.2, §2).
+"""Reference VCU (node VCU): the four drive modes of docs/spec/vehicles.md A as wheel commands ([P0] §1.2, §2).
 
 Inputs: DRV_MotionRequest (DriveMode, PivotX, PivotY, TargetSpeed), DRV_Steering (HandWheelAngle, in
 NORMAL and ADAPTIVE only), WHL_Status_xx (faults and the VehicleSpeed estimate), IMU_Motion (yaw rate,
 for ADAPTIVE's feedback law or hook), BENCH_VcuConfig (ADAPTIVE's rear-steering law). TargetSpeed is the
-signed centre speed v (k-matrix.md).
+signed centre speed v (docs/spec/k-matrix.md).
 
-Modes (every one a rotation about a point, seed 000 §1.2):
+Modes (every one a rotation about a point, [P0] §1.2):
 - NORMAL: curvature angle X = HandWheelAngle / hand_wheel_ratio at the front-axle centre, centre on the
-  rear-axle line y = -L (seed 002, formulas.md §3), rear wheels 0; angles and speeds by formulas.md §2.
+  rear-axle line y = -L ([P2], docs/spec/formulas.md §3), rear wheels 0; angles and speeds by docs/spec/formulas.md §2.
 - LATERAL: every wheel +90° (-90° for a negative TargetSpeed), equal speeds |v| (positive = to the right).
 - PIVOT: centre (PivotX, PivotY), §2 with v_o = TargetSpeed (positive clockwise).
 - ADAPTIVE: below adaptive_low_speed_limit (20 km/h) opposite-phase 4WS, the centre on y = 0 with the
-  front-axle curvature angle X = HandWheelAngle / ratio (seed 000 §3's U-turn). Above it the front-axle
-  angle stays X (fixed ratio 15) and the rear-axle angle comes from seed 003 §2's law chosen by the
+  front-axle curvature angle X = HandWheelAngle / ratio ([P0] §3's U-turn). Above it the front-axle
+  angle stays X (fixed ratio 15) and the rear-axle angle comes from [P3] §2's law chosen by the
   bench-private coding BENCH_VcuConfig.RearSteerLaw (plant/ecus/rear_steer.py: OFF = 2WS, FEEDFORWARD =
   zero-sideslip k(u) X, FEEDBACK = −X + C2 u r with the IMU_Motion yaw rate; FEEDFORWARD when the message
   is absent; REQUEST_INVALID when its last frame is invalid or its value unknown), or, when the VCU is
@@ -91,12 +91,12 @@ class VcuFault(IntEnum):
 
 
 #: ADAPTIVE rear-steering law: (front curvature angle X deg, speed m/s >= 0, measured yaw rate deg/s)
-#: -> rear-axle-centre angle deg (bus signs, formulas.md §1).
+#: -> rear-axle-centre angle deg (bus signs, docs/spec/formulas.md §1).
 RearSteerLaw = Callable[[float, float, float], float]
 
 
 def opposite_phase(front_deg: float, speed: float, yaw_rate_dps: float) -> float:
-    """Low-speed 4WS (seed 000 §3, seed 003 "at very low speed rear opposite to front 1:1"): centre on y = 0."""
+    """Low-speed 4WS ([P0] §3, [P3] "at very low speed rear opposite to front 1:1"): centre on y = 0."""
     return -front_deg
 
 

@@ -1,13 +1,13 @@
 """Reference wheel ECU (nodes WHL_FL, WHL_FR, WHL_RL, WHL_RR): steering servo and hub motor of one corner.
 
-Seed 000 §2.2: each wheel ECU executes the VCU's steering-angle and wheel-speed targets and reports the
-wheel's state. Models (parameters in plant/vehicles/ev4wis.toml, vehicles.md A, all "chosen"):
+[P0] §2.2: each wheel ECU executes the VCU's steering-angle and wheel-speed targets and reports the
+wheel's state. Models (parameters in plant/vehicles/ev4wis.toml, docs/spec/vehicles.md A, all "chosen"):
 
 - Steering servo: first-order lag (servo_lag, 50 ms) with a rate limit (servo_rate_limit, 120 deg/s).
 - Hub motor speed loop: first-order lag (hub_motor_lag, 100 ms).
 - SteerMotorCurrent: servo_current_per_rate * steering rate (viscous/back-EMF part) plus the aligning
   load servo_twist_current * tanh(rate / 5 deg/s) / (1 + |wheel speed| / 0.5 m/s). The steering axis
-  passes through the contact point (seed 000 §1.1), so there is no scrub arm: the load is the tyre's
+  passes through the contact point ([P0] §1.1), so there is no scrub arm: the load is the tyre's
   bore (twisting) torque, full when steering at standstill and fading once the wheel rolls.
 
 WheelFault (dbc value table): 0 OK, 1 SERVO_FAULT and 2 MOTOR_FAULT (reserved, not modelled),

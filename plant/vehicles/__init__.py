@@ -1,6 +1,6 @@
 """Vehicle parameter sets: one TOML file per vehicle, every value with its unit and its source.
 
-Why a file per vehicle and a strict loader: vehicles.md asks that chosen values live in one data
+Why a file per vehicle and a strict loader: docs/spec/vehicles.md asks that chosen values live in one data
 file with their source, and a typo in a key or a unit must fail loudly (naming file and key) rather
 than run a campaign on a default.
 
@@ -8,7 +8,7 @@ File layout (see ev4wis.toml)::
 
     name = "EV4WIS"
     [parameters]
-    track = { value = 1.11, unit = "m", source = "seed 000 §3" }
+    track = { value = 1.11, unit = "m", source = "[P0] §3" }
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def _p(unit: str) -> Any:
 
 @dataclass(frozen=True)
 class Ev4wisParams:
-    """vehicles.md A: the 4WIS steer-by-wire EV of seed 000 (SI units unless the name says so)."""
+    """docs/spec/vehicles.md A: the 4WIS steer-by-wire EV of [P0] (SI units unless the name says so)."""
 
     track: float = _p("m")
     wheelbase: float = _p("m")
@@ -67,13 +67,13 @@ class Ev4wisParams:
 
     @property
     def geometry(self) -> Geometry:
-        """formulas.md §1: K = track/2, L = wheelbase/2."""
+        """docs/spec/formulas.md §1: K = track/2, L = wheelbase/2."""
         return Geometry(self.track / 2.0, self.wheelbase / 2.0, self.wheel_radius)
 
 
 @dataclass(frozen=True)
 class AclassParams:
-    """vehicles.md B: the A-class car of seeds 001 and 004 (SI units unless the name says so)."""
+    """docs/spec/vehicles.md B: the A-class car of [P1] and [P4] (SI units unless the name says so)."""
 
     mass: float = _p("kg")
     yaw_inertia: float = _p("kg*m^2")
@@ -89,13 +89,13 @@ class AclassParams:
 
     @property
     def wheelbase(self) -> float:
-        """L = a + b (formulas.md §5)."""
+        """L = a + b (docs/spec/formulas.md §5)."""
         return self.cog_to_front_axle + self.cog_to_rear_axle
 
 
 @dataclass(frozen=True)
 class AbsParams:
-    """ACLASS_ABS (vehicles.md B with seed 004's brakes, tyres, sensors and ABS ECU): what braking adds to
+    """ACLASS_ABS (docs/spec/vehicles.md B with [P4]'s brakes, tyres, sensors and ABS ECU): what braking adds to
     AclassParams (aclass.toml), from abs.toml. Units in the field metadata, sources in the file."""
 
     hand_wheel_ratio: float = _p("1")
@@ -161,12 +161,12 @@ class AbsParams:
 
 @dataclass(frozen=True)
 class SbwParams:
-    """The front steer-by-wire system of the A-class car (seed 001 eq. 1-10, formulas.md §4), its steering
-    robot and its reference ECU (bilateral control, seed 001 §2.3-3; yaw-rate feedback, seed 003 §1), from
+    """The front steer-by-wire system of the A-class car ([P1] eq. 1-10, docs/spec/formulas.md §4), its steering
+    robot and its reference ECU (bilateral control, [P1] §2.3-3; yaw-rate feedback, [P3] §1), from
     sbw.toml. Angles of the hand wheel, column and pinion are hand-wheel angles (the pinion turns
     `steering_ratio` times the road wheels). Units in the field metadata, sources in the file."""
 
-    # hand-wheel module (seed 001 eq. 1-2)
+    # hand-wheel module ([P1] eq. 1-2)
     hand_wheel_inertia: float = _p("kg*m^2")
     hand_wheel_damping: float = _p("N*m*s/rad")
     torsion_bar_stiffness: float = _p("N*m/rad")
@@ -214,7 +214,7 @@ class SbwParams:
     steer_current_ki: float = _p("V/(A*s)")
     steer_current_kd: float = _p("V*s/A")
     rack_force_filter: float = _p("s")
-    # reference ECU: yaw-rate feedback with an ideal steering ratio (seed 003 §1.1, §1.2)
+    # reference ECU: yaw-rate feedback with an ideal steering ratio ([P3] §1.1, §1.2)
     ideal_yaw_gain: float = _p("1/s")
     yaw_reference_lag: float = _p("s")
     yaw_feedback_kp: float = _p("s")
