@@ -6,6 +6,7 @@ Every problem is a ConfigError naming the file and the key.
 
 from __future__ import annotations
 
+import glob
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -13,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.bus import VIRTUAL, is_virtual
+from bench.contract import Requirement, load_requirements
 from bench.errors import ConfigError
 from bench.paths import ROOT
 
@@ -42,6 +44,11 @@ class ProjectConfig:
     testcases: Path
     reports: Path
     latency: tuple[LatencyPair, ...] = ()
+    contract: tuple[Path, ...] = ()              # the contract documents ([contract] documents, globs resolved)
+    requirements: tuple[Requirement, ...] = ()   # every requirement of those documents, in document order
+
+    def requirement(self, requirement_id: str) -> Requirement | None:
+        return next((r for r in self.requirements if r.id == requirement_id), None)
 
 
 def find_config(start: Path | None = None) -> Path:
@@ -100,7 +107,44 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         testcases=base / string("testcases"),
         reports=base / string("reports"),
         latency=_latency_pairs(path, data.get("timing", {})),
+        **_contract(path, text, data.get("contract", {})),
     )
+
+
+def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
+    """[contract] documents = ["docs/contract/*.md", ...]: globs relative to bench.toml, each matching at least
+    one file; the requirements are read here so that a duplicate id stops the run before any case starts."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [contract] must be a table")
+    unknown = set(table) - {"documents"}
+    if unknown:
+        raise ConfigError(f"{path}: [contract] unknown key(s) {', '.join(sorted(unknown))} (known: documents)")
+    if "documents" not in table:
+        return {}
+    patterns = table["documents"]
+    if not isinstance(patterns, list) or not patterns or not all(isinstance(p, str) and p for p in patterns):
+        raise ConfigError(f"{path}: [contract] documents must be a non-empty list of glob strings, got {patterns!r}")
+    documents: list[Path] = []
+    for pattern in patterns:
+        try:
+            matches = sorted(glob.glob(str(path.parent / pattern), recursive=True))
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{path}:{_line_of(text, pattern)}: [contract] documents: {pattern!r}: {exc}") from None
+        files = [Path(m) for m in matches if Path(m).is_file()]
+        if not files:
+            raise ConfigError(f"{path}:{_line_of(text, pattern)}: [contract] documents: {pattern!r} matches no file "
+                              f"(relative to {path.parent})")
+        documents.extend(f for f in files if f not in documents)
+    requirements = load_requirements(documents)
+    return {"contract": tuple(documents), "requirements": tuple(requirements.values())}
+
+
+def _line_of(text: str, needle: str) -> int:
+    """The 1-based line of bench.toml that holds a value (tomllib gives no positions); 0 when not found."""
+    for number, line in enumerate(text.splitlines(), 1):
+        if needle in line:
+            return number
+    return 0
 
 
 def _latency_pairs(path: Path, timing: Any) -> tuple[LatencyPair, ...]:

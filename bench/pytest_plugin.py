@@ -1,9 +1,14 @@
 """pytest plugin (entry point `pytest11`): the `bench` fixture and the run's log and reports.
 
 A plain `pytest` on any folder of test cases works: options `--bench-interface`,
-`--bench-channel`, `--bench-external`, `--bench-out`, `--bench-config`. The run (bus, plant,
-MCAP log) starts at the first case that asks for the `bench` fixture; at the end of the session
+`--bench-channel`, `--bench-external`, `--bench-out`, `--bench-config`, `--bench-dut`. The run (bus,
+plant, MCAP log) starts at the first case that asks for the `bench` fixture; at the end of the session
 `report.html` and `junit.xml` are written next to `run.mcap`, marked aborted on Ctrl-C.
+
+Conformance markers (bench.marks): `dut`, `req` and `reference_only` are checked against the databases'
+nodes and the contract documents when a module is collected (a bad one is that module's collection
+error, so nothing runs); reference-only cases are skipped at collection when their node is external;
+`--bench-dut NODE` deselects every case that does not judge NODE.
 """
 
 from __future__ import annotations
@@ -16,15 +21,22 @@ from pathlib import Path
 import pytest
 
 from bench.case import Case
-from bench.config import RunSettings, load_config
+from bench.codec import load_codebook
+from bench.config import ProjectConfig, RunSettings, load_config
+from bench.errors import BenchError
 from bench.faults import parse_fault
-from bench.results import RunResult
+from bench.marks import MARKER_HELP, CaseMarks, check_marks, read_marks, skip_reason, split_names
+from bench.results import CaseRef, RequirementInfo, RunResult
+from bench.session import resolve_external
 from bench import results_io
 from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 
 _RUN_KEY = pytest.StashKey["BenchRun | None"]()
 _CASE_KEY = pytest.StashKey[Case]()
 _WALL0_KEY = pytest.StashKey[float]()
+_FACTS_KEY = pytest.StashKey["tuple[ProjectConfig, list[str]]"]()
+_DESELECTED_KEY = pytest.StashKey[list[CaseRef]]()
+_PENDING_KEY = pytest.StashKey[list[tuple[pytest.Item, pytest.TestReport, pytest.CallInfo]]]()
 _last_finished: list[RunResult] = []
 PARTS_DIR = "parts"   # where pytest-xdist workers leave their part of the run for the controller
 
@@ -45,10 +57,16 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                     help="inject a fault for the whole run: KIND:TARGET[:PARAM]@START[-END] (bench.faults)")
     group.addoption("--bench-out", default=None, help="folder for report.html, run.mcap, junit.xml")
     group.addoption("--bench-config", default=None, help="bench.toml of the project")
+    group.addoption("--bench-dut", action="append", default=[], metavar="NODE",
+                    help="run only the cases that judge NODE (@pytest.mark.dut); repeatable")
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    for name, text in MARKER_HELP.items():
+        config.addinivalue_line("markers", f"{name}: {text}")
     config.stash[_RUN_KEY] = None
+    config.stash[_DESELECTED_KEY] = []
+    config.stash[_PENDING_KEY] = []
     if _xdist_controller(config):
         # Workers inherit the controller's options: decide the one output folder for all of them here.
         if config.getoption("--bench-interface") not in ("virtual", "bench_virtual"):
@@ -74,6 +92,96 @@ def _config_path(config: pytest.Config) -> Path | None:
     return Path(value) if value else None
 
 
+def _facts(config: pytest.Config) -> tuple[ProjectConfig, list[str]]:
+    """The project and the databases' nodes, loaded once per session and only when a case has markers
+    (the bench's own tests have none and need no bench.toml)."""
+    facts = config.stash.get(_FACTS_KEY, None)
+    if facts is None:
+        try:
+            project = load_config(_config_path(config))
+            nodes = load_codebook(project.databases).nodes
+        except BenchError as exc:
+            raise pytest.UsageError(str(exc)) from None
+        facts = config.stash[_FACTS_KEY] = (project, nodes)
+    return facts
+
+
+def _documents(project: ProjectConfig) -> str:
+    return ", ".join(str(p.relative_to(project.path.parent)) if p.is_relative_to(project.path.parent) else str(p)
+                     for p in project.contract)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
+    """A collected case with a bad conformance marker makes its module (or class) a collection error that
+    names the case and the value: pytest then runs no case at all."""
+    outcome = yield
+    report: pytest.CollectReport = outcome.get_result()
+    if not report.passed:
+        return
+    problems = []
+    for item in report.result:
+        if not isinstance(item, pytest.Item):
+            continue
+        marks = read_marks(item)
+        if not marks.any:
+            continue
+        project, nodes = _facts(item.config)
+        requirements = {r.id: r for r in project.requirements}
+        problems += [f"{item.nodeid}: {p}" for p in check_marks(marks, nodes, requirements, _documents(project))]
+    if problems:
+        report.outcome = "failed"
+        report.longrepr = "bad conformance markers:\n" + "\n".join(problems)
+        report.result = []
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Skip reference-only cases whose node is external; with --bench-dut keep only the cases judging it."""
+    marked = [(item, read_marks(item)) for item in items]
+    if any(m.reference_only for _, m in marked):
+        project, _ = _facts(config)
+        external = _external(config, project)
+        for item, marks in marked:
+            reason = skip_reason(marks, external)
+            if reason:
+                item.add_marker(pytest.mark.skip(reason=reason))
+    wanted = split_names(config.getoption("--bench-dut"))
+    if not wanted:
+        return
+    _, nodes = _facts(config)
+    unknown = [n for n in wanted if n not in nodes]
+    if unknown:
+        raise pytest.UsageError(f"--bench-dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(nodes)})")
+    keep = [item for item, marks in marked if set(marks.duts) & set(wanted)]
+    if len(keep) != len(items):
+        kept = {id(i) for i in keep}
+        config.hook.pytest_deselected(items=[i for i in items if id(i) not in kept])
+        items[:] = keep
+
+
+def _external(config: pytest.Config, project: ProjectConfig) -> set[str]:
+    try:
+        return resolve_external(load_codebook(project.databases), project.stimulus,
+                                config.getoption("--bench-external"))
+    except BenchError as exc:
+        raise pytest.UsageError(str(exc)) from None
+
+
+def pytest_deselected(items: list[pytest.Item]) -> None:
+    """Every deselected bench case (--bench-dut, -k, -m): the conformance section lists it as not run."""
+    for item in items:
+        if "bench" in getattr(item, "fixturenames", ()):
+            marks = read_marks(item)
+            item.config.stash[_DESELECTED_KEY].append(CaseRef(item.nodeid, item.name, marks.duts, marks.reqs))
+
+
+def _catalogue(project: ProjectConfig) -> list[RequirementInfo]:
+    base = project.path.parent
+    return [RequirementInfo(r.id, r.title, str(r.path.relative_to(base)) if r.path.is_relative_to(base)
+                            else str(r.path), r.line) for r in project.requirements]
+
+
 def _run(config: pytest.Config) -> BenchRun:
     run = config.stash[_RUN_KEY]
     if run is None:
@@ -86,7 +194,12 @@ def _run(config: pytest.Config) -> BenchRun:
         faults = [parse_fault(spec) for spec in config.getoption("--bench-fault")]
         worker = _worker_id(config)
         run = BenchRun(project, settings, out_dir, mcap_name=f"run-{worker}.mcap" if worker else MCAP_NAME)
+        run.requirements = _catalogue(project)
+        run.deselected = config.stash[_DESELECTED_KEY]
         config.stash[_RUN_KEY] = run
+        for item, report, call in config.stash[_PENDING_KEY]:   # cases skipped before the run started
+            _record(run, item, report, call)
+        config.stash[_PENDING_KEY].clear()
         run.start()
         run.session.faults.extend(faults)
         if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
@@ -103,6 +216,8 @@ def bench(request: pytest.FixtureRequest) -> Iterator[Case]:
     """The bench for one test case: set signals, run, wait, check and plot (see bench.case.Case)."""
     run = _run(request.config)
     case = run.begin_case(request.node.nodeid, request.node.name)
+    marks = read_marks(request.node)
+    case.result.duts, case.result.reqs = marks.duts, marks.reqs
     request.node.stash[_CASE_KEY] = case
     yield case
     case.close()
@@ -128,10 +243,21 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Itera
     report: pytest.TestReport = outcome.get_result()
     if call.excinfo is not None and call.excinfo.errisinstance(FailedSteps):
         report.longrepr = str(call.excinfo.value)   # the steps say it all: no traceback through pytest's hooks
-    run = item.config.stash.get(_RUN_KEY, None)
-    if run is None or "bench" not in getattr(item, "fixturenames", ()):
+    if "bench" not in getattr(item, "fixturenames", ()):
         return
+    run = item.config.stash.get(_RUN_KEY, None)
+    if run is None:   # skipped (e.g. reference_only) before any case started the run: recorded once it starts
+        item.config.stash[_PENDING_KEY].append((item, report, call))
+        return
+    _record(run, item, report, call)
+
+
+def _record(run: BenchRun, item: pytest.Item, report: pytest.TestReport, call: pytest.CallInfo) -> None:
     run.record_report(item.nodeid, item.name, report, call)
+    result = run.cases.get(item.nodeid)
+    if result is not None and not (result.duts or result.reqs):
+        marks: CaseMarks = read_marks(item)
+        result.duts, result.reqs = marks.duts, marks.reqs
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:

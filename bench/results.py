@@ -67,10 +67,33 @@ class CaseResult:
     tables: list[Table] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     message: str = ""            # failure or skip text
+    duts: list[str] = field(default_factory=list)   # the nodes the case judges (@pytest.mark.dut)
+    reqs: list[str] = field(default_factory=list)   # the requirement ids it checks (@pytest.mark.req)
 
     @property
     def failed_steps(self) -> list[Step]:
         return [s for s in self.steps if s.verdict == "fail"]
+
+
+@dataclass
+class RequirementInfo:
+    """One requirement of the contract documents, as the report shows it."""
+
+    id: str
+    title: str
+    document: str                # path of the contract document, as bench.toml resolved it
+    line: int = 0
+
+
+@dataclass
+class CaseRef:
+    """A case of the campaign that did not run in this process (deselected by --bench-dut or -k):
+    the conformance section still lists it under the requirements it checks."""
+
+    nodeid: str
+    name: str
+    duts: list[str] = field(default_factory=list)
+    reqs: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -88,6 +111,8 @@ class RunResult:
     frames: int = 0
     invalid_frames: int = 0
     tables: list[Table] = field(default_factory=list)
+    requirements: list[RequirementInfo] = field(default_factory=list)   # the contract's catalogue
+    deselected: list[CaseRef] = field(default_factory=list)
 
     @property
     def counts(self) -> dict[str, int]:

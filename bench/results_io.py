@@ -8,7 +8,7 @@ from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
 
-from bench.results import CaseResult, Plot, RunResult, Series, Step, Table
+from bench.results import CaseRef, CaseResult, Plot, RequirementInfo, RunResult, Series, Step, Table
 
 
 def dump(run: RunResult, path: Path) -> None:
@@ -22,7 +22,11 @@ def load(path: Path) -> RunResult:
     data = json.loads(path.read_text())
     cases = [_case(c) for c in data.pop("cases")]
     tables = [Table(**t) for t in data.pop("tables")]
-    return RunResult(**_known(RunResult, data), cases=cases, tables=tables)
+    # parts written before the contract existed have neither key
+    requirements = [RequirementInfo(**_known(RequirementInfo, r)) for r in data.pop("requirements", [])]
+    deselected = [CaseRef(**_known(CaseRef, c)) for c in data.pop("deselected", [])]
+    return RunResult(**_known(RunResult, data), cases=cases, tables=tables, requirements=requirements,
+                     deselected=deselected)
 
 
 def _case(data: dict[str, Any]) -> CaseResult:
@@ -42,7 +46,8 @@ def merge(parts: list[tuple[str, RunResult]], wall_time: float) -> RunResult:
     first = parts[0][1]
     merged = RunResult(started=min(p.started for _, p in parts), interface=first.interface,
                        channel=first.channel, time_mode=first.time_mode, external=first.external,
-                       mcap_path=first.mcap_path, aborted=any(p.aborted for _, p in parts), wall_time=wall_time)
+                       mcap_path=first.mcap_path, aborted=any(p.aborted for _, p in parts), wall_time=wall_time,
+                       requirements=first.requirements)
     logs = []
     for worker, part in sorted(parts):
         merged.cases.extend(part.cases)
@@ -57,6 +62,13 @@ def merge(parts: list[tuple[str, RunResult]], wall_time: float) -> RunResult:
             title = table.title if table.title.startswith("Databases") else f"[{worker}] {table.title}"
             merged.tables.append(Table(title, table.columns, table.rows))
     merged.cases.sort(key=lambda c: c.nodeid)
+    ran = {c.nodeid for c in merged.cases}
+    seen: set[str] = set()
+    for _, part in parts:   # every worker deselects the same cases; none of them ran anywhere
+        for ref in part.deselected:
+            if ref.nodeid not in ran and ref.nodeid not in seen:
+                seen.add(ref.nodeid)
+                merged.deselected.append(ref)
     merged.tables.insert(0, Table("Workers: one in-process bus and one MCAP log each",
                                   ["worker", "log", "cases", "bench s", "frames", "invalid"], logs))
     return merged

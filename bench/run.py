@@ -16,7 +16,7 @@ from bench.codec import Codebook, MessageCodec
 from bench.errors import BenchError
 from bench.logproc import LogProcess
 from bench.config import ProjectConfig, RunSettings
-from bench.results import CaseResult, RunResult, Step, Table
+from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
 from bench.session import BenchSession
 from bench.timing import TimingCollector
 
@@ -47,6 +47,8 @@ class BenchRun:
         self.recorder: LogProcess | None = None
         self.session = None
         self.finished: RunResult | None = None
+        self.requirements: list[RequirementInfo] = []   # the contract's catalogue (set by the pytest plugin)
+        self.deselected: list[CaseRef] = []             # cases of the campaign this process did not run
         label = f"{settings.interface}:{settings.channel or 'default'}"
         self.recorder = log = LogProcess(self.mcap_path, project.databases, label)
         self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
@@ -126,7 +128,8 @@ class BenchRun:
             mcap_path=self.mcap_path.name if self.mcap_path.parent == self.out_dir else str(self.mcap_path),
             aborted=aborted, wall_time=time.monotonic() - self._wall0,
             sim_time=session.now() if session else 0.0,
-            frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0)
+            frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0,
+            requirements=list(self.requirements), deselected=list(self.deselected))
         if session is not None:   # the report's timing section (bench.timing); never raises
             run.tables.extend(self.timing.tables(session.codebook))
             run.tables.append(database_table(session.codebook))

@@ -16,6 +16,7 @@ from bench.codec import load_codebook
 from bench.config import ProjectConfig, load_config
 from bench.errors import ConfigError
 from bench.faults import parse_fault
+from bench.marks import split_names
 from bench.run import default_out_dir
 from bench.session import resolve_external
 
@@ -29,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                         "virtual-time bus) and write report.html, run.mcap, junit.xml.")
     add_bus_options(parser, "virtual")
     parser.add_argument("-k", dest="keyword", default=None, help="only cases matching this pytest -k expression")
+    parser.add_argument("--dut", nargs="+", action="extend", default=[], metavar="NODE",
+                        help="only the cases that judge NODE (@pytest.mark.dut); the report's conformance section "
+                             "lists the others as deselected")
     parser.add_argument("--out", default=None, help="output folder (default: a new folder under reports/)")
     parser.add_argument("-n", dest="workers", default=None, metavar="N",
                         help="run the cases in N processes (pytest-xdist; 'auto' = one per core), each with its own "
@@ -78,6 +82,9 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace) -> N
     A mistake here is one clear error (exit 2), not an error in every case."""
     codebook = load_codebook(project.databases)
     resolve_external(codebook, project.stimulus, args.external)
+    unknown = [n for n in split_names(args.dut) if n not in codebook.nodes]
+    if unknown:
+        raise ConfigError(f"--dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(codebook.nodes)})")
     if not is_virtual(args.interface) and args.interface not in can.interfaces.VALID_INTERFACES:
         raise ConfigError(f"--interface: unknown python-can interface {args.interface!r} "
                           f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
@@ -96,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
         pytest_args += ["--bench-channel", args.channel]
     for node in args.external:
         pytest_args += ["--bench-external", node]
+    for node in args.dut:
+        pytest_args += ["--bench-dut", node]
     for spec in args.fault:
         parse_fault(spec)                      # a bad spec is a clear error before pytest starts
         pytest_args += ["--bench-fault", spec]

@@ -18,6 +18,7 @@ from urllib.parse import quote
 from jinja2 import Environment, PackageLoader, select_autoescape
 from markupsafe import Markup, escape
 
+from bench.report.conformance import build_conformance
 from bench.report.plots import Plotter, RenderedPlot
 from bench.results import Plot, RunResult
 
@@ -103,6 +104,7 @@ def render_html(run: RunResult, report_dir: Path = Path(".")) -> str:
         run=run,
         counts=run.counts,
         plots=plots,
+        conformance=build_conformance(run),
         mcap_href=_mcap_href(run.mcap_path, report_dir),
     )
 

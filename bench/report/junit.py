@@ -57,6 +57,11 @@ def _testcase(parent: ET.Element, case: CaseResult) -> None:
     classname, name = split_nodeid(case.nodeid, case.name)
     tc = ET.SubElement(parent, "testcase", classname=xml_safe(classname), name=xml_safe(name),
                        time=f"{case.wall_time:.3f}")
+    if case.duts or case.reqs:   # what the case judges and checks, for CI tools that filter on properties
+        props = ET.SubElement(tc, "properties")
+        for key, values in (("dut", case.duts), ("req", case.reqs)):
+            for value in values:
+                ET.SubElement(props, "property", name=key, value=xml_safe(value))
     failed = case.failed_steps
     if case.outcome == "failed":
         summary = "; ".join(

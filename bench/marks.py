@@ -1,0 +1,116 @@
+"""The conformance markers of a test case: which nodes it judges, which requirements it checks,
+and whether it only makes sense while a node is the bench's own simulation.
+
+    @pytest.mark.dut("VCU", ...)                       the node(s) the case judges
+    @pytest.mark.req("VCU-FLT-03", ...)                the requirement id(s) it checks
+    @pytest.mark.reference_only("VCU", reason="...")   skipped while VCU is external (a real ECU)
+
+Reading and checking them is plain code on pytest's marks, so the plugin only wires hooks and the
+checks can be tested without running pytest.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterable, Mapping
+from dataclasses import dataclass, field
+
+import pytest
+
+DUT, REQ, REFERENCE_ONLY = "dut", "req", "reference_only"
+MARKER_HELP = {
+    DUT: "dut(NODE, ...): the node(s) of the databases this case judges",
+    REQ: "req(ID, ...): the requirement id(s) of the contract documents this case checks",
+    REFERENCE_ONLY: "reference_only(NODE, ..., reason=TEXT): the case only makes sense while NODE is the "
+                    "bench's own simulation; skipped with TEXT when NODE is external",
+}
+
+
+@dataclass(frozen=True)
+class ReferenceOnly:
+    nodes: tuple[str, ...]
+    reason: str
+
+
+@dataclass
+class CaseMarks:
+    """The markers of one case (module, class and function marks together), and what is wrong with them."""
+
+    duts: list[str] = field(default_factory=list)
+    reqs: list[str] = field(default_factory=list)
+    reference_only: list[ReferenceOnly] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def any(self) -> bool:
+        return bool(self.duts or self.reqs or self.reference_only or self.problems)
+
+
+def _strings(mark: pytest.Mark, what: str, problems: list[str]) -> list[str]:
+    if not mark.args:
+        problems.append(f"@pytest.mark.{mark.name} without a {what}")
+    out = []
+    for arg in mark.args:
+        if isinstance(arg, str) and arg:
+            out.append(arg)
+        else:
+            problems.append(f"@pytest.mark.{mark.name}: {arg!r} is not a {what} (a non-empty string)")
+    return out
+
+
+def read_marks(item: pytest.Item) -> CaseMarks:
+    """The case's markers, outermost first, each value once; malformed markers become problems."""
+    marks = CaseMarks()
+    for mark in reversed(list(item.iter_markers())):      # iter_markers: closest (function) first
+        if mark.name not in (DUT, REQ, REFERENCE_ONLY):
+            continue
+        extra = set(mark.kwargs) - ({"reason"} if mark.name == REFERENCE_ONLY else set())
+        if extra:
+            marks.problems.append(f"@pytest.mark.{mark.name}: unknown keyword(s) {', '.join(sorted(extra))}")
+        if mark.name == DUT:
+            marks.duts.extend(n for n in _strings(mark, "node name", marks.problems) if n not in marks.duts)
+        elif mark.name == REQ:
+            marks.reqs.extend(r for r in _strings(mark, "requirement id", marks.problems) if r not in marks.reqs)
+        else:
+            nodes = _strings(mark, "node name", marks.problems)
+            reason = mark.kwargs.get("reason")
+            if not isinstance(reason, str) or not reason.strip():
+                marks.problems.append(f"@pytest.mark.reference_only{tuple(mark.args)!r}: reason=\"...\" is "
+                                      f"required (a non-empty string), got {reason!r}")
+            elif nodes:
+                marks.reference_only.append(ReferenceOnly(tuple(nodes), reason.strip()))
+    return marks
+
+
+def check_marks(marks: CaseMarks, nodes: Collection[str], requirements: Mapping[str, object],
+                documents: str) -> list[str]:
+    """What is wrong with the case's markers against the databases' nodes and the contract's ids."""
+    problems = list(marks.problems)
+    known = ", ".join(nodes)
+    used = [(DUT, n) for n in marks.duts] + [(REFERENCE_ONLY, n) for r in marks.reference_only for n in r.nodes]
+    for name, node in used:
+        if node not in nodes:
+            problems.append(f"@pytest.mark.{name}: {node!r} is not a node of the databases (nodes: {known})")
+    for rid in marks.reqs:
+        if rid not in requirements:
+            where = f"the contract documents ({documents})" if documents else \
+                "the contract: bench.toml has no [contract] documents"
+            problems.append(f"@pytest.mark.req: {rid!r} is not a requirement of {where}")
+    return problems
+
+
+def skip_reason(marks: CaseMarks, external: Collection[str]) -> str | None:
+    """The skip text of a reference-only case while one of its nodes is external, else None."""
+    for ref in marks.reference_only:
+        real = [n for n in ref.nodes if n in external]
+        if real:
+            verb = "is" if len(real) == 1 else "are"
+            return f"reference_only: {ref.reason} ({', '.join(real)} {verb} external)"
+    return None
+
+
+def split_names(values: Iterable[str]) -> list[str]:
+    """Node names as given on a command line: repeated options, commas or spaces."""
+    out: list[str] = []
+    for value in values:
+        out.extend(n for n in value.replace(",", " ").split() if n and n not in out)
+    return out

@@ -1,0 +1,111 @@
+"""The report's conformance section: per node, requirement -> the cases that check it -> a verdict.
+
+A requirement belongs to the nodes whose name prefix equals its id prefix (WHL-STS-01 -> WHL_FL, WHL_FR,
+...; VCU-FLT-03 -> VCU; see bench.contract). A requirement that belongs to no node with a table of its
+own (common rules such as COM-E2E-01) appears in the table of every node judged by a case that checks it,
+with those cases. Requirements in no table are listed at the end. Verdicts:
+
+- pass: no case that checks it failed, and at least one passed (the cell says how many of them ran);
+- fail: a case that checks it failed or errored;
+- not run: every case that checks it was skipped, deselected or cut short;
+- uncovered: no case of the campaign checks it.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Literal
+
+from bench.contract import node_prefix, owner_prefix
+from bench.results import RequirementInfo, RunResult
+
+ReqVerdict = Literal["pass", "fail", "not run", "uncovered"]
+VERDICTS: tuple[ReqVerdict, ...] = ("pass", "fail", "not run", "uncovered")
+_FAILED = ("failed", "error")
+
+
+@dataclass
+class CaseLink:
+    """A case under a requirement; `anchor` is the id of its section in the report ("" when it did not run)."""
+
+    nodeid: str
+    name: str
+    outcome: str            # a CaseResult outcome, or "deselected"
+    anchor: str = ""
+
+
+@dataclass
+class Row:
+    requirement: RequirementInfo
+    cases: list[CaseLink] = field(default_factory=list)
+
+    @property
+    def ran(self) -> int:
+        return sum(1 for c in self.cases if c.outcome in ("passed", *_FAILED))
+
+    @property
+    def verdict(self) -> ReqVerdict:
+        if not self.cases:
+            return "uncovered"
+        outcomes = {c.outcome for c in self.cases}
+        if outcomes & set(_FAILED):
+            return "fail"
+        return "pass" if "passed" in outcomes else "not run"
+
+
+@dataclass
+class NodeTable:
+    node: str
+    external: bool
+    rows: list[Row]
+
+    @property
+    def counts(self) -> dict[str, int]:
+        counts = Counter(r.verdict for r in self.rows)
+        return {v: counts[v] for v in VERDICTS if counts[v]}
+
+
+@dataclass
+class Conformance:
+    nodes: list[NodeTable]
+    others: NodeTable | None    # requirements in no node's table (their node judged by no case of this run)
+
+
+@dataclass
+class _Case:
+    link: CaseLink
+    duts: list[str]
+    reqs: list[str]
+
+
+def build_conformance(run: RunResult) -> Conformance | None:
+    """The section's tables; None when the run has neither a contract nor a case that declares a node."""
+    cases = [_Case(CaseLink(c.nodeid, c.name, c.outcome, f"case-{i}"), c.duts, c.reqs)
+             for i, c in enumerate(run.cases, 1)]             # anchors as report.html.j2 numbers the cases
+    ran = {c.nodeid for c in run.cases}
+    cases += [_Case(CaseLink(d.nodeid, d.name, "deselected"), d.duts, d.reqs)
+              for d in run.deselected if d.nodeid not in ran]
+    catalogue = list(run.requirements)
+    known = {r.id for r in catalogue}
+    for case in cases:                                       # ids the contract lacks (an old or foreign result)
+        for rid in case.reqs:
+            if rid not in known:
+                known.add(rid)
+                catalogue.append(RequirementInfo(rid, "(not in the contract documents)", ""))
+    judged = sorted({n for c in run.cases for n in c.duts})
+    if not judged and not catalogue:
+        return None
+    prefixes = {node_prefix(n) for n in judged}
+    tables, shown = [], set()
+    for node in judged:
+        rows = []
+        for req in catalogue:
+            owned = owner_prefix(req.id) == node_prefix(node)
+            links = [c.link for c in cases if req.id in c.reqs and (owned or node in c.duts)]
+            if owned or (links and owner_prefix(req.id) not in prefixes):
+                rows.append(Row(req, links))
+                shown.add(req.id)
+        tables.append(NodeTable(node, node in run.external, rows))
+    rest = [Row(r, [c.link for c in cases if r.id in c.reqs]) for r in catalogue if r.id not in shown]
+    return Conformance(tables, NodeTable("", False, rest) if rest else None)
