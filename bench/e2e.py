@@ -1,10 +1,14 @@
 """End-to-end protection of the contract (docs/spec/e2e.md).
 
 One implementation used by both the sender (restbus) and the receiver (monitor), so that
-sending and checking can never disagree (the opendbc packer/parser idea).
+sending and checking can never disagree (the opendbc packer/parser idea). The receiver's rules
+(docs/spec/e2e.md "Receiver") are the small state machine `Receiver` at the end of this module.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
 
 COUNTER_BYTE = 6          # AliveCounter: 4 bits at bit 48 = low nibble of byte 6
 CHECKSUM_BYTE = 7         # Checksum: byte 7
@@ -61,3 +65,75 @@ def protect(frame_id: int, data: bytearray, counter: int) -> None:
 
 def next_counter(counter: int) -> int:
     return (counter + 1) % COUNTER_MODULO
+
+
+# -- receiver (docs/spec/e2e.md "Receiver") --------------------------------------------------------------
+MAX_DELTA_COUNTER = 1     # the only counter step accepted: a lost frame (step 2) is a wrong sequence
+REVALIDATION_FRAMES = 2   # consecutive in-sequence frames after an E2E error; the last of them is accepted
+RESYNC_GAP_CYCLES = 3     # a reception gap (any frame) longer than this many cycles resynchronises
+
+
+class Check(Enum):
+    """What one frame's protection shows, judged against the reference counter."""
+
+    INITIAL = "initial"                # first intact frame without a reference: it starts the sequence
+    OK = "ok"                          # counter = reference + 1
+    REPEATED = "repeated"              # counter = reference
+    WRONG_SEQUENCE = "wrong sequence"  # any other counter: skipped, backwards, stale, a second sender
+    ERROR = "error"                    # wrong length or checksum: its counter is not trusted
+
+
+class RxState(Enum):
+    """The receiver's state of one message."""
+
+    NODATA = "nodata"      # nothing intact since the start or since a reception gap: no reference counter
+    VALID = "valid"        # in sequence: in-sequence frames are accepted
+    INVALID = "invalid"    # after an E2E error: counting in-sequence frames up to REVALIDATION_FRAMES
+
+
+@dataclass(slots=True)
+class Receiver:
+    """Per-message E2E state machine (transition table in docs/spec/e2e.md). No clock: the monitor calls
+    `resync` when a frame arrives after a reception gap, then `receive` for every frame."""
+
+    state: RxState = RxState.NODATA
+    reference: int | None = None   # counter of the last intact frame since the last resync
+    good: int = 0                  # consecutive in-sequence frames while INVALID
+
+    def resync(self) -> None:
+        """A real reception gap: forget the sequence; the next intact frame starts a new one."""
+        self.state, self.reference, self.good = RxState.NODATA, None, 0
+
+    def receive(self, intact: bool, counter: int) -> tuple[Check, bool]:
+        """One frame of the message: `intact` = right length and checksum. Returns its check and whether
+        its protection lets it be applied (the signal checks still follow)."""
+        if not intact:
+            check = Check.ERROR
+        elif self.reference is None:
+            check = Check.INITIAL
+        else:
+            delta = (counter - self.reference) % COUNTER_MODULO
+            check = Check.REPEATED if delta == 0 else Check.OK if delta <= MAX_DELTA_COUNTER else Check.WRONG_SEQUENCE
+        if intact:
+            self.reference = counter
+        return check, self._step(check)
+
+    def _step(self, check: Check) -> bool:
+        state = self.state
+        if check is Check.ERROR:
+            if state is RxState.VALID or state is RxState.INVALID:
+                self.state, self.good = RxState.INVALID, 0
+            return False                                   # NODATA stays NODATA: there is no sequence yet
+        if check is Check.INITIAL:
+            self.state, self.good = RxState.VALID, 0
+            return True
+        if check is Check.OK:
+            if state is RxState.VALID:
+                return True
+            self.good += 1
+            if self.good >= REVALIDATION_FRAMES:
+                self.state, self.good = RxState.VALID, 0
+                return True
+            return False
+        self.state, self.good = RxState.INVALID, 0        # REPEATED, WRONG_SEQUENCE
+        return False

@@ -1,8 +1,14 @@
 """Receive side: every frame on the bus is checked against the DBC and the contract's E2E rules.
 
 One monitor per bus handle decodes every frame, keeps the latest valid values and, when asked,
-a time-stamped history per message; it checks length, checksum, counter sequence, signal ranges
-and timeouts (3 x cycle time). Invalid frames are counted and logged, never applied.
+a time-stamped history per message; it checks length, checksum, counter sequence (the receiver's state
+machine, bench.e2e.Receiver, docs/spec/e2e.md), signal ranges and timeouts (3 x cycle time). Invalid
+frames are counted and logged, never applied.
+
+Two clocks per message (docs/spec/e2e.md "Timeout and resynchronisation"): the consumer's timeout runs
+from the last *valid* frame; the counter resynchronises only after a real reception gap, measured from
+the last frame of the message, valid or not, so that a stream of rejected frames can never time itself
+back into acceptance.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ class MessageState:
     latest: dict[str, float] | None = None
     last_valid: float | None = None          # bench time of the last valid frame
     last_seen: float | None = None           # bench time of the last frame, valid or not
-    counter: int | None = None               # AliveCounter of the last frame (None: resync)
+    rx: e2e.Receiver = field(default_factory=e2e.Receiver)   # the E2E receiver's state machine
     last_invalid: bool = False
     frames: int = 0
     invalid: dict[str, int] = field(default_factory=dict)      # reason -> count
@@ -92,38 +98,35 @@ class Monitor:
                 self.sink(t, arbitration_id, data, direction, False, reason, None, None)
             return False
         codec = state.codec
-        if state.last_valid is not None and not state.timed_out_flag and codec.cycle_time is not None \
-                and t - state.last_valid > TIMEOUT_CYCLES * codec.cycle_time + TIME_EPS:
-            self._time_out(state)   # the gap before this frame was a timeout: record it, resync the counter
-        if state.last_seen is not None and self.keep_intervals:
-            state.intervals.append(t - state.last_seen)
-            if len(state.intervals) > 2 * INTERVALS_CAP:
-                state.intervals_dropped += _trim(state.intervals, INTERVALS_CAP)
+        cycle = codec.cycle_time
+        if state.last_valid is not None and not state.timed_out_flag and cycle is not None \
+                and t - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
+            self._time_out(state)   # the consumer went 3 cycles without a valid frame: record the timeout
+        if state.last_seen is not None:
+            if cycle is not None and t - state.last_seen > e2e.RESYNC_GAP_CYCLES * cycle + TIME_EPS:
+                state.rx.resync()   # a real reception gap (no frame at all): the sender may have restarted
+            if self.keep_intervals:
+                state.intervals.append(t - state.last_seen)
+                if len(state.intervals) > 2 * INTERVALS_CAP:
+                    state.intervals_dropped += _trim(state.intervals, INTERVALS_CAP)
         state.last_seen = t
         state.frames += 1
         kind = reason = ""
         values = None
-        if len(data) != codec.length:
+        length_ok = len(data) == codec.length
+        if codec.e2e:
+            kind, reason = _e2e_verdict(state.rx, arbitration_id, data, length_ok)
+        if not length_ok:
             kind, reason = "length", f"length {len(data)}, DBC says {codec.length}"
-            state.counter = None
-        else:
-            if codec.e2e:
-                counter = data[e2e.COUNTER_BYTE] & 0x0F
-                expected_counter = None if state.counter is None else (state.counter + 1) % e2e.COUNTER_MODULO
-                state.counter = counter
-                if data[e2e.CHECKSUM_BYTE] != e2e.checksum(arbitration_id, data):
-                    kind = reason = "checksum"
-                elif expected_counter is not None and counter != expected_counter:
-                    kind, reason = "counter", f"counter {counter}, expected {expected_counter}"
-            if not kind:
-                try:
-                    values = codec.decode(data)
-                except DecodeError as exc:
-                    kind, reason = "decode", f"decode: {exc}"
-                else:
-                    bad = codec.out_of_range(values)
-                    if bad:
-                        kind, reason = "range", "range: " + ", ".join(f"{n}={values[n]:g}" for n in bad)
+        elif not kind:
+            try:
+                values = codec.decode(data)
+            except DecodeError as exc:
+                kind, reason = "decode", f"decode: {exc}"
+            else:
+                bad = codec.out_of_range(values)
+                if bad:
+                    kind, reason = "range", "range: " + ", ".join(f"{n}={values[n]:g}" for n in bad)
         if reason:
             state.invalid[kind] = state.invalid.get(kind, 0) + 1
             state.last_invalid = True
@@ -174,7 +177,7 @@ class Monitor:
         assert cycle is not None and state.last_valid is not None
         state.timed_out_flag = True
         state.timeouts.append(state.last_valid + TIMEOUT_CYCLES * cycle)
-        state.counter = None   # a receiver resynchronises on the first frame after a timeout
+        # no resynchronisation here: frames may still be arriving, rejected (on_frame resyncs on a real gap)
 
     # -- queries ---------------------------------------------------------------------------------
     def state(self, message: str) -> MessageState:
@@ -221,6 +224,24 @@ class Monitor:
     def invalid_frames(self) -> int:
         """Frames that failed a check, unknown identifiers and error frames, and failed sends."""
         return self.invalid_dropped + len(self.invalid_log)
+
+
+def _e2e_verdict(rx: e2e.Receiver, frame_id: int, data: bytes, length_ok: bool) -> tuple[str, str]:
+    """(kind, reason) of the frame's protection through the receiver's state machine; ("", "") = accepted."""
+    intact = length_ok and data[e2e.CHECKSUM_BYTE] == e2e.checksum(frame_id, data)
+    counter = data[e2e.COUNTER_BYTE] & 0x0F if length_ok else -1
+    expected = None if rx.reference is None else (rx.reference + 1) % e2e.COUNTER_MODULO
+    check, accepted = rx.receive(intact, counter)
+    if accepted:
+        return "", ""
+    if check is e2e.Check.ERROR:
+        return ("checksum", "checksum") if length_ok else ("length", "length")
+    if check is e2e.Check.REPEATED:
+        return "counter", f"counter {counter} repeated"
+    if check is e2e.Check.WRONG_SEQUENCE:
+        return "counter", f"counter {counter}, expected {expected}"
+    return "revalidating", (f"counter {counter} in sequence, {rx.good} of {e2e.REVALIDATION_FRAMES} "
+                            "consecutive frames after an E2E error")
 
 
 def _trim(items: list, keep: int) -> int:

@@ -1,7 +1,11 @@
-"""E2E protection against the contract: CRC-8/SAE-J1850 and the AliveCounter."""
+"""E2E protection against the contract (docs/spec/e2e.md): CRC-8/SAE-J1850, the AliveCounter, and the
+receiver's transition table as the document writes it."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -35,3 +39,66 @@ def test_protect_writes_counter_and_checksum_over_id_and_bytes_0_to_6(frame_id: 
 def test_counter_wraps_15_to_0() -> None:
     assert e2e.next_counter(15) == 0
     assert e2e.next_counter(3) == 4
+
+
+# -- the receiver's transition table (docs/spec/e2e.md "States and transitions") ------------------------------
+E2E_DOC = Path(__file__).resolve().parents[1] / "docs" / "spec" / "e2e.md"
+TABLE_HEADER = "| state | check | next state | frame accepted |"
+REFERENCE = 5          # the reference counter of a receiver that has one
+
+
+def _transition_rows() -> list[list[str]]:
+    lines = E2E_DOC.read_text(encoding="utf-8").splitlines()
+    start = lines.index(TABLE_HEADER) + 2            # skip the header and its |---| line
+    rows = []
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+    return rows
+
+
+def _frame_for(check: str) -> tuple[bool, int]:
+    """(intact, counter) of a frame showing `check` against REFERENCE (no reference for INITIAL)."""
+    return {"ERROR": (False, REFERENCE + 1), "INITIAL": (True, 11), "OK": (True, REFERENCE + 1),
+            "REPEATED": (True, REFERENCE), "WRONG_SEQUENCE": (True, REFERENCE + 2)}[check]
+
+
+def test_transition_table_covers_every_state_and_check() -> None:
+    text = E2E_DOC.read_text(encoding="utf-8")     # the document's numbers are the code's
+    assert f"REVALIDATION_FRAMES = {e2e.REVALIDATION_FRAMES}" in text and e2e.REVALIDATION_FRAMES == 2
+    assert f"MAX_DELTA_COUNTER = {e2e.MAX_DELTA_COUNTER}" in text
+    rows = [r for r in _transition_rows() if r[0] != "any"]
+    covered = {(state, check.split(",")[0]) for state, check, _, _ in rows}
+    assert covered == {("NODATA", "ERROR"), ("NODATA", "INITIAL"),
+                       *((s, c) for s in ("VALID", "INVALID") for c in ("ERROR", "OK", "REPEATED", "WRONG_SEQUENCE"))}
+
+
+@pytest.mark.parametrize("row", _transition_rows(), ids=lambda r: f"{r[0]} {r[1]}")
+def test_receiver_follows_the_documented_transition(row: list[str]) -> None:
+    state_text, check_text, next_text, accepted_text = row
+    if state_text == "any":                          # the reception gap: resync, then the NODATA rows
+        for state in e2e.RxState:
+            rx = e2e.Receiver(state, None if state is e2e.RxState.NODATA else REFERENCE, 1)
+            rx.resync()
+            assert (rx.state, rx.reference, rx.good) == (e2e.RxState.NODATA, None, 0)
+        return
+    check_name = check_text.split(",")[0]
+    good = 1 if "good + 1 = 2" in check_text else 0
+    state = e2e.RxState[state_text]
+    rx = e2e.Receiver(state, None if state is e2e.RxState.NODATA else REFERENCE, good)
+    counters = [_frame_for(check_name)]
+    if check_name == "WRONG_SEQUENCE":               # every step from 2 to 15, each from a fresh receiver
+        counters = [(True, (REFERENCE + d) % 16) for d in range(2, 16)]
+    for intact, counter in counters:
+        rx = e2e.Receiver(state, None if state is e2e.RxState.NODATA else REFERENCE, good)
+        check, accepted = rx.receive(intact, counter)
+        assert check is e2e.Check[check_name]
+        assert accepted == (accepted_text == "yes")
+        next_state, _, next_good = next_text.partition(", good")
+        assert rx.state is e2e.RxState[next_state]
+        if next_good.strip() == "= 0":
+            assert rx.good == 0
+        elif next_good.strip() == "+ 1":
+            assert rx.good == good + 1
+        assert rx.reference == (counter if intact else (None if state is e2e.RxState.NODATA else REFERENCE))
