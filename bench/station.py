@@ -21,6 +21,7 @@ from bench.socketcan_rx import FastReceiver
 
 
 ECHO_WINDOW = 4
+BABBLE_ECHO_WINDOW = 256   # a babbling node sends many identical frames per tick (flood: PARAM per ms)
 #: Frames one poll takes from the socket at most: a station slower than the bus still gets back to its
 #: tick (and the clock to its deadline) instead of draining for ever; the rest waits in the socket.
 POLL_BATCH = 64
@@ -182,8 +183,11 @@ class Station:
             self.monitor.note_send_failure(t, frame_id, str(exc))
             return
         self.sent += 1
-        if self.loops_back:
-            self._echoes[frame_id].append(data)
+        if self.loops_back:   # a babbling node's identifier (flood) has no periodic message: its own window
+            echoes = self._echoes.get(frame_id)
+            if echoes is None:
+                echoes = self._echoes[frame_id] = deque(maxlen=BABBLE_ECHO_WINDOW)
+            echoes.append(data)
         self.monitor.on_frame(t, frame_id, data, "tx", False, is_error)
 
     def reset_behaviours(self) -> None:

@@ -1,0 +1,60 @@
+"""A babbling node on a bus that loops a sender's frames back (udp_multicast): the flood's identifier is no
+periodic message, and the station must neither crash on it nor count its own echoes as foreign frames.
+
+Issue 13: `flood:0x000` raised KeyError in Station._transmit on udp_multicast, and the next case then failed
+in start_scenario.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import can
+import pytest
+
+from bench.codec import load_codebook
+from bench.config import load_config
+from bench.faults import FaultPlan, parse_fault
+from bench.monitor import Monitor
+from bench.restbus import Restbus
+from bench.station import Station
+
+
+class UdpMulticastBus(can.BusABC):
+    """Named like python-can's UDP multicast bus (the station detects a looping bus by its class name): every
+    frame sent comes back to the sender's own socket."""
+
+    def __init__(self) -> None:
+        self.queue: deque[can.Message] = deque()
+        super().__init__(channel="loop")
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.queue.append(msg)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        return (self.queue.popleft() if self.queue else None), False
+
+
+@pytest.fixture(scope="module")
+def codebook():
+    return load_codebook(load_config().databases)
+
+
+def test_a_flood_on_a_looping_bus_is_sent_and_its_echoes_are_recognised(codebook) -> None:
+    bus = UdpMulticastBus()
+    station = Station("runner", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), lambda: 0.0, ())
+    assert station.loops_back
+    plan = FaultPlan(codebook)
+    plan.add(parse_fault("flood:0x000:8@0-0.002"))
+    station.faults, station.babbles = plan, True
+
+    station.tick(0, 0.0, 0.001)           # 8 frames of identifier 0 at 8 frames/ms, no KeyError
+    sent_floods = [m for m in bus.queue if m.arbitration_id == 0]
+    assert len(sent_floods) == 8
+    unknown_before = station.monitor.unknown_frames   # the station logged its own 8 flood frames (tx)
+    assert unknown_before == 8
+
+    station.poll(0.0)                     # the echoes come back: recognised as our own, not counted again
+    assert station.monitor.unknown_frames == unknown_before
+    assert not any(m.arbitration_id == 0 for m in bus.queue)
+    bus.shutdown()
