@@ -16,7 +16,7 @@ from pathlib import Path
 
 from bench.errors import ConfigError
 
-ID_PATTERN = r"[A-Z][A-Z0-9]*(?:-[A-Z0-9]+)*-\d{2}"
+ID_PATTERN = r"[A-Z][A-Z0-9]*(?:-[A-Z0-9]+)*-[0-9]{2}"   # ASCII digits only (\d would take any script's)
 ID_RE = re.compile(rf"{ID_PATTERN}\Z")
 SEPARATOR = " — "
 _HEADING = re.compile(r" {0,3}### +(?P<text>.*?)(?: +#+)? *\Z")       # CommonMark ATX, optional closing #s

@@ -119,7 +119,7 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
     report: pytest.CollectReport = outcome.get_result()
     if not report.passed:
         return
-    problems = []
+    problems: dict[tuple[str, str], list[str]] = {}   # (case without parameters, problem) -> node ids
     for item in report.result:
         if not isinstance(item, pytest.Item):
             continue
@@ -128,10 +128,13 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
             continue
         project, nodes = _facts(item.config)
         requirements = {r.id: r for r in project.requirements}
-        problems += [f"{item.nodeid}: {p}" for p in check_marks(marks, nodes, requirements, _documents(project))]
+        for problem in check_marks(marks, nodes, requirements, _documents(project)):
+            problems.setdefault((item.nodeid.partition("[")[0], problem), []).append(item.nodeid)
     if problems:
+        lines = [f"{ids[0] if len(ids) == 1 else f'{base}[...] ({len(ids)} parametrized cases)'}: {problem}"
+                 for (base, problem), ids in problems.items()]
         report.outcome = "failed"
-        report.longrepr = "bad conformance markers:\n" + "\n".join(problems)
+        report.longrepr = "bad conformance markers:\n" + "\n".join(lines)
         report.result = []
 
 
