@@ -48,7 +48,7 @@ CASES = [
               reaction="vcu_timeout"),
     FaultCase("duplicate", "DRV_MotionRequest", "DRV_MotionRequest"),
     FaultCase("bitflip", "DRV_MotionRequest", "DRV_MotionRequest", param=5),
-    FaultCase("counter_freeze", "DRV_MotionRequest", "DRV_MotionRequest"),
+    FaultCase("counter_freeze", "DRV_MotionRequest", "DRV_MotionRequest", duration=1.0),   # issue 14: 1 s
     FaultCase("counter_jump", "DRV_MotionRequest", "DRV_MotionRequest", param=3),
     FaultCase("checksum_value", "DRV_MotionRequest", "DRV_MotionRequest", param=0x00),
     FaultCase("checksum_freeze", "DRV_MotionRequest", "DRV_MotionRequest"),
@@ -88,15 +88,52 @@ def _reaction(bench: Case, case: FaultCase) -> None:
                          REACTION_S)
 
 
+def _expect_commands_frozen(bench: Case, fault, held: dict[str, float], t_zero: float) -> None:
+    """Frozen AliveCounter (docs/spec/e2e.md "What a consumer shows during a frozen counter"): no frame of
+    the fault is accepted, so the VCU's commands do not move for the whole window: angles held at the last
+    valid request, speeds 0 from the reaction on, VcuFault 4 then 5 (timed out after 3 cycles), never back."""
+    in_window = lambda t: (t >= fault.start) & (t < fault.end)  # noqa: E731
+    angle_moves, speed_moves, samples = [], [], 0
+    for c in ("FL", "FR", "RL", "RR"):
+        t, angle = bench.history(f"VCU_WheelCmd_{c}", "SteerAngleCmd", since=fault.start)
+        angle = angle[in_window(t)]
+        samples += len(angle)
+        angle_moves.append(float(abs(angle - held[c]).max()) if len(angle) else float("nan"))
+        t, speed = bench.history(f"VCU_WheelCmd_{c}", "WheelSpeedCmd", since=t_zero)
+        speed = speed[in_window(t)]
+        speed_moves.append(float(abs(speed).max()) if len(speed) else float("nan"))
+    bench.expect("SteerAngleCmd frames during the fault (4 wheels, 10 ms)", samples,
+                 4 * (fault.end - fault.start) / CYCLE["VCU_WheelCmd_FL"], abs_tol=4)
+    bench.expect("largest SteerAngleCmd change during the fault", max(angle_moves), 0.0, unit="deg",
+                 detail="every frame of the window against the command before the fault (held)")
+    bench.expect("largest |WheelSpeedCmd| from the reaction to the end of the fault", max(speed_moves), 0.0,
+                 unit="rpm", detail=f"from +{(t_zero - fault.start) * 1000:.0f} ms")
+    t, fault_code = bench.history("VCU_VehicleState", "VcuFault", since=fault.start)
+    codes = [int(v) for v in fault_code[in_window(t)]]
+    sequence = [v for i, v in enumerate(codes) if i == 0 or v != codes[i - 1]]
+    while sequence and sequence[0] == 0:
+        sequence.pop(0)                       # the first frozen frame is in sequence: accepted, still OK
+    bench.expect_true("VcuFault during the fault: REQUEST_INVALID, then REQUEST_TIMEOUT, never back",
+                      sequence == [REQUEST_INVALID, REQUEST_TIMEOUT], measured=" → ".join(map(str, sequence)),
+                      expected=f"{REQUEST_INVALID} → {REQUEST_TIMEOUT}", detail=f"{len(codes)} VCU_VehicleState frames")
+    accepted = bench.history(fault.target, "DriveMode", since=fault.start)[0]
+    bench.expect("DRV_MotionRequest frames accepted after the first frozen one", int(in_window(accepted[1:]).sum()),
+                 0, detail="a repeated counter is never accepted (docs/spec/e2e.md)")
+
+
 @pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c.kind}:{c.target}")
 def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
     _drive(bench)
+    held = {c: bench.value(f"VCU_WheelCmd_{c}", "SteerAngleCmd") for c in ("FL", "FR", "RL", "RR")}
     fault = bench.inject(case.kind, case.target, after=0.0, duration=case.duration, param=case.param)
     if case.after_window:
         bench.run(fault.end - bench.now)
         bench.wait_until(lambda: not bench.timed_out("VCU_VehicleState"), 0.05)
     _reaction(bench, case)
+    t_zero = bench.now
     bench.run(max(0.0, fault.end - bench.now) + 0.3)    # past the window: the bus recovers
+    if case.kind == "counter_freeze":
+        _expect_commands_frozen(bench, fault, held, t_zero)
     found = bench.detections(case.watched, since=fault.start)
     expected_kind = "timeout" if case.timeout_fault else "invalid frame"
     relevant = [(t, r) for t, r in found if (r == "timeout") == case.timeout_fault]
