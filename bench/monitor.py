@@ -230,10 +230,11 @@ def _e2e_verdict(rx: e2e.Receiver, frame_id: int, data: bytes, length_ok: bool) 
     """(kind, reason) of the frame's protection through the receiver's state machine; ("", "") = accepted."""
     intact = length_ok and data[e2e.CHECKSUM_BYTE] == e2e.checksum(frame_id, data)
     counter = data[e2e.COUNTER_BYTE] & 0x0F if length_ok else -1
-    expected = None if rx.reference is None else (rx.reference + 1) % e2e.COUNTER_MODULO
+    reference = rx.reference
     check, accepted = rx.receive(intact, counter)
     if accepted:
         return "", ""
+    expected = None if reference is None else (reference + 1) % e2e.COUNTER_MODULO
     if check is e2e.Check.ERROR:
         return ("checksum", "checksum") if length_ok else ("length", "length")
     if check is e2e.Check.REPEATED:
