@@ -238,6 +238,13 @@ def test_simulated_node_runs_reference_cases(fixture_project: Path, tmp_path: Pa
     assert re.search(r'test_pass</span> <span class="outcome deselected">', html)
 
 
+def test_external_all_skips_reference_cases(fixture_project: Path, tmp_path: Path) -> None:
+    result = run_pytest(fixture_project, tmp_path, "-k", "ref", "--bench-external", "all")
+    assert result.returncode == 0, result.stdout + result.stderr
+    skipped = junit_cases(tmp_path)["test_ref"].find("skipped")
+    assert skipped is not None and "(VCU is external)" in skipped.get("message")
+
+
 def test_bench_run_dut_runs_only_the_cases_that_judge_it(fixture_project: Path, tmp_path: Path) -> None:
     result = subprocess.run([*BENCH, "run", str(fixture_project / "cases"), "--config", str(fixture_project / "bench.toml"),
                              "--out", str(tmp_path), "--dut", "VCU"], cwd=ROOT, capture_output=True, text=True,
