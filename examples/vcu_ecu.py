@@ -17,7 +17,7 @@ Modes (docs/spec/vehicles.md A; every one a rotation about a point S, [P0] §1.2
   ADAPTIVE  below 20 km/h: X as above, S on y = 0 (rear wheels opposite to the front, [P0] §3): x = L / tan X.
             Above 20 km/h [P3]'s rear-steering laws apply; this example does not implement them and
             answers REQUEST_INVALID.
-  LATERAL   every wheel +90° (-90° for a negative TargetSpeed), equal speeds |v| (positive: to the right).
+  LATERAL   every wheel +90°, one signed speed (positive: to the right; negative rpm at +90° moves left).
   In NORMAL and ADAPTIVE a positive TargetSpeed drives forward: v_o = v · sign(x); X = 0 drives straight.
 Faults (VCU_VehicleState.VcuFault, the first found): REQUEST_TIMEOUT (a request message older than 3 cycles),
 REQUEST_INVALID (its last frame failed a check; a request needing more than 1500 rpm on a wheel or 120 °/s of
@@ -140,9 +140,8 @@ def rotation_plan(mode: int, x: float, y: float, v_o: float, curvature: float,
 def plan_for(mode: int, px: float, py: float, v: float, hand_wheel: float) -> tuple[int, Plan | None]:
     """The fault and, when OK, the plan for one request."""
     if mode == LATERAL:
-        angle = 90.0 if v >= 0.0 else -90.0
-        n = abs(v) * RPM_PER_MPS
-        fault, plan = OK, Plan(mode, [angle] * 4, [n] * 4, None, angle, 0.0, (1.0, 0.0))
+        n = v * RPM_PER_MPS        # +90° both ways, the sign in the speed (docs/contract/vcu.md VCU-MODE-08)
+        fault, plan = OK, Plan(mode, [90.0] * 4, [n] * 4, None, 90.0, 0.0, (1.0, 0.0))
     elif mode == PIVOT:
         r_o = math.hypot(px, py)
         direction = (-py / r_o, px / r_o) if r_o > 0.0 else (0.0, 1.0)

@@ -15,6 +15,10 @@ from testcases.oracle import WHEELS, WheelTarget
 from testcases.stimulus import STIMULUS
 
 VEHICLE = "EV4WIS"
+#: the nodes a 4WIS case judges when it checks commanded (VCU_WheelCmd_xx) and reached (WHL_Status_xx) values
+VCU_AND_WHEELS = ("VCU", "WHL_FL", "WHL_FR", "WHL_RL", "WHL_RR")
+#: requirements every 4WIS case checks through expect_clean_bus: no out-of-range value, no E2E error, 8 bytes
+CLEAN_BUS_REQS = ("COM-VAL-01", "COM-E2E-01", "COM-E2E-02", "COM-FRM-01")
 ANGLE_TOL = 0.05          # deg, commanded and reached steering angle (issue)
 SPEED_REL_TOL = 0.005     # wheel speed, 0.5 % ... (issue)
 SPEED_ABS_TOL = 0.2       # ... or 0.2 rpm, whichever is larger (issue)

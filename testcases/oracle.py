@@ -19,8 +19,8 @@ from dataclasses import dataclass
 TRACK = 1.11             # 2K, m: track between the steering pivots (docs/spec/vehicles.md A; [P0] §3)
 WHEELBASE = 2.76         # 2L, m (docs/spec/vehicles.md A; [P0] §3)
 WHEEL_RADIUS = 0.281     # r, m (docs/spec/vehicles.md A; [P0] §3)
-HAND_WHEEL_RATIO = 15.0  # hand wheel : curvature angle X in NORMAL (docs/spec/vehicles.md A, "chosen"); the reference
-                         # VCU uses the same ratio in ADAPTIVE (plant/README.md, "Reference VCU" table)
+HAND_WHEEL_RATIO = 15.0  # hand wheel : curvature angle X in NORMAL (docs/spec/vehicles.md A, "chosen"); the VCU
+                         # contract uses the same ratio in ADAPTIVE (docs/contract/vcu.md VCU-MODE-05)
 K = TRACK / 2.0          # half track, m
 L = WHEELBASE / 2.0      # half wheelbase, m
 
@@ -184,9 +184,12 @@ def car_mode_targets(centre: tuple[float, float] | None, v: float) -> dict[str, 
 
 
 def lateral_targets(v: float) -> dict[str, WheelTarget]:
-    """LATERAL (docs/spec/vehicles.md A): all wheels +90° (-90° for a negative speed), equal speeds |v|;
-    positive v = to the right (docs/spec/k-matrix.md). At +90° positive rpm drives toward +x, at -90° toward -x."""
-    return translation_targets(90.0 if v >= 0.0 else -90.0, abs(v))
+    """LATERAL: every wheel at +90° with one signed speed (eq. 6); positive v = to the right (docs/spec/k-matrix.md).
+
+    At +90° positive rpm rolls a wheel toward +x. Moving left (v < 0) is the same +90° with negative rpm:
+    road-wheel angles lie in (-90°, +90°] (docs/spec/formulas.md §1), so the paper's -90° is not a bus angle
+    (docs/contract/vcu.md VCU-MODE-08)."""
+    return translation_targets(90.0, v)
 
 
 # -- §3: Ackermann and the curvature angle ([P2]) ---------------------------------------------------

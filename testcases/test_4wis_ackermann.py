@@ -19,9 +19,11 @@ import math
 import pytest
 
 from testcases import oracle
-from testcases.helpers import (ANGLE_TOL, SPEED_ABS_TOL, SPEED_REL_TOL, expect_clean_bus, expect_fault,
-                               send_car_mode, speed_for, start, wait_for_targets)
+from testcases.helpers import (ANGLE_TOL, CLEAN_BUS_REQS, SPEED_ABS_TOL, SPEED_REL_TOL, VCU_AND_WHEELS, expect_clean_bus,
+                               expect_fault, send_car_mode, speed_for, start, wait_for_targets)
 from testcases.plots import plot_wheels
+
+pytestmark = [pytest.mark.dut(*VCU_AND_WHEELS)]
 
 NORMAL_HAND_WHEEL = [-750.0, -450.0, -150.0, 120.0, 330.0, 600.0, 900.0]
 ADAPTIVE_HAND_WHEEL = [-600.0, 240.0]
@@ -32,6 +34,7 @@ def _outer_inner(hand_wheel: float) -> tuple[str, str, str, str]:
     return ("FL", "FR", "RL", "RR") if hand_wheel > 0 else ("FR", "FL", "RR", "RL")
 
 
+@pytest.mark.req("VCU-MODE-04", "VCU-MODE-01", "VCU-OUT-03", "WHL-CTL-01", "WHL-CTL-02", "WHL-STA-01", *CLEAN_BUS_REQS)
 @pytest.mark.parametrize("hand_wheel", NORMAL_HAND_WHEEL, ids=[f"NORMAL handwheel={h:g}" for h in NORMAL_HAND_WHEEL])
 def test_ackermann_normal(bench, hand_wheel: float) -> None:
     x_cmd = oracle.curvature_from_hand_wheel(hand_wheel)
@@ -84,6 +87,8 @@ def test_ackermann_normal(bench, hand_wheel: float) -> None:
     plot_wheels(bench)
 
 
+@pytest.mark.req("VCU-MODE-05", "VCU-MODE-06", "VCU-MODE-01", "VCU-OUT-03", "WHL-CTL-01", "WHL-STA-01",
+                 *CLEAN_BUS_REQS)
 @pytest.mark.parametrize("hand_wheel", ADAPTIVE_HAND_WHEEL,
                          ids=[f"ADAPTIVE handwheel={h:g}" for h in ADAPTIVE_HAND_WHEEL])
 def test_ackermann_difference_doubles_in_adaptive(bench, hand_wheel: float) -> None:

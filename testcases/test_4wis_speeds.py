@@ -16,11 +16,13 @@ import pytest
 
 from testcases import oracle
 from testcases.helpers import (ANGLE_TOL, GROUND_TRUTH_YAW_ABS_TOL, SPEED_ABS_TOL, SPEED_REL_TOL, WHEEL_SPEED_LIMIT,
-                               YAW_ABS_TOL,
+                               YAW_ABS_TOL, CLEAN_BUS_REQS, VCU_AND_WHEELS,
                                expect_clean_bus, expect_fault, expect_wheels, send_car_mode, send_pivot,
                                speed_for, start, wait_for_targets)
 from testcases.oracle import WHEEL_POSITION, WHEELS
 from testcases.plots import plot_wheels
+
+pytestmark = [pytest.mark.dut(*VCU_AND_WHEELS)]
 
 CENTRES = [(3.0, 2.0), (-4.0, -1.38), (0.3, 1.38), (-2.0, 0.0), (0.0, 2.5), (5.0, -6.0), (-0.3, -2.5),
            (1000.0, 0.0)]
@@ -38,6 +40,8 @@ def _fold(angle_deg: float) -> float:
     return a
 
 
+@pytest.mark.req("VCU-MODE-01", "VCU-MODE-02", "VCU-REQ-01", "VCU-OUT-01", "VCU-OUT-05", "WHL-CTL-01", "WHL-CTL-02",
+                 "WHL-STA-01", *CLEAN_BUS_REQS)
 @pytest.mark.parametrize("centre,direction", CASES,
                          ids=[f"centre=({c[0]:g},{c[1]:g}) {d}" for c, d in CASES])
 def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> None:
@@ -94,9 +98,11 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
     plot_wheels(bench)
 
 
+@pytest.mark.req("VCU-MODE-08", "VCU-REQ-01", "VCU-OUT-01", "WHL-CTL-01", "WHL-CTL-02", "WHL-STA-01", *CLEAN_BUS_REQS)
 @pytest.mark.parametrize("v", [1.5, -1.5], ids=["LATERAL right v=+1.5", "LATERAL left v=-1.5"])
 def test_lateral_speeds(bench, v: float) -> None:
-    """LATERAL (docs/spec/vehicles.md A): all wheels +90° (-90° for v < 0), equal speeds |v| (eq. 6); the body
+    """LATERAL (docs/contract/vcu.md VCU-MODE-08): all wheels +90°, one signed speed (eq. 6; v < 0: negative rpm
+    at the same +90°, road-wheel angles lie in (-90°, +90°], docs/spec/formulas.md §1); the body
     translates to the right for v > 0 without turning (ground truth)."""
     targets = oracle.lateral_targets(v)
     start(bench)
@@ -135,6 +141,7 @@ E1_CENTRES = [(3.0, 2.0), (-2.0, 0.0), (5.0, -6.0), (0.0, 2.5)]
 E2_HAND_WHEEL = 450.0          # NORMAL, X = 30°: a right turn, outer wheels FL/RL, inner FR/RR
 
 
+@pytest.mark.req("VCU-MODE-01", "VCU-MODE-02", "VCU-MODE-04", "WHL-CTL-02", "WHL-STA-01", *CLEAN_BUS_REQS)
 def test_errata_e1_e2(bench) -> None:
     """E1 ([P0] eq. 10 prints x + K for RR; geometry: x - K) and E2 ([P2] §4 prints V_b = V_d × cos β
     and equal rear speeds; geometry: V_b = V_d / cos β, rear wheels differ). The bench checks the geometry:

@@ -15,10 +15,12 @@ from dataclasses import dataclass
 import pytest
 
 from testcases import oracle
-from testcases.helpers import (ANGLE_TOL, CENTRE_ABS_TOL, MODE_VALUE, SPEED_REL_TOL, YAW_ABS_TOL,
-                               expect_clean_bus, expect_fault, expect_wheels, send_car_mode, send_pivot,
+from testcases.helpers import (ANGLE_TOL, CENTRE_ABS_TOL, CLEAN_BUS_REQS, MODE_VALUE, SPEED_REL_TOL, VCU_AND_WHEELS,
+                               YAW_ABS_TOL, expect_clean_bus, expect_fault, expect_wheels, send_car_mode, send_pivot,
                                speed_for, start, wait_for_targets)
 from testcases.plots import plot_wheels
+
+pytestmark = [pytest.mark.dut(*VCU_AND_WHEELS)]
 
 
 @dataclass(frozen=True)
@@ -68,8 +70,8 @@ def _expected(req: Request) -> tuple[dict[str, oracle.WheelTarget], tuple[float,
         return (oracle.rotation_targets(x, y, v), req.centre, v, oracle.curvature_angle(x, y),
                 oracle.yaw_rate(x, y, v), "docs/spec/formulas.md §2, eq. 1-4 and 7-10 (E1 corrected)")
     if req.mode == "LATERAL":
-        return (oracle.lateral_targets(req.v), None, req.v, 90.0 if req.v >= 0 else -90.0, 0.0,
-                "docs/spec/vehicles.md A LATERAL: all ±90°, equal speeds; eq. 6")
+        return (oracle.lateral_targets(req.v), None, req.v, 90.0, 0.0,
+                "docs/contract/vcu.md VCU-MODE-08 LATERAL: all +90°, one signed speed (eq. 6)")
     centre = (oracle.normal_centre if req.mode == "NORMAL" else oracle.adaptive_centre)(req.hand_wheel)
     v = speed_for(centre)
     yaw = 0.0 if centre is None else oracle.yaw_rate(*centre, oracle.forward_v_o(centre[0], v))
@@ -78,7 +80,20 @@ def _expected(req: Request) -> tuple[dict[str, oracle.WheelTarget], tuple[float,
             f"docs/spec/vehicles.md A {req.mode}: X = HandWheelAngle/15, centre on {where}; docs/spec/formulas.md §2")
 
 
-@pytest.mark.parametrize("req", REQUESTS, ids=[r.id for r in REQUESTS])
+#: what every request checks: §2's angles and speeds commanded and reached, the VehicleState fields, a clean bus
+_COMMON_REQS = ("VCU-MODE-01", "VCU-REQ-01", "VCU-OUT-01", "VCU-OUT-02", "VCU-OUT-03", "VCU-OUT-04", "VCU-FLT-03",
+                "WHL-CTL-01", "WHL-CTL-02", "WHL-STA-01", *CLEAN_BUS_REQS)
+_MODE_REQS = {"PIVOT": ("VCU-MODE-02", "VCU-OUT-06"), "LATERAL": ("VCU-MODE-08",),
+              "NORMAL": ("VCU-MODE-04", "VCU-OUT-06"), "ADAPTIVE": ("VCU-MODE-05", "VCU-MODE-06", "VCU-OUT-06")}
+
+
+def _param(req: Request):
+    reqs = _MODE_REQS[req.mode] + (("VCU-MODE-07",) if req.mode in ("NORMAL", "ADAPTIVE") and req.hand_wheel == 0.0
+                                      else ())
+    return pytest.param(req, id=req.id, marks=pytest.mark.req(*_COMMON_REQS, *reqs))
+
+
+@pytest.mark.parametrize("req", [_param(r) for r in REQUESTS])
 def test_steering_angles(bench, req: Request) -> None:
     targets, centre, v, x_angle, yaw, source = _expected(req)
     start(bench)
@@ -117,33 +132,36 @@ def test_steering_angles(bench, req: Request) -> None:
 
 
 #: (label, mode, hand wheel or TargetSpeed) of the translations: the centre is at infinity.
-_TRANSLATIONS = [("NORMAL straight", "NORMAL", 0.0), ("ADAPTIVE straight", "ADAPTIVE", 0.0),
-                 ("NORMAL hand wheel 0.3° (centre 7907 m to the right)", "NORMAL", 0.3),
-                 ("LATERAL right", "LATERAL", 1.0)]
+END = 5242.87   # m: VCU_RotationCentre's range end, the contract's "infinity" (VCU-OUT-07)
+#: (label, mode, hand wheel or TargetSpeed, expected (X, Y) on the bus). Translations have their centre at
+#: infinity to the right of the wheels' common heading θ, (cos θ, −sin θ) scaled to the range end: straight
+#: (θ = 0) (+END, 0), LATERAL (θ = +90° either way) (0, −END). A far finite centre is saturated per coordinate.
+_TRANSLATIONS = [("NORMAL straight", "NORMAL", 0.0, (END, 0.0)), ("ADAPTIVE straight", "ADAPTIVE", 0.0, (END, 0.0)),
+                 ("NORMAL hand wheel 0.3° (centre 7907 m to the right)", "NORMAL", 0.3, (END, -oracle.L)),
+                 ("LATERAL right", "LATERAL", 1.0, (0.0, -END)), ("LATERAL left", "LATERAL", -1.0, (0.0, -END))]
 
 
+@pytest.mark.req("VCU-OUT-07", "VCU-OUT-06", "VCU-MODE-07", "VCU-MODE-08", "COM-VAL-01", *CLEAN_BUS_REQS)
 def test_rotation_centre_at_infinity(bench) -> None:
-    """VCU_RotationCentre for a centre at infinity, as dbc/chassis.dbc defines it: "+/-5242.87 m (raw
-    +/-524287, the range end) = centre at infinity = straight; the VCU saturates any farther centre to it"
-    (NORMAL/ADAPTIVE straight: X at the range end; LATERAL: Y at the range end); docs/spec/k-matrix.md: "out of
-    range = straight". A finite centre must never be reported for a translation."""
-    end = 5242.87
-    for label, mode, value in _TRANSLATIONS:
+    """VCU_RotationCentre for a centre at infinity (docs/contract/vcu.md VCU-OUT-07): the DBC has no value beyond
+    ±5242.87 m, and an out-of-range value would make the frame invalid (COM-VAL-01), so the range end is the
+    contract's "infinity": straight ahead (+5242.87, 0), LATERAL (0, -5242.87) whichever way it moves; a finite
+    centre farther away is saturated per coordinate (VCU-OUT-06). A finite centre must never be reported for a
+    translation."""
+    for label, mode, value, expected in _TRANSLATIONS:
         start(bench)
         if mode == "LATERAL":
             bench.set("DRV_MotionRequest", DriveMode="LATERAL", TargetSpeed=value)
             targets = oracle.lateral_targets(value)
-            signal = "RotationCentreY"
         else:
             send_car_mode(bench, mode, value, 1.0)
             centre = oracle.normal_centre(value) if mode == "NORMAL" else oracle.adaptive_centre(value)
             targets = oracle.car_mode_targets(centre, 1.0)
-            signal = "RotationCentreX"
         wait_for_targets(bench, targets)
-        bench.expect(f"{label}: |{signal}| at the range end (centre at infinity)",
-                     abs(bench.value("VCU_RotationCentre", signal)), end, abs_tol=0.005, unit="m",
-                     detail="dbc/chassis.dbc comment of VCU_RotationCentre")
+        for signal, want in zip(("RotationCentreX", "RotationCentreY"), expected):
+            bench.expect(f"{label}: {signal}", bench.value("VCU_RotationCentre", signal), want,
+                         abs_tol=CENTRE_ABS_TOL, unit="m", detail="docs/contract/vcu.md VCU-OUT-07 (one LSB)")
         expect_clean_bus(bench)
-    plot_wheels(bench, "last request (LATERAL right)")
+    plot_wheels(bench, "last request (LATERAL left)")
     bench.plot("VCU_RotationCentre (last request)", [("VCU_RotationCentre", "RotationCentreX"),
                                                      ("VCU_RotationCentre", "RotationCentreY")], ylabel="m")

@@ -5,9 +5,9 @@ Bounds (docs/spec/e2e.md): a timeout is declared 3 cycles after the last valid f
 so a fault that silences a message is detected within 3 cycles + 1 cycle of its start (the last frame
 before the fault may have left up to one cycle earlier); an end-to-end fault (checksum, counter) is
 detected at the first or second affected frame: within 2 cycles + one 1 ms tick.
-Safe reactions are the documented ones of plant/README.md: the VCU sets VcuFault (4 REQUEST_INVALID,
-5 REQUEST_TIMEOUT, 6 WHEEL_FAULT) and commands zero wheel speeds; a wheel ECU whose command times out sets
-WheelFault 3 (CMD_TIMEOUT).
+Safe reactions are the documented ones of docs/contract/vcu.md (VCU-FLT-*) and docs/contract/wheel.md
+(WHL-FLT-01): the VCU sets VcuFault (4 REQUEST_INVALID, 5 REQUEST_TIMEOUT, 6 WHEEL_FAULT) and commands zero
+wheel speeds; a wheel ECU whose command times out sets WheelFault 3 (CMD_TIMEOUT).
 """
 
 from __future__ import annotations
@@ -121,7 +121,41 @@ def _expect_commands_frozen(bench: Case, fault, held: dict[str, float], t_zero: 
                  0, detail="a repeated counter is never accepted (docs/spec/e2e.md)")
 
 
-@pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c.kind}:{c.target}")
+#: What each fault case judges (dut), which requirements it checks (req), and whether it needs a node to be the
+#: bench's own simulation (reference_only: the fault acts on frames only the simulated node sends through the
+#: bench). Every case also ends with the VCU's recovery once the window is over (VCU-FLT-10).
+_VCU_REQUEST = (("VCU",), ("VCU-FLT-02", "VCU-FLT-08", "VCU-FLT-10", "COM-RX-01"), None)
+_JUDGES: dict[str, tuple[tuple[str, ...], tuple[str, ...], tuple[str, str] | None]] = {
+    "drop:VCU_WheelCmd_FL": (("WHL_FL", "VCU"), ("WHL-FLT-01", "COM-RX-02", "VCU-FLT-07", "VCU-FLT-10"),
+                             ("VCU", "drops VCU_WheelCmd_FL, which the bench sends only while it simulates the VCU")),
+    "delay:DRV_MotionRequest": (("VCU",), ("VCU-FLT-01", "VCU-FLT-08", "VCU-FLT-10", "COM-RX-02"), None),
+    "duplicate:DRV_MotionRequest": _VCU_REQUEST,
+    "bitflip:DRV_MotionRequest": _VCU_REQUEST,
+    "counter_freeze:DRV_MotionRequest": _VCU_REQUEST,
+    "counter_jump:DRV_MotionRequest": _VCU_REQUEST,
+    "checksum_value:DRV_MotionRequest": _VCU_REQUEST,
+    "checksum_freeze:DRV_MotionRequest": _VCU_REQUEST,
+    "checksum_random:DRV_MotionRequest": _VCU_REQUEST,
+    "checksum_offset:DRV_MotionRequest": _VCU_REQUEST,
+    "silence:VCU": (("WHL_FL", "VCU"), ("WHL-FLT-01", "COM-RX-02", "VCU-FLT-10"),
+                    ("VCU", "silences the simulated VCU; an external VCU's frames cannot be taken off the bus")),
+    "bus_off:WHL_FR": (("VCU",), ("VCU-FLT-07", "VCU-FLT-08", "VCU-FLT-10"),
+                       ("WHL_FR", "takes the simulated WHL_FR off the bus; an external wheel module's frames cannot "
+                                  "be")),
+    "flood:0x000": (("VCU",), ("VCU-FLT-01", "VCU-FLT-08", "VCU-FLT-10", "COM-RX-02"), None),
+}
+
+
+def _param(case: FaultCase):
+    name = f"{case.kind}:{case.target}"
+    duts, reqs, reference = _JUDGES[name]
+    marks = [pytest.mark.dut(*duts), pytest.mark.req(*reqs)]
+    if reference is not None:
+        marks.append(pytest.mark.reference_only(reference[0], reason=reference[1]))
+    return pytest.param(case, id=name, marks=marks)
+
+
+@pytest.mark.parametrize("case", [_param(c) for c in CASES])
 def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
     _drive(bench)
     held = {c: bench.value(f"VCU_WheelCmd_{c}", "SteerAngleCmd") for c in ("FL", "FR", "RL", "RR")}
@@ -151,6 +185,7 @@ def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
                                           ("VCU_WheelCmd_FL", "WheelSpeedCmd")])
 
 
+@pytest.mark.dut("TESTER")   # judges the bench's own receiver: error frames are counted, none is applied
 def test_error_frames_are_counted(bench: Case) -> None:
     _drive(bench)
     fault = bench.inject("error_frame", "bus", duration=0.05)

@@ -129,7 +129,8 @@ def test_example_kinematics_are_a_rigid_rotation(x: float, y: float, v: float) -
 
 
 def test_example_car_modes_put_the_centre_where_vehicles_md_says() -> None:
-    """NORMAL: X = HandWheelAngle / 15 and S on y = -L; ADAPTIVE below 20 km/h: S on y = 0; LATERAL: ±90°."""
+    """NORMAL: X = HandWheelAngle / 15 and S on y = -L; ADAPTIVE below 20 km/h: S on y = 0; LATERAL: +90° with
+    signed rpm (docs/contract/vcu.md VCU-MODE-08)."""
     for mode, y_centre, factor in ((VCU.NORMAL, -1.38, 2.0), (VCU.ADAPTIVE, 0.0, 1.0)):
         fault, plan = VCU.plan_for(mode, 0.0, 0.0, 1.0, 300.0)
         x_deg = 300.0 / 15.0
@@ -141,8 +142,8 @@ def test_example_car_modes_put_the_centre_where_vehicles_md_says() -> None:
         assert all(n > 0 for n in plan.rpm)                     # forward: every wheel rolls forward
     assert VCU.plan_for(VCU.ADAPTIVE, 0.0, 0.0, 6.0, 300.0)[0] == VCU.INVALID     # above 20 km/h: not here
     fault, plan = VCU.plan_for(VCU.LATERAL, 0.0, 0.0, -1.5, 0.0)
-    assert fault == VCU.OK and plan.angles == [-90.0] * 4
-    assert all(math.isclose(n, 1.5 * 30 / (math.pi * RADIUS)) for n in plan.rpm)
+    assert fault == VCU.OK and plan.angles == [90.0] * 4
+    assert all(math.isclose(n, -1.5 * 30 / (math.pi * RADIUS)) for n in plan.rpm)
 
 
 def test_example_checksum_is_the_contracts() -> None:

@@ -192,10 +192,13 @@ def test_adaptive_high_speed_hook_is_used_above_20_kmh():
     rig = Rig(vcu=Vcu(PARAMS, high_speed_law=law))
     rig.request(2, 10.0, hand_wheel=15 * 2.0)
     rig.run(0.2)
-    assert calls and calls[-1] == 10.0
+    # the law gets the vehicle's speed (VCU-4WS-01), here that of the wheels, not TargetSpeed
+    assert calls and calls[-1] == pytest.approx(rig.sent("VCU_VehicleState")["VehicleSpeed"], abs=0.05)
+    assert 20.0 / 3.6 < calls[-1] < 10.0
     angles = [rig.sent(f"VCU_WheelCmd_{c}")["SteerAngleCmd"] for c in CORNERS]
     assert angles[0] > 0 and angles[2] > 0                       # rear steers with the front
     rig.request(2, 3.0, hand_wheel=15 * 2.0)                    # below 20 km/h: opposite phase, no hook
+    rig.run(1.5)                                                # once the car is below 20 km/h
     n = len(calls)
     rig.run(0.05)
     assert len(calls) == n and rig.sent("VCU_WheelCmd_RL")["SteerAngleCmd"] < 0
@@ -205,17 +208,19 @@ def test_lateral_mode_negative_speed_moves_left():
     rig = Rig()
     rig.request(1, -1.0)
     rig.run(3.0)
-    assert all(rig.sent(f"VCU_WheelCmd_{c}")["SteerAngleCmd"] == -90.0 for c in CORNERS)
+    # docs/contract/vcu.md VCU-MODE-08: +90° with negative rpm (road-wheel angles lie in (-90°, +90°])
+    assert all(rig.sent(f"VCU_WheelCmd_{c}")["SteerAngleCmd"] == 90.0 for c in CORNERS)
+    assert all(rig.sent(f"VCU_WheelCmd_{c}")["WheelSpeedCmd"] < 0.0 for c in CORNERS)
     body = rig.plant.body
     assert body.vx == pytest.approx(-1.0, rel=1e-3) and body.vy == pytest.approx(0.0, abs=1e-6)
     assert body.heading == pytest.approx(0.0, abs=1e-9)
     assert rig.sent("PLANT_Motion")["Speed"] == pytest.approx(-1.0, rel=1e-3)
     assert rig.sent("PLANT_Dynamics")["Sideslip"] == pytest.approx(90.0)   # signed Speed -1 along +90 deg
     assert rig.sent("VCU_VehicleState")["VehicleSpeed"] == pytest.approx(-1.0, rel=1e-3)
-    # wheels at -90 deg: the centre is at infinity to the right of that heading, (cos, -sin)(-90 deg) = (0, +1)
+    # wheels at +90 deg: the centre is at infinity to the right of that heading, (cos, -sin)(+90 deg) = (0, -1)
     centre = rig.sent("VCU_RotationCentre")
     assert centre["RotationCentreX"] == pytest.approx(0.0, abs=1e-9)
-    assert centre["RotationCentreY"] == CENTRE_AT_INFINITY_M
+    assert centre["RotationCentreY"] == -CENTRE_AT_INFINITY_M
 
 
 def test_normal_straight_sends_centre_at_infinity():

@@ -1,5 +1,8 @@
 """Reference VCU (node VCU): the four drive modes of docs/spec/vehicles.md A as wheel commands ([P0] §1.2, §2).
 
+The contract it implements: docs/contract/vcu.md (VCU-*) and, for ADAPTIVE at speed, docs/contract/vcu-4ws.md.
+This docstring summarises it for the code; where they differ, the contract is right.
+
 Inputs: DRV_MotionRequest (DriveMode, PivotX, PivotY, TargetSpeed), DRV_Steering (HandWheelAngle, in
 NORMAL and ADAPTIVE only), WHL_Status_xx (faults and the VehicleSpeed estimate), IMU_Motion (yaw rate,
 for ADAPTIVE's feedback law or hook), BENCH_VcuConfig (ADAPTIVE's rear-steering law). TargetSpeed is the
@@ -8,7 +11,8 @@ signed centre speed v (docs/spec/k-matrix.md).
 Modes (every one a rotation about a point, [P0] §1.2):
 - NORMAL: curvature angle X = HandWheelAngle / hand_wheel_ratio at the front-axle centre, centre on the
   rear-axle line y = -L ([P2], docs/spec/formulas.md §3), rear wheels 0; angles and speeds by docs/spec/formulas.md §2.
-- LATERAL: every wheel +90° (-90° for a negative TargetSpeed), equal speeds |v| (positive = to the right).
+- LATERAL: every wheel +90° and every speed 30 v / (pi r), signed: v > 0 moves right, v < 0 left with negative
+  rpm at the same +90° (road-wheel angles lie in (-90°, +90°], docs/spec/formulas.md §1).
 - PIVOT: centre (PivotX, PivotY), §2 with v_o = TargetSpeed (positive clockwise).
 - ADAPTIVE: below adaptive_low_speed_limit (20 km/h) opposite-phase 4WS, the centre on y = 0 with the
   front-axle curvature angle X = HandWheelAngle / ratio ([P0] §3's U-turn). Above it the front-axle
@@ -16,7 +20,7 @@ Modes (every one a rotation about a point, [P0] §1.2):
   bench-private coding BENCH_VcuConfig.RearSteerLaw (plant/ecus/rear_steer.py: OFF = 2WS, FEEDFORWARD =
   zero-sideslip k(u) X, FEEDBACK = −X + C2 u r with the IMU_Motion yaw rate; FEEDFORWARD when the message
   is absent; REQUEST_INVALID when its last frame is invalid or its value unknown), or, when the VCU is
-  built with a hook `high_speed_law(X, |v|, measured yaw rate)`, from the hook instead; all four wheels
+  built with a hook `high_speed_law(X, |u|, measured yaw rate)` (u: the vehicle speed estimate of rear_steer.py), from the hook instead; all four wheels
   steer about the one centre of the two axle headings (VCU_RotationCentre).
 In NORMAL and ADAPTIVE a positive v drives forward: v_o = v * sign(x_centre) in §2's convention.
 
@@ -26,7 +30,8 @@ Faults (VCU_VehicleState.VcuFault), checked in this order, the first found is se
                      or the request needs more than hub_motor_max_speed on a wheel or more than
                      max_yaw_rate (e.g. a centre a few cm off the origin), or (ADAPTIVE above its low-speed
                      range) BENCH_VcuConfig's last frame is invalid or names no law: never an out-of-range
-                     command.
+                     command. The limit check runs after 1-3 (their centres have no speeds):
+                     docs/contract/vcu.md VCU-FLT-03.
   1 CENTRE_AT_ORIGIN centre within 1 cm of the origin with v != 0 (v = 0 sets the spin-in-place angles).
   2 CENTRE_ON_WHEEL  centre within 1 cm of a contact point.
   3 ANGLE_OVER_90    "a wheel that would need more than 90°": in the car-like modes (NORMAL, ADAPTIVE)
@@ -50,7 +55,7 @@ infinity to the right of the wheels' common heading θ: the direction (cos θ, �
 coordinate reaches the range end (straight: (+5242.87, 0); LATERAL at +90°: (0, −5242.87)).
 VCU_VehicleState.VehicleSpeed: the centre speed estimated from the four WHL_Status (least-squares rigid
 fit), signed as TargetSpeed in the active mode; 0 unless all four are received.
-CurvatureAngle: X at the front-axle centre (deg, 0 straight; ±90° in LATERAL, like the wheels).
+CurvatureAngle: X at the front-axle centre (deg, 0 straight; +90° in LATERAL, like the wheels).
 """
 
 from __future__ import annotations
@@ -63,7 +68,7 @@ from enum import IntEnum
 from bench.node import NodeIO
 from plant import limits
 from plant.body import VelocityFit
-from plant.ecus.rear_steer import DEFAULT_LAW, SeedLaws, Strategy
+from plant.ecus.rear_steer import DEFAULT_LAW, SeedLaws, Strategy, VehicleSpeedEstimate
 from plant.kinematics import (CORNERS, centre_from_axle_angles, classify_centre, curvature_angle,
                               rotation, translation, yaw_rate)
 from plant.vehicles import Ev4wisParams
@@ -127,6 +132,7 @@ class Vcu:
         self.geometry = params.geometry
         self.high_speed_law = high_speed_law
         self.laws = SeedLaws(params)
+        self.vehicle_speed = VehicleSpeedEstimate(params)   # u of the rear-steer laws (rear_steer.py)
         self._ratio = params.hand_wheel_ratio
         self._low_speed = params.adaptive_low_speed_limit / 3.6
         self._max_rpm = min(params.hub_motor_max_speed, limits.WHEEL_SPEED_CMD[1])
@@ -142,6 +148,7 @@ class Vcu:
         self._t_start: float | None = None
         self._cache: tuple[tuple[float, ...], tuple[VcuFault, Plan | None]] | None = None
         self._next_task = -math.inf
+        self.vehicle_speed.reset()
 
     # -- decision --------------------------------------------------------------------------------
     def decide(self, io: NodeIO) -> tuple[VcuFault, Plan | None]:
@@ -166,7 +173,8 @@ class Vcu:
             if io.invalid("DRV_Steering") or not limits.finite(hw):
                 return VcuFault.REQUEST_INVALID, None
             if mode == DriveMode.ADAPTIVE:
-                rear = self._rear_angle(hw / self._ratio, abs(v), io)
+                u = self.vehicle_speed.value      # the vehicle's speed, not the request's (VCU-4WS-01)
+                rear = self._rear_angle(hw / self._ratio, abs(v) if u is None else abs(u), io)
         key = (mode, px, py, v, hw, rear)
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
@@ -205,10 +213,9 @@ class Vcu:
     def _plan(self, mode: int, px: float, py: float, v: float, x_deg: float,
               rear: float) -> tuple[VcuFault, Plan | None]:
         g = self.geometry
-        if mode == DriveMode.LATERAL:
-            angle = 90.0 if v >= 0.0 else -90.0
-            angles, rpm = translation(angle, abs(v), g)
-            plan = Plan(mode, angles, rpm, None, angle, 0.0, (1.0, 0.0))
+        if mode == DriveMode.LATERAL:     # +90° both ways, the sign of v in the rpm (VCU-MODE-08)
+            angles, rpm = translation(90.0, v, g)
+            plan = Plan(mode, angles, rpm, None, 90.0, 0.0, (1.0, 0.0))
         elif mode == DriveMode.PIVOT:
             undefined = classify_centre(px, py, v, g)
             if undefined is not None:
@@ -274,6 +281,7 @@ class Vcu:
         if self._t_start is None:
             self._t_start = t
         try:
+            self.vehicle_speed.update(io, t)
             fault, plan = self.decide(io)
         except (ArithmeticError, TypeError, ValueError):   # defensive: the checks above should catch it
             fault, plan = VcuFault.REQUEST_INVALID, None

@@ -1,5 +1,8 @@
 """Reference wheel ECU (nodes WHL_FL, WHL_FR, WHL_RL, WHL_RR): steering servo and hub motor of one corner.
 
+The contract it implements: docs/contract/wheel.md (WHL-*); where this docstring and the contract differ, the
+contract is right.
+
 [P0] §2.2: each wheel ECU executes the VCU's steering-angle and wheel-speed targets and reports the
 wheel's state. Models (parameters in plant/vehicles/ev4wis.toml, docs/spec/vehicles.md A, all "chosen"):
 
