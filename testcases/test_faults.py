@@ -186,6 +186,7 @@ def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
 
 
 @pytest.mark.dut("TESTER")   # judges the bench's own receiver: error frames are counted, none is applied
+@pytest.mark.req("COM-RX-03")
 def test_error_frames_are_counted(bench: Case) -> None:
     _drive(bench)
     fault = bench.inject("error_frame", "bus", duration=0.05)
