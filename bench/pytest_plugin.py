@@ -273,6 +273,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             return
     else:
         run = config.stash.get(_RUN_KEY, None)
+        if run is None and config.stash[_PENDING_KEY] and not aborted:
+            run = _run_for_skipped_cases(config)
         if run is None:
             return
         worker = _worker_id(config)
@@ -283,6 +285,18 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     reporter = config.pluginmanager.get_plugin("terminalreporter")
     if reporter is not None:
         reporter.write_line(f"bench: report in {out_dir}")
+
+
+def _run_for_skipped_cases(config: pytest.Config) -> BenchRun | None:
+    """Every bench case was skipped (e.g. reference_only with its node external): the run starts only now,
+    so that the report still says which cases were skipped and why."""
+    try:
+        return _run(config)
+    except (BenchError, OSError) as exc:
+        reporter = config.pluginmanager.get_plugin("terminalreporter")
+        if reporter is not None:
+            reporter.write_line(f"bench: every case was skipped and the run could not start: {exc}")
+        return config.stash.get(_RUN_KEY, None)   # created but not started: finish() still closes its log
 
 
 def _merge_parts(out_dir: Path, wall_time: float, aborted: bool) -> RunResult | None:
