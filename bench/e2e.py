@@ -69,7 +69,7 @@ def next_counter(counter: int) -> int:
 
 # -- receiver (docs/spec/e2e.md "Receiver") --------------------------------------------------------------
 MAX_DELTA_COUNTER = 1     # the only counter step accepted: a lost frame (step 2) is a wrong sequence
-REVALIDATION_FRAMES = 2   # consecutive in-sequence frames after an E2E error; the last of them is accepted
+REVALIDATION_FRAMES = 2   # consecutive in-sequence frames after a sequence error; the last of them is accepted
 RESYNC_GAP_CYCLES = 3     # a reception gap (any frame) longer than this many cycles resynchronises
 
 
@@ -80,7 +80,7 @@ class Check(Enum):
     OK = "ok"                          # counter = reference + 1
     REPEATED = "repeated"              # counter = reference
     WRONG_SEQUENCE = "wrong sequence"  # any other counter: skipped, backwards, stale, a second sender
-    ERROR = "error"                    # wrong length or checksum: its counter is not trusted
+    ERROR = "error"                    # wrong length or checksum: its counter is not read, it took one slot
 
 
 class RxState(Enum):
@@ -88,7 +88,7 @@ class RxState(Enum):
 
     NODATA = "nodata"      # nothing intact since the start or since a reception gap: no reference counter
     VALID = "valid"        # in sequence: in-sequence frames are accepted
-    INVALID = "invalid"    # after an E2E error: counting in-sequence frames up to REVALIDATION_FRAMES
+    INVALID = "invalid"    # after a sequence error: counting in-sequence frames up to REVALIDATION_FRAMES
 
 
 _VALID, _OK = RxState.VALID, Check.OK
@@ -100,7 +100,7 @@ class Receiver:
     `resync` when a frame arrives after a reception gap, then `receive` for every frame."""
 
     state: RxState = RxState.NODATA
-    reference: int | None = None   # counter of the last intact frame since the last resync
+    reference: int | None = None   # counter of the previous frame since the last resync (ERROR: reference + 1)
     good: int = 0                  # consecutive in-sequence frames while INVALID
 
     def resync(self) -> None:
@@ -123,14 +123,15 @@ class Receiver:
             check = Check.REPEATED if delta == 0 else Check.OK if delta <= MAX_DELTA_COUNTER else Check.WRONG_SEQUENCE
         if intact:
             self.reference = counter
+        elif self.reference is not None:   # a frame came in its slot: the next one must carry the counter after it
+            self.reference = (self.reference + 1) % COUNTER_MODULO
         return check, self._step(check)
 
     def _step(self, check: Check) -> bool:
         state = self.state
         if check is Check.ERROR:
-            if state is RxState.VALID or state is RxState.INVALID:
-                self.state, self.good = RxState.INVALID, 0
-            return False                                   # NODATA stays NODATA: there is no sequence yet
+            self.good = 0                                  # rejected; it interrupts a re-validation, no more
+            return False
         if check is Check.INITIAL:
             self.state, self.good = RxState.VALID, 0
             return True

@@ -101,4 +101,5 @@ def test_receiver_follows_the_documented_transition(row: list[str]) -> None:
             assert rx.good == 0
         elif next_good.strip() == "+ 1":
             assert rx.good == good + 1
-        assert rx.reference == (counter if intact else (None if state is e2e.RxState.NODATA else REFERENCE))
+        # an intact frame becomes the reference; one that is not takes its slot: reference + 1
+        assert rx.reference == (counter if intact else (None if state is e2e.RxState.NODATA else REFERENCE + 1))

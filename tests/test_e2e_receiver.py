@@ -1,10 +1,11 @@
 """The E2E receiver (docs/spec/e2e.md "Receiver"): every counter pattern of the document gets its verdict.
 
-Expected verdicts come from the document's rules, written here once more as a small declarative model
-(`accepted_by_rules`), never from bench.e2e: a frame is accepted when it is intact (length and checksum)
-and either starts a sequence (the first intact frame since the start or since a reception gap of more than
-3 cycles) or advances the counter by exactly 1 from the previous intact frame while the frame before it was
-accepted or advanced by exactly 1 as well (2 consecutive in-sequence frames re-validate). Frames are
+Expected verdicts come from the document's rules, written here once more as a small model
+(`accepted_by_rules`, from the document's sentence "In words"), never from bench.e2e: a frame is accepted
+when it is intact (length and checksum) and either starts a sequence (the first intact frame since the
+start or since a reception gap of more than 3 cycles), or carries the counter after the previous frame's (a
+frame that was not intact counts with the counter it should have had) while no repeated or wrong counter
+came since the last accepted frame, or is the second of two such frames in a row after one. Frames are
 DRV_MotionRequest (20 ms cycle), built with tests/reference.py's checksum; byte 0 carries the frame's
 index (PivotX = 0.02 m x index) so that the applied values show which frame was applied.
 """
@@ -49,21 +50,28 @@ def accepted_by_rules(frames: list[Frame]) -> list[bool]:
     """The document's verdicts, from its rules (not from the code): see the module docstring."""
     verdicts: list[bool] = []
     last_t: int | None = None
-    prev_counter: int | None = None        # counter of the previous intact frame since the last resync
-    prev_in_sequence = prev_accepted = False  # of the previous frame of the message since the last resync
+    previous: int | None = None     # counter of the previous frame since the last resync (not intact: + 1)
+    clean = False                   # no repeated or wrong counter since the last accepted frame
+    in_a_row = 0                    # in-sequence frames in a row since the last repeated or wrong counter
     for frame in frames:
         if last_t is not None and frame.t_ms - last_t > GAP_MS:
-            prev_counter, prev_in_sequence, prev_accepted = None, False, False
+            previous, clean, in_a_row = None, False, 0
         last_t = frame.t_ms
         if not frame.intact:
             verdicts.append(False)
-            prev_in_sequence = prev_accepted = False
+            previous = None if previous is None else (previous + 1) % 16
+            in_a_row = 0
             continue
-        starts = prev_counter is None
-        in_sequence = not starts and frame.counter == (prev_counter + 1) % 16
-        accepted = starts or (in_sequence and (prev_accepted or prev_in_sequence))
+        if previous is None:
+            accepted = True
+        elif frame.counter == (previous + 1) % 16:
+            in_a_row += 1
+            accepted = clean or in_a_row >= 2
+        else:
+            accepted, clean, in_a_row = False, False, 0
+        clean = clean or accepted
         verdicts.append(accepted)
-        prev_counter, prev_in_sequence, prev_accepted = frame.counter, in_sequence, accepted
+        previous = frame.counter
     return verdicts
 
 
@@ -190,14 +198,35 @@ def test_delayed_stale_frame(codebook: Codebook) -> None:
     assert monitor.invalid_log[0].reason == "counter 9, expected 14"
 
 
-def test_checksum_error_breaks_the_sequence(codebook: Codebook) -> None:
-    """A frame with a wrong checksum gives no trusted counter: the next frame is judged against the last intact
-    one, so it is a wrong sequence (a lost frame), and the second in-sequence frame after it is accepted."""
-    frames = _steady([3, 4, 5, 6, 7])
+def test_checksum_error_costs_only_its_frame(codebook: Codebook) -> None:
+    """A frame with a wrong checksum is rejected and counted as the frame of its slot (counter 4 here), so the
+    next frame, 5, is in sequence and accepted: the consumer misses one cycle, no timeout."""
+    frames = _steady([3, 4, 5, 6])
+    frames[1] = Frame(frames[1].t_ms, 4, intact=False)
+    monitor, verdicts = _feed(codebook, frames)
+    assert verdicts == accepted_by_rules(frames) == [True, False, True, True]
+    assert [r.reason for r in monitor.invalid_log] == ["checksum"]
+    assert monitor.state(MESSAGE).timeouts == []
+
+
+def test_checksum_burst_then_the_first_intact_frame(codebook: Codebook) -> None:
+    """Ten frames with a wrong checksum from a sender that kept counting: each takes its slot, so the first
+    intact frame after them (14) is in sequence and accepted at once; the consumer timed out meanwhile."""
+    frames = _steady([3] + _run(4, 10) + [14, 15])
+    frames[1:11] = [Frame(f.t_ms, f.counter, intact=False) for f in frames[1:11]]
+    monitor, verdicts = _feed(codebook, frames)
+    assert verdicts == accepted_by_rules(frames) == [True] + [False] * 10 + [True, True]
+    assert monitor.state(MESSAGE).timeouts == [pytest.approx(GAP_MS / 1000.0)]
+
+
+def test_lost_frame_after_a_bad_checksum_is_a_wrong_sequence(codebook: Codebook) -> None:
+    """3, a bad frame (the slot of 4), then 6: a frame was lost, a wrong sequence; 7 is the first of the two
+    in-sequence frames that re-validate, 8 is accepted."""
+    frames = _steady([3, 4, 6, 7, 8])
     frames[1] = Frame(frames[1].t_ms, 4, intact=False)
     monitor, verdicts = _feed(codebook, frames)
     assert verdicts == accepted_by_rules(frames) == [True, False, False, False, True]
-    assert [r.reason.split(",")[0] for r in monitor.invalid_log] == ["checksum", "counter 5", "counter 6 in sequence"]
+    assert [r.reason.split(",")[0] for r in monitor.invalid_log] == ["checksum", "counter 6", "counter 7 in sequence"]
 
 
 def test_timeout_then_resume(codebook: Codebook) -> None:

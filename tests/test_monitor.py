@@ -38,8 +38,8 @@ def test_each_fault_is_detected_and_not_applied(codebook: Codebook) -> None:
     bad_crc = bytearray(good[1])
     bad_crc[7] ^= 0x01
     assert not monitor.on_frame(0.01, frame_id, bytes(bad_crc), "rx")
-    assert not monitor.on_frame(0.02, frame_id, good[3], "rx")        # counter 3 after 0: a bad checksum
-                                                                      # gives no trusted counter
+    assert not monitor.on_frame(0.02, frame_id, good[3], "rx")        # counter 3 where 2 was due (the frame
+                                                                      # with the bad checksum took the slot of 1)
     assert not monitor.on_frame(0.03, frame_id, good[4][:7], "rx")    # short frame
     state = monitor.state("VCU_WheelCmd_FL")
     assert state.invalid == {"checksum": 1, "counter": 1, "length": 1}
