@@ -1,15 +1,21 @@
 """Opening buses: the in-process virtual-time bus (the embedded default) or any python-can interface.
 
 `VirtualTimeBus` is a python-can `BusABC` registered as the interface `bench_virtual`. Unlike
-python-can's `virtual` interface it has no threads and never blocks: frames are handed over in
-the order they were sent, stamped by the sender with the bench's virtual time, so that a campaign
-gives the same frame sequence on every run.
+python-can's `virtual` interface it keeps the sender's timestamp (the bench's virtual time; it never
+stamps the wall clock) and has no threads of its own: frames are handed over in the order they were
+sent, so that a campaign gives the same frame sequence on every run. Otherwise it behaves as python-can's
+buses do (docs/python-can-conformance.md): every receiver gets its own copy of a frame, stamped with the
+receiving bus's channel and `is_rx`; `recv(timeout)` sleeps until a frame arrives; a shut-down bus raises
+`can.CanOperationError`; a bus dropped without `shutdown()` is collected and stops receiving.
 """
 
 from __future__ import annotations
 
 import socket
 import sys
+import threading
+import time
+import weakref
 from collections import deque
 from typing import Any
 
@@ -24,34 +30,146 @@ UDP_MULTICAST_HOP_LIMIT = 0
 #: python-can's default IPv4 group for udp_multicast (an administratively scoped address).
 UDP_MULTICAST_DEFAULT_GROUP = "239.74.163.2"
 
+_new_message = object.__new__
+
+
+def _copy(msg: can.Message, channel: Any, is_rx: bool) -> can.Message:
+    """The receiver's own copy of `msg` (fresh data buffer), with its channel and direction.
+
+    Not `copy.deepcopy`: this is the bench's hot path (one copy per frame and receiver), and a plain
+    slot copy costs a fraction of Message(...) or deepcopy."""
+    copy = _new_message(can.Message)
+    copy.timestamp = msg.timestamp
+    copy.arbitration_id = msg.arbitration_id
+    copy.is_extended_id = msg.is_extended_id
+    copy.is_remote_frame = msg.is_remote_frame
+    copy.is_error_frame = msg.is_error_frame
+    copy.channel = channel
+    copy.dlc = msg.dlc
+    copy.data = bytearray(msg.data)
+    copy.is_fd = msg.is_fd
+    copy.is_rx = is_rx
+    copy.bitrate_switch = msg.bitrate_switch
+    copy.error_state_indicator = msg.error_state_indicator
+    return copy
+
+
+class _Inbox(deque):  # type: ignore[type-arg]
+    """One bus's pending frames. The channel registry holds inboxes, never buses, so a dropped bus is
+    collected. `qsize()`/`empty()` as python-can's virtual bus exposes its `queue`."""
+
+    __slots__ = ("channel", "closed", "waiters", "ready")
+
+    def __init__(self, channel: Any) -> None:
+        super().__init__()
+        self.channel = channel
+        self.closed = False
+        self.waiters = 0                     # threads sleeping in recv: only then does send() notify
+        self.ready = threading.Condition(threading.Lock())
+
+    def qsize(self) -> int:
+        return len(self)
+
+    def empty(self) -> bool:
+        return not self
+
+    def wake(self) -> None:
+        with self.ready:
+            self.ready.notify_all()
+
+
+class _Channel:
+    """The inboxes on one channel name; `inboxes` is replaced, never changed, so send() reads it without a lock."""
+
+    __slots__ = ("inboxes",)
+
+    def __init__(self) -> None:
+        self.inboxes: tuple[_Inbox, ...] = ()
+
+
+_registry: dict[str, _Channel] = {}
+_registry_lock = threading.Lock()
+
+
+def _join(name: str, inbox: _Inbox) -> _Channel:
+    with _registry_lock:
+        channel = _registry.get(name)
+        if channel is None:
+            channel = _registry[name] = _Channel()
+        channel.inboxes = (*channel.inboxes, inbox)
+        return channel
+
+
+def _leave(name: str, inbox: _Inbox) -> None:
+    """Take `inbox` off its channel (idempotent; also the finaliser of a bus dropped without shutdown)."""
+    inbox.closed = True
+    with _registry_lock:
+        channel = _registry.get(name)
+        if channel is not None:
+            channel.inboxes = tuple(other for other in channel.inboxes if other is not inbox)
+            if not channel.inboxes:
+                del _registry[name]
+    inbox.clear()
+    inbox.wake()
+
 
 class VirtualTimeBus(can.BusABC):
     """An in-process bus whose instances on the same channel receive each other's frames."""
-
-    _channels: dict[str, list["VirtualTimeBus"]] = {}
 
     def __init__(self, channel: Any = "bench", receive_own_messages: bool = False, **kwargs: Any) -> None:
         super().__init__(channel=channel, **kwargs)
         self.channel_info = f"bench virtual-time bus {channel!r}"
         self._channel_name = str(channel)
-        self._queue: deque[can.Message] = deque()
-        self._own = receive_own_messages
-        self._peers = self._channels.setdefault(self._channel_name, [])
-        self._peers.append(self)
+        self._own = bool(receive_own_messages)
+        self._inbox = _Inbox(channel)
+        self.queue = self._inbox              # python-can's virtual bus name for it (qsize, empty)
+        self._net = _join(self._channel_name, self._inbox)
+        self._finalizer = weakref.finalize(self, _leave, self._channel_name, self._inbox)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        for peer in self._peers:
-            if peer is not self or self._own:
-                peer._queue.append(msg)
+        mine = self._inbox
+        if mine.closed:
+            raise can.CanOperationError(f"{self.channel_info} is shut down")
+        own = self._own
+        for inbox in self._net.inboxes:
+            if inbox is mine:
+                if not own:
+                    continue
+                inbox.append(_copy(msg, inbox.channel, False))
+            else:
+                inbox.append(_copy(msg, inbox.channel, True))
+            if inbox.waiters:
+                inbox.wake()
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        queue = self._queue
-        return (queue.popleft() if queue else None), False
+        inbox = self._inbox
+        if inbox:
+            return inbox.popleft(), False
+        if inbox.closed:
+            raise can.CanOperationError(f"{self.channel_info} is shut down")
+        if timeout is not None and timeout <= 0.0:
+            return None, False
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with inbox.ready:
+            inbox.waiters += 1
+            try:
+                while not inbox:
+                    if inbox.closed:
+                        raise can.CanOperationError(f"{self.channel_info} is shut down")
+                    left = None if deadline is None else deadline - time.monotonic()
+                    if left is not None and left <= 0.0:
+                        return None, False
+                    inbox.ready.wait(left)
+            finally:
+                inbox.waiters -= 1
+        try:
+            return inbox.popleft(), False
+        except IndexError:   # another thread took it first
+            return None, False
 
     def shutdown(self) -> None:
-        if self in self._peers:
-            self._peers.remove(self)
-        super().shutdown()
+        super().shutdown()    # periodic tasks first, as python-can's virtual bus does
+        self._finalizer()     # off the channel now, not when collected; wakes a recv() waiting on it
 
 
 #: Bytes of socket receive buffer for udp_multicast: every frame is one datagram (about 1 KiB of kernel

@@ -7,6 +7,11 @@ x.mcap` and `can.LogReader("x.mcap")` play a bench run's log. Writing goes throu
 and reading through `bench.logread.read_frames` (which tolerates a log cut by a kill), so the format is
 exactly the one `bench run` writes.
 
+Both take a file name or a binary file object, as python-can's own formats do (so `can.Logger("x.mcap.gz")`,
+python-can's size-rotating logger and `can.logger --file-size` work), and keep what a `can.Message` says:
+CAN FD (also at 8 bytes or fewer), BRS, ESI, a remote frame's DLC, and the channel as given (None, a
+number or a name). docs/python-can-conformance.md lists what python-can's own tests check of them.
+
 Without a DBC the log has the raw-frame channel only. With `dbc` (a path, several separated by commas;
 on the logger's command line `--dbc=dbc/chassis.dbc`) every frame also goes through the bench's monitor:
 it is checked (length, the contract's E2E checksum and counter, ranges) and its decoded signals are
@@ -19,10 +24,12 @@ import math
 import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import can
-from can.io.generic import MessageReader, MessageWriter
+from can.io.generic import BinaryIOMessageReader, BinaryIOMessageWriter
+
+from bench.errors import LogError
 
 from bench.codec import MessageCodec, load_codebook
 from bench.logread import LoggedFrame, read_frames
@@ -30,17 +37,28 @@ from bench.monitor import Monitor
 from bench.recorder import Recorder
 
 SUFFIX = ".mcap"
-DEFAULT_CHANNEL = "can0"       # the channel label of frames whose bus gives none
+NO_CHANNEL = ""       # the channel label of frames whose bus gives none (read back as None)
 
 
 def frame_to_message(frame: LoggedFrame) -> can.Message:
-    """A logged frame as a python-can message: log time, direction (is_rx) and channel label kept."""
-    return can.Message(
-        timestamp=frame.t, arbitration_id=frame.arbitration_id, data=frame.data, dlc=len(frame.data),
+    """A logged frame as a python-can message: log time, direction (is_rx), flags and channel kept."""
+    channel: Any = frame.channel_number if frame.channel_number is not None else (frame.channel or None)
+    return can.Message(   # a remote frame's record holds as many (zero) bytes as it requests: its DLC, no data
+        timestamp=frame.t, arbitration_id=frame.arbitration_id, data=b"" if frame.is_remote else frame.data,
+        dlc=len(frame.data),
         is_extended_id=frame.is_extended, is_remote_frame=frame.is_remote, is_error_frame=frame.is_error,
-        is_fd=len(frame.data) > 8, is_rx=frame.direction == "rx", channel=frame.channel or None,
-        check=False,
+        is_fd=frame.is_fd, bitrate_switch=frame.bitrate_switch, error_state_indicator=frame.error_state_indicator,
+        is_rx=frame.direction == "rx", channel=channel, check=False,
     )
+
+
+def _channel(value: Any) -> tuple[str, int | None]:
+    """A message's channel as the log's label and, for a numbered channel, its number."""
+    if value is None:
+        return NO_CHANNEL, None
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value), value
+    return str(value), None
 
 
 def _paths(value: Any) -> list[Path]:
@@ -50,62 +68,83 @@ def _paths(value: Any) -> list[Path]:
     return [Path(str(item).strip()) for item in items if str(item).strip()]
 
 
-class MCAPWriter(MessageWriter):
-    """Writes received messages into a bench MCAP log (python-can writer for ".mcap")."""
+class MCAPWriter(BinaryIOMessageWriter):
+    """Writes received messages into a bench MCAP log (python-can writer for ".mcap").
 
-    def __init__(self, file: str | os.PathLike[str], *, dbc: Any = None, channel: str | None = None,
+    `file` is a path or a binary file object (which stop() closes, as python-can's writers do)."""
+
+    def __init__(self, file: str | os.PathLike[str] | IO[bytes], *, dbc: Any = None, channel: Any = None,
                  append: bool = False, flush_interval: float = 0.5, **kwargs: Any) -> None:
         if append:
             raise ValueError(f"{file}: an MCAP log cannot be appended to; write a new file")
-        if not isinstance(file, (str, os.PathLike)):
-            raise TypeError(f"MCAPWriter writes to a file name, not {type(file).__name__}")
         dbc_paths = _paths(dbc)
         codebook = load_codebook(dbc_paths) if dbc_paths else None   # DatabaseError names a bad file
         databases = [db for _, db in codebook.databases] if codebook else []
-        self.recorder = Recorder(Path(file), databases, attachments=dbc_paths, flush_interval=flush_interval)
-        self.default_channel = str(channel) if channel is not None else DEFAULT_CHANNEL
+        super().__init__(file, mode="wb")
+        try:
+            self.recorder = Recorder(self.file, databases, attachments=dbc_paths, flush_interval=flush_interval)
+        except BaseException:
+            self.file.close()
+            raise
+        self.default_channel = channel           # the channel of messages that carry none
         self.monitor = Monitor(codebook, sink=self._sink) if codebook else None
         self._last_t = 0.0
-        self._flags = (DEFAULT_CHANNEL, False, False, False)   # channel, extended, error, remote of the frame in hand
+        self._extra: dict[str, Any] = {}         # the recorder's keywords for the frame in the monitor's hands
 
     def on_message_received(self, msg: can.Message) -> None:
         t = msg.timestamp
         if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 0.0):
             t = self._last_t          # a bus without timestamps: keep the order, never a bad time
         self._last_t = t
-        channel = self.default_channel if msg.channel is None else str(msg.channel)
+        channel, number = _channel(self.default_channel if msg.channel is None else msg.channel)
         direction = "rx" if msg.is_rx else "tx"
         data = bytes(msg.data)
+        extra = {"channel": channel, "is_extended": msg.is_extended_id, "is_error": msg.is_error_frame,
+                 "is_remote": msg.is_remote_frame, "is_fd": msg.is_fd, "bitrate_switch": msg.bitrate_switch,
+                 "error_state_indicator": msg.error_state_indicator, "channel_number": number,
+                 "dlc": msg.dlc if msg.is_remote_frame else None}
         if self.monitor is None or msg.is_remote_frame:
-            self.recorder.frame(t, msg.arbitration_id, data, channel=channel, direction=direction,
-                                is_extended=msg.is_extended_id, is_error=msg.is_error_frame,
-                                is_remote=msg.is_remote_frame)
+            self.recorder.frame(t, msg.arbitration_id, data, direction=direction, **extra)
             return
-        self._flags = (channel, msg.is_extended_id, msg.is_error_frame, msg.is_remote_frame)
+        self._extra = extra
         self.monitor.on_frame(t, msg.arbitration_id, data, direction, msg.is_extended_id, msg.is_error_frame)
 
     def _sink(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
               codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
-        channel, extended, error, remote = self._flags
-        self.recorder.frame(t, arbitration_id, data, channel=channel, direction=direction, is_extended=extended,
-                            is_error=error, is_remote=remote, valid=valid, error=reason)
+        self.recorder.frame(t, arbitration_id, data, direction=direction, valid=valid, error=reason, **self._extra)
         if values is not None and codec is not None:
             self.recorder.decoded(t, codec.name, values)
 
     def stop(self) -> None:
-        """Write the log's summary and footer (idempotent)."""
+        """Write the log's summary and footer and close the file (idempotent)."""
         self.recorder.close()
+        self.file.close()
+
+    def file_size(self) -> int:
+        """Bytes on disk so far (python-can's size-rotating logger asks); the open chunk is not counted."""
+        return self.file.tell()
 
 
-class MCAPReader(MessageReader):
-    """Reads the raw frames of a bench MCAP log (python-can reader for ".mcap"), also of a killed run."""
+class MCAPReader(BinaryIOMessageReader):
+    """Reads the raw frames of a bench MCAP log (python-can reader for ".mcap"), also of a killed run.
 
-    def __init__(self, file: str | os.PathLike[str], **kwargs: Any) -> None:
-        if not isinstance(file, (str, os.PathLike)):
-            raise TypeError(f"MCAPReader reads a file name, not {type(file).__name__}")
-        self._frames = read_frames(file)
-        # Open the file now, so that a missing or foreign file fails here (LogError) and not mid-iteration.
-        self._first = next(self._frames, None)
+    `file` is a path or a binary file object, read from where it stands; stop() closes it."""
+
+    def __init__(self, file: str | os.PathLike[str] | IO[bytes], **kwargs: Any) -> None:
+        if isinstance(file, (str, os.PathLike)):
+            try:
+                self.file = open(file, "rb")  # noqa: SIM115 - closed by stop()
+            except OSError as exc:
+                raise LogError(f"{file}: cannot read run log: {exc.strerror}") from None
+        else:
+            self.file = file
+        try:
+            self._frames = read_frames(self.file)
+            # Read the head now, so that a foreign file fails here (LogError) and not mid-iteration.
+            self._first = next(self._frames, None)
+        except BaseException:
+            self.file.close()
+            raise
 
     def __iter__(self) -> Iterator[can.Message]:
         if self._first is None:
@@ -117,3 +156,4 @@ class MCAPReader(MessageReader):
 
     def stop(self) -> None:
         self._frames.close()
+        self.file.close()

@@ -10,6 +10,8 @@ into mcap's own `EndOfFile`: a cut at any byte ends the iteration quietly, at th
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 from collections.abc import Iterator
@@ -25,6 +27,7 @@ from bench.errors import LogError
 from bench.recorder import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
 
 MAGIC = b"\x89MCAP0\r\n"
+_EXACT_NS = 1 << 53   # log times below it convert to float exactly
 
 
 @dataclass
@@ -42,6 +45,10 @@ class LoggedFrame:
     error: str
     is_remote: bool = False
     t_ns: int = 0
+    is_fd: bool = False
+    bitrate_switch: bool = False
+    error_state_indicator: bool = False
+    channel_number: int | None = None      # the channel as the bus gave it, when a number
 
 
 @dataclass
@@ -63,7 +70,9 @@ class _WholeReads:
 
     def __init__(self, file: IO[bytes]) -> None:
         self._file = file
-        self._size = os.fstat(file.fileno()).st_size
+        here = file.tell()
+        self._size = file.seek(0, os.SEEK_END)   # also of a file object without a descriptor (gzip, BytesIO)
+        file.seek(here)
 
     def read(self, size: int = -1) -> bytes:
         if size is not None and size > self._size - self._file.tell():
@@ -75,23 +84,47 @@ class _WholeReads:
 
 
 class _Scan:
-    """The records of a log in file order, ending quietly at a cut; `complete` once the footer and end magic are read."""
+    """The records of a log in file order, ending quietly at a cut; `complete` once the footer and end magic are read.
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
+    `source` is a path or a binary file object read from where it stands (python-can's readers take both);
+    one that cannot seek (a pipe) is read into memory first."""
+
+    def __init__(self, source: str | os.PathLike[str] | IO[bytes]) -> None:
+        self._stream: IO[bytes] | None = None
+        if hasattr(source, "read"):
+            stream: Any = source
+            self.path = Path(str(getattr(stream, "name", "<stream>")))
+            try:
+                if not stream.seekable():
+                    stream = io.BytesIO(stream.read())
+                self._stream, self._start = stream, stream.tell()
+                head = stream.read(len(MAGIC))
+                stream.seek(self._start)
+            except OSError as exc:
+                raise LogError(f"{self.path}: cannot read run log: {exc}") from None
+        else:
+            self.path = Path(source)  # type: ignore[arg-type]
+            try:
+                with self.path.open("rb") as file:
+                    head = file.read(len(MAGIC))
+            except OSError as exc:
+                raise LogError(f"{self.path}: cannot read run log: {exc.strerror}") from None
         self.complete = False
         self.topics: dict[int, str] = {}  # channel id -> topic
-        try:
-            with self.path.open("rb") as file:
-                head = file.read(len(MAGIC))
-        except OSError as exc:
-            raise LogError(f"{self.path}: cannot read run log: {exc.strerror}") from None
+        if not isinstance(head, bytes):
+            raise LogError(f"{self.path}: a run log is read from a binary file, not {type(source).__name__}")
         if not MAGIC.startswith(head):  # a log cut inside its magic is an empty log, not a foreign file
             raise LogError(f"{self.path}: not an MCAP run log")
 
+    def _open(self) -> Any:
+        if self._stream is None:
+            return self.path.open("rb")
+        self._stream.seek(self._start)
+        return contextlib.nullcontext(self._stream)   # the caller's file: it closes it
+
     def __iter__(self) -> Iterator[McapRecord]:
         footer = False
-        with self.path.open("rb") as file:
+        with self._open() as file:
             try:
                 for record in StreamReader(_WholeReads(file)).records:
                     if isinstance(record, Channel):
@@ -118,17 +151,30 @@ def _messages(scan: _Scan, wanted: Any) -> Iterator[tuple[str, Message]]:
             ids.add(record.id)
 
 
-def read_frames(path: str | Path) -> Iterator[LoggedFrame]:
-    """The raw frames of a log, in the order logged."""
-    for _, message in _messages(_Scan(path), FRAMES_TOPIC.__eq__):
+def read_frames(path: str | Path | IO[bytes]) -> Iterator[LoggedFrame]:
+    """The raw frames of a log, in the order logged (`path` may also be a binary file object)."""
+    scan = _Scan(path)
+    path = scan.path
+    for _, message in _messages(scan, FRAMES_TOPIC.__eq__):
         try:
             d = json.loads(message.data)
             channel = d.get("channel", d.get("header", {}).get("frame_id", ""))
+            dlc = int(d["dlc"])
+            ns = message.log_time
+            if ns < _EXACT_NS:
+                t = ns / 1e9            # exact int to float: one rounding, the nearest float
+            else:                       # a wall-clock time: whole seconds apart, or the int loses its last bits
+                seconds, ns = divmod(ns, 1_000_000_000)
+                t = seconds + ns / 1e9
+            number = d.get("channel_number")
             frame = LoggedFrame(
-                t=message.log_time / 1e9, arbitration_id=int(d["id"]), data=bytes(d["data"][: d["dlc"]]),
+                t=t, arbitration_id=int(d["id"]), data=bytes(d["data"][:dlc]),
                 channel=str(channel), direction=d.get("direction", "rx"), is_extended=bool(d["is_extended"]),
                 is_error=bool(d["is_error"]), valid=bool(d.get("valid", True)), error=str(d.get("error", "")),
-                is_remote=bool(d["is_rtr"]), t_ns=message.log_time)
+                is_remote=bool(d["is_rtr"]), t_ns=message.log_time, is_fd=bool(d.get("is_fd", dlc > 8)),
+                bitrate_switch=bool(d.get("bitrate_switch", False)),
+                error_state_indicator=bool(d.get("error_state_indicator", False)),
+                channel_number=None if number is None else int(number))
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise LogError(f"{path}: damaged frame record at {message.log_time} ns: {type(exc).__name__}: {exc}") from None
         yield frame

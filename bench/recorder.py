@@ -47,12 +47,13 @@ CHUNK_BYTES = 1 << 20
 MAX_DATA = 64  # CAN FD
 
 _MAX_T = 1.8e10  # s: log times are uint64 ns (~584 years)
+_EXACT_T = 2.0 ** 22  # s: below it t * 1e9 < 2**53, an exact float product
 _RECORD_OVERHEAD = 31  # bytes of an MCAP Message record besides its data
 _DECIMAL = [str(i) for i in range(256)]
 _PAD = [bytes(8 - n) for n in range(8)]
 _FRAME_JSON = (
     '{"header":{"stamp":{"sec":%d,"nsec":%d},"frame_id":%s},"id":%d,"is_rtr":%s,"is_extended":%s,'
-    '"is_error":%s,"dlc":%d,"data":[%s],"channel":%s,"direction":"%s","valid":%s,"error":%s}'
+    '"is_error":%s,"dlc":%d,"data":[%s],"channel":%s,"direction":"%s","valid":%s,"error":%s%s}'
 )
 _ENCODER = json.JSONEncoder(allow_nan=False, separators=(",", ":"), default=lambda o: o.value)
 
@@ -78,7 +79,8 @@ FRAME_SCHEMA: dict[str, Any] = {
         "is_rtr": _BOOL,
         "is_extended": _BOOL,
         "is_error": _BOOL,
-        "dlc": {"type": "integer", "minimum": 0, "maximum": MAX_DATA, "description": "Number of data bytes"},
+        "dlc": {"type": "integer", "minimum": 0, "maximum": MAX_DATA,
+                "description": "Number of data bytes; of a remote frame, the length it requests"},
         "data": {
             "type": "array",
             "items": {"type": "integer", "minimum": 0, "maximum": 255},
@@ -90,6 +92,12 @@ FRAME_SCHEMA: dict[str, Any] = {
         "direction": {"type": "string", "enum": ["rx", "tx"]},
         "valid": {"type": "boolean", "description": "False when the bench rejected the frame"},
         "error": {"type": "string", "description": "Why the frame is invalid; empty when valid"},
+        # Written only when true (or set): a classic frame's record stays as it was.
+        "is_fd": {"type": "boolean", "description": "CAN FD frame (absent: FD when more than 8 data bytes)"},
+        "bitrate_switch": {"type": "boolean", "description": "CAN FD: data phase at the higher bit rate (BRS)"},
+        "error_state_indicator": {"type": "boolean", "description": "CAN FD: sender error-passive (ESI)"},
+        "channel_number": {"type": "integer", "description": "The channel when the bus named it by a number "
+                           "(python-can); channel is then its decimal text"},
     },
     "required": ["header", "id", "is_rtr", "is_extended", "is_error", "dlc", "data", "channel", "direction", "valid", "error"],
 }
@@ -139,7 +147,10 @@ def _ns(t: float) -> int:
     """Bench time (s) to integer ns, rounded: log_time is a uint64, so reject what does not fit."""
     if not 0.0 <= t <= _MAX_T:  # also false for NaN
         raise ValueError(f"time {t!r} s is not in [0, {_MAX_T:g}]")
-    return int(t * 1e9 + 0.5)
+    if t < _EXACT_T:
+        return int(t * 1e9 + 0.5)
+    seconds = int(t)    # wall-clock times: t * 1e9 is past 2**53, so split off the exact fraction first
+    return seconds * 1_000_000_000 + int((t - seconds) * 1e9 + 0.5)
 
 
 def _number(value: object, choices: Mapping[str, int]) -> int | float | None:
@@ -154,6 +165,22 @@ def _number(value: object, choices: Mapping[str, int]) -> int | float | None:
         return int(value)  # also makes bools numbers
     number = float(value)  # type: ignore[arg-type]  # TypeError/ValueError for non-numbers
     return number if math.isfinite(number) else None
+
+
+def _extra_fields(is_fd: bool, bitrate_switch: bool, error_state_indicator: bool, channel_number: int | None) -> str:
+    """The optional fields of a frame record (CAN FD flags, a numbered channel), each only when set."""
+    extra = ""
+    if is_fd:
+        extra += ',"is_fd":true'
+    if bitrate_switch:
+        extra += ',"bitrate_switch":true'
+    if error_state_indicator:
+        extra += ',"error_state_indicator":true'
+    if channel_number is not None:
+        if isinstance(channel_number, bool) or not isinstance(channel_number, int):
+            raise ValueError(f"channel number {channel_number!r} is not an int")
+        extra += f',"channel_number":{channel_number}'
+    return extra
 
 
 def _finalise_chunk(writer: Writer, file: IO[bytes]) -> None:
@@ -190,7 +217,7 @@ class Recorder:
 
     def __init__(
         self,
-        path: Path,
+        path: Path | IO[bytes],
         databases: Sequence[cantools.database.can.Database],
         attachments: Sequence[Path] = (),
         *,
@@ -200,7 +227,8 @@ class Recorder:
     ) -> None:
         if not flush_interval > 0:
             raise LogError(f"run log {path}: flush interval must be > 0 s, not {flush_interval!r}")
-        self.path = Path(path)
+        stream = path if hasattr(path, "write") else None   # a binary file object, as python-can's writers take
+        self.path = Path(str(getattr(stream, "name", "<stream>"))) if stream is not None else Path(path)  # type: ignore[arg-type]
         self._interval = float(flush_interval)
         self._chunk_bytes = int(chunk_size)
         # Everything that can fail on bad input happens before the file exists.
@@ -218,7 +246,7 @@ class Recorder:
             except OSError as exc:
                 raise LogError(f"run log {path}: cannot attach {attachment}: {exc.strerror}") from None
         try:
-            self._file: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 - closed by close()
+            self._file: IO[bytes] = stream if stream is not None else open(self.path, "wb")  # noqa: SIM115 - closed by close()
         except OSError as exc:
             raise LogError(f"run log {path}: cannot create: {exc.strerror}") from None
 
@@ -243,8 +271,14 @@ class Recorder:
     def frame(
         self, t: float, arbitration_id: int, data: bytes, *, channel: str, direction: str,
         is_extended: bool = False, is_error: bool = False, is_remote: bool = False, valid: bool = True, error: str = "",
+        is_fd: bool = False, bitrate_switch: bool = False, error_state_indicator: bool = False, dlc: int | None = None,
+        channel_number: int | None = None,
     ) -> None:
-        """Log one raw frame on `/can/frames` (bad input raises LogError and writes nothing)."""
+        """Log one raw frame on `/can/frames` (bad input raises LogError and writes nothing).
+
+        `dlc`, a remote frame's requested length: its record then carries that many zero bytes (else
+        `data` as given); `channel_number`, the channel when the bus named it by a number (python-can's
+        int channels), so a reader gets it back."""
         try:
             ns = _ns(t)
             quoted = self._quoted.get(channel)
@@ -256,17 +290,24 @@ class Recorder:
                 raise ValueError(f"direction must be 'rx' or 'tx', not {direction!r}")
             if not isinstance(arbitration_id, int) or not 0 <= arbitration_id <= 0x1FFFFFFF:
                 raise ValueError(f"arbitration id {arbitration_id!r} is not an int in [0, 0x1FFFFFFF]")
+            if is_remote and dlc is not None:
+                if not isinstance(dlc, int) or not 0 <= dlc <= MAX_DATA:
+                    raise ValueError(f"dlc {dlc!r} is not an int in [0, {MAX_DATA}]")
+                data = bytes(dlc)   # a remote frame has no payload; its length is what it asks for
             data = bytes(data)
-            dlc = len(data)
-            if dlc < 8:
-                data += _PAD[dlc]
-            elif dlc > MAX_DATA:
-                raise ValueError(f"{dlc} data bytes, at most {MAX_DATA}")
+            size = len(data)
+            if size < 8:
+                data += _PAD[size]
+            elif size > MAX_DATA:
+                raise ValueError(f"{size} data bytes, at most {MAX_DATA}")
+            extra = ""
+            if is_fd or bitrate_switch or error_state_indicator or channel_number is not None:
+                extra = _extra_fields(is_fd, bitrate_switch, error_state_indicator, channel_number)
             payload = _FRAME_JSON % (
                 ns // 1_000_000_000, ns % 1_000_000_000, quoted, arbitration_id,
                 "true" if is_remote else "false", "true" if is_extended else "false", "true" if is_error else "false",
-                dlc, ",".join([_DECIMAL[b] for b in data]), quoted, direction,
-                "true" if valid else "false", json.dumps(str(error)) if error else '""',
+                size, ",".join([_DECIMAL[b] for b in data]), quoted, direction,
+                "true" if valid else "false", json.dumps(str(error)) if error else '""', extra,
             )
         except (TypeError, ValueError) as exc:
             raise LogError(f"run log {self.path}: bad frame {arbitration_id!r} on {channel!r}: {exc}") from None
