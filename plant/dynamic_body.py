@@ -35,10 +35,19 @@ the §5 equations keep their form when every angle, rate and force flips sign to
   saturates (no force above μ F_z). Static axle loads F_z = m g b/L (front), m g a/L (rear); no load
   transfer, no combined slip (the hub motors only hold the speed), no relaxation length.
 - μ = BENCH_Control.RoadMu at the scenario start (limited to [MU_MIN, 1.5]: RoadMu 0 would leave no force).
-- Speed: the hub motors are speed-controlled and stiff: u = the forward velocity their rolling implies, the
-  mean of the four wheels' v_i cos δ_i (= the kinematic fit's forward velocity), so BENCH_Control.InitialSpeed
-  (the wheels' preset) and DRV_MotionRequest.TargetSpeed (through the VCU and the hub-motor lag) set it.
-  Longitudinal slip is not modelled; LongAccel = u̇ − ω w.
+- Speed: the hub motors are speed-controlled and the tyres longitudinally stiff: u follows the forward velocity
+  the wheels' rolling implies (the kinematic fit's forward velocity u_w, the mean of the four v_i cos δ_i), so
+  BENCH_Control.InitialSpeed (the wheels' preset) and DRV_MotionRequest.TargetSpeed (through the VCU and the
+  hub-motor lag) set it, but never faster than the tyres can push or brake the car: |u̇| ≤ μ g
+  (`LongitudinalGrip`: four driven and braked wheels, Σ|F_x| ≤ μ Σ F_z = μ m g; load transfer moves load
+  between the axles but not this sum). When u_w runs away faster (a speed step: the hub motors' 100 ms lag
+  alone would ask for up to 20 g) the wheels slide: u changes at exactly μ g until it meets u_w again, and
+  the wheels report their own (slipping) speed in WHL_Status while PLANT_Motion.Speed is the body's. The
+  slip does not take lateral grip away (no combined slip: a limit of this model). LongAccel = u̇ − ω w.
+  The kinematic regime below 16.2 km/h is not limited ([P0]'s slow manoeuvres; docs/contract/plant.md);
+  the body's own speed (not the wheels') decides when it leaves the dynamic regime, and a sliding body stays
+  dynamic down to SLIDE_MIN_SPEED (1 m/s), so a stop from speed hands over to the kinematic fit without a jump
+  in speed once the wheels grip again (a jump of at most 1 m/s when they are still sliding there).
 - Integration: Heun (2nd-order Runge-Kutta) at the plant tick with the angles and u held over the step. The
   step is well inside the stable region (|λ| h ≤ 0.04 at 4.5 m/s, 1 ms) and a steady state of the model is
   a fixed point of the scheme, so steady values equal the closed forms exactly. Position and heading as in
@@ -67,6 +76,25 @@ DYNAMIC_ON_SPEED = 5.0         # m/s (18 km/h): kinematic -> dynamic at or above
 DYNAMIC_OFF_SPEED = 4.5        # m/s (16.2 km/h): dynamic -> kinematic below (chosen)
 DYNAMIC_ON_ANGLE = 25.0        # deg: every wheel within this to enter the dynamic regime (chosen)
 DYNAMIC_OFF_ANGLE = 30.0       # deg: a wheel beyond this leaves it (chosen)
+SLIDE_TOL = 0.05               # m/s: wheels and body differ by more than this = the wheels slide (chosen)
+SLIDE_MIN_SPEED = 1.0          # m/s: a sliding body stays dynamic down to this speed (chosen; Heun stays stable)
+
+
+def longitudinal_limit(mu: float) -> float:
+    """Largest |u̇| the four tyres can give, m/s²: μ g (module docstring, `Speed`)."""
+    return mu * GRAVITY
+
+
+def follow_speed(u: float, u_wheels: float, limit: float, dt: float) -> float:
+    """The body's forward speed after dt: the wheels' u_w when the tyres can give the change, else u moved
+    towards u_w by limit·dt (the wheels slide)."""
+    step = limit * dt
+    change = u_wheels - u
+    if change > step:
+        return u + step
+    if change < -step:
+        return u - step
+    return u_wheels
 
 
 def ev_single_track(p: Ev4wisParams) -> SingleTrackParams:
@@ -190,6 +218,15 @@ class VehicleBody(PlanarBody):
     def set_mu(self, mu: float) -> None:
         self.dynamics.set_mu(mu)
 
+    @property
+    def long_limit(self) -> float:
+        """|u̇| the tyres can give at the road's μ (the front axle's μ: both axles share it), m/s²."""
+        return longitudinal_limit(self.dynamics.front.mu)
+
+    def sliding(self, u_wheels: float) -> bool:
+        """The wheels' rolling speed differs from the body's by more than SLIDE_TOL (dynamic regime only)."""
+        return abs(u_wheels - self.vy) > SLIDE_TOL
+
     # -- regime ----------------------------------------------------------------------------------------
     @staticmethod
     def wants_dynamic(angles_deg: Sequence[float], speeds_rpm: Sequence[float], forward_speed: float,
@@ -207,7 +244,9 @@ class VehicleBody(PlanarBody):
     def advance(self, angles_deg: Sequence[float], speeds_rpm: Sequence[float], dt: float) -> None:
         """Move by dt with the wheels' states at the end of the step, in the regime they call for."""
         vx, vy, om = self.fit(angles_deg, speeds_rpm)
-        want = self.wants_dynamic(angles_deg, speeds_rpm, vy, self.dynamic)
+        want = self.wants_dynamic(angles_deg, speeds_rpm, self.vy if self.dynamic else vy, self.dynamic)
+        if not want and self.dynamic and self.sliding(vy):
+            want = self.wants_dynamic(angles_deg, speeds_rpm, DYNAMIC_OFF_SPEED, True) and self.vy >= SLIDE_MIN_SPEED
         if want != self.dynamic:
             if want:                        # carry the motion over (the first tick: the wheels' motion)
                 if self._fresh:
@@ -225,11 +264,12 @@ class VehicleBody(PlanarBody):
         delta_f = (angles_deg[0] + angles_deg[1]) * h
         delta_r = (angles_deg[2] + angles_deg[3]) * h
         d = self.dynamics
-        d.step(dt, vy, delta_f, delta_r)
-        self._move(d.w, vy, d.omega, dt)
+        u = follow_speed(self.vy, vy, self.long_limit, dt)
+        d.step(dt, u, delta_f, delta_r)
+        self._move(d.w, u, d.omega, dt)
         self.ax = d.lat_accel
-        self.ay = (vy - self.vy) / dt - d.omega * d.w
-        self.vx, self.vy, self.omega = d.w, vy, d.omega
+        self.ay = (u - self.vy) / dt - d.omega * d.w
+        self.vx, self.vy, self.omega = d.w, u, d.omega
 
     def _move(self, vx: float, vy: float, om: float, dt: float) -> None:
         """Position and heading over the step from the trapezoid of old and new body velocities, exact for

@@ -22,12 +22,21 @@ Selected by the bench-private coding BENCH_VcuConfig.RearSteerLaw (dbc/bench.dbc
 
 All angles in degrees and rates in deg/s with the bus signs of docs/spec/formulas.md §1: the laws are odd, so they read
 the same in the ISO convention of §5 (δ_r[deg] = −C1 δ_f[deg] + C2 u r[deg/s]).
+
+The speed u of every law (and of the 20 km/h switch) is the VEHICLE's forward speed as the VCU can know it over
+the bus (`VehicleSpeedEstimate`, docs/contract/vcu-4ws.md VCU-4WS-01), never |TargetSpeed|: a request says where
+the car shall go, not where it is; after a step from 100 to 30 km/h, k(30 km/h) would steer the rear in opposite
+phase while the car still runs at 100 km/h, the destabilising case 4WS exists to avoid.
 """
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum
 
+from bench.node import NodeIO
+from plant import limits
+from plant.body import VelocityFit
 from plant.vehicles import Ev4wisParams
 
 
@@ -69,3 +78,89 @@ class SeedLaws:
         if law == Strategy.FEEDBACK and yaw_rate_dps is not None:
             return -self.c1 * front_deg + self.c2 * speed * yaw_rate_dps
         return self.ratio(speed) * front_deg
+
+
+class VehicleSpeedEstimate:
+    """The vehicle's forward speed (m/s) from what the VCU receives: the four WHL_Status_xx (angles and wheel
+    speeds; forward component of the least-squares rigid fit, plant.body.VelocityFit) while the wheels roll,
+    IMU_Motion.LongAccel integrated while they slip (docs/contract/vcu-4ws.md VCU-4WS-01).
+
+    Why both: a speed step makes the hub motors brake (or drive) the wheels faster than the tyres can slow
+    (or push) the car; the wheels then slide and their speed is no longer the car's. Rule per control task:
+    predict u + LongAccel·Δt; take the wheels' value when it lies within SLIP_BAND of the prediction (rolling:
+    the estimate is re-anchored to the wheels every task, so an IMU bias never accumulates), else the
+    prediction (slipping). A slip ends, besides the wheels meeting the prediction again, when the wheels
+    roll at a steady speed (changing less than STEADY_WHEEL_RATE) while the IMU measures no acceleration
+    (|LongAccel| < STEADY_ACCEL) for RESYNC_S: a sustained slip needs a force, which would accelerate the car.
+    In the first GRACE_S after a reset, without a valid IMU_Motion, or after a gap longer than MAX_GAP_S, the
+    wheels' value is taken as it is. None until the four WHL_Status have arrived.
+    """
+
+    SLIP_BAND = 0.3      # m/s: wheel fit vs prediction (rolling at μ g moves WHL_Status ≤ 0.1 m/s per 10 ms frame; chosen)
+    GRACE_S = 0.1        # s after a reset: frames from before the scenario start may still be the latest
+    MAX_GAP_S = 0.05     # s: a longer gap between updates restarts from the wheels
+    RESYNC_S = 0.2       # s of steady wheels and no acceleration that end a slip (chosen)
+    STEADY_ACCEL = 0.5   # m/s² (chosen: well above the IMU's resolution, well below a slip's μ g)
+    STEADY_WHEEL_RATE = 0.5   # m/s² of the wheels' speed (chosen, as STEADY_ACCEL)
+    WHEEL_LSB = 0.01     # m/s: allowance for WHL_Status's 0.1 rpm steps (0.003 m/s) between frames
+
+    def __init__(self, params: Ev4wisParams) -> None:
+        self._fit = VelocityFit(params.geometry)
+        self._status = tuple(f"WHL_Status_{c}" for c in ("FL", "FR", "RL", "RR"))
+        self.reset()
+
+    def reset(self) -> None:
+        self.value: float | None = None
+        self.slipping = False
+        self._t: float | None = None
+        self._t0: float | None = None
+        self._wheels: float | None = None
+        self._steady_since: float | None = None
+
+    def wheels(self, io: NodeIO) -> float | None:
+        """Forward speed of the rigid fit to the four WHL_Status_xx, m/s; None when one is missing."""
+        angles, speeds = [], []
+        for message in self._status:
+            status = io.latest(message)
+            if status is None:
+                return None
+            angles.append(status.get("SteerAngle", math.nan))
+            speeds.append(status.get("WheelSpeed", math.nan))
+        if not limits.finite(*angles, *speeds):
+            return None
+        return self._fit(angles, speeds)[1]
+
+    @staticmethod
+    def long_accel(io: NodeIO) -> float | None:
+        """IMU_Motion.LongAccel (m/s², positive forward); None when absent, invalid or not finite."""
+        imu = io.latest("IMU_Motion")
+        if imu is None or io.invalid("IMU_Motion"):
+            return None
+        a = imu.get("LongAccel", math.nan)
+        return a if limits.finite(a) else None
+
+    def update(self, io: NodeIO, t: float) -> float | None:
+        """Advance to bench time t (once per control task); returns the estimate."""
+        if self._t0 is None:
+            self._t0 = t
+        wheels = self.wheels(io)
+        accel = self.long_accel(io)
+        previous, t_prev, wheels_prev = self.value, self._t, self._wheels
+        self._t, self._wheels = t, wheels
+        if wheels is None:
+            return self.value                    # WHEEL_FAULT stops the car anyway; hold the last estimate
+        if (previous is None or t_prev is None or wheels_prev is None or accel is None
+                or t - self._t0 < self.GRACE_S or not 0.0 < t - t_prev <= self.MAX_GAP_S):
+            self.value, self.slipping, self._steady_since = wheels, False, None
+            return self.value
+        dt = t - t_prev
+        predicted = previous + accel * dt
+        steady = abs(accel) < self.STEADY_ACCEL and abs(wheels - wheels_prev) < self.STEADY_WHEEL_RATE * dt + self.WHEEL_LSB
+        if not steady:
+            self._steady_since = None
+        elif self._steady_since is None:
+            self._steady_since = t
+        resync = self._steady_since is not None and t - self._steady_since >= self.RESYNC_S
+        self.slipping = abs(wheels - predicted) > self.SLIP_BAND and not resync
+        self.value = predicted if self.slipping else wheels
+        return self.value
