@@ -234,8 +234,9 @@ def test_simulated_node_runs_reference_cases(fixture_project: Path, tmp_path: Pa
     cases = junit_cases(tmp_path)
     assert list(cases) == ["test_ref", "test_wheel"] and cases["test_ref"].find("skipped") is None
     html = (tmp_path / "report.html").read_text()
-    # -k deselected test_pass and test_fail: listed as such, not as uncovered
-    assert re.search(r'test_pass</span> <span class="outcome deselected">', html)
+    # -k deselected test_pass (VCU-FLT-01) and test_fail: counted as such, not uncovered
+    row = re.search(r'VCU-FLT-01</span>.*?</tr>', html, re.S)
+    assert row and "1 deselected case (not run here)" in row.group(0) and "badge not-run" in row.group(0)
 
 
 def test_external_all_skips_reference_cases(fixture_project: Path, tmp_path: Path) -> None:
@@ -252,7 +253,8 @@ def test_bench_run_dut_runs_only_the_cases_that_judge_it(fixture_project: Path, 
     assert result.returncode == 1, result.stdout + result.stderr
     assert list(junit_cases(tmp_path)) == ["test_ref", "test_pass", "test_fail"]
     html = (tmp_path / "report.html").read_text()
-    assert 'id="node-WHL_FL"' not in html and re.search(r'test_wheel</span> <span class="outcome deselected">', html)
+    row = re.search(r'WHL-STS-01</span>.*?</tr>', html, re.S)
+    assert 'id="node-WHL_FL"' not in html and row and "1 deselected case (not run here)" in row.group(0)
 
 
 def test_plugin_dut_option_deselects(fixture_project: Path, tmp_path: Path) -> None:
@@ -365,6 +367,20 @@ def test_verdict_per_requirement_and_node() -> None:
     others = {r.requirement.id: r.verdict for r in section.others.rows}
     assert others == {"COM-E2E-02": "uncovered", "ABS-X-01": "not run"}      # ABS: only a deselected case
     assert tables["VCU"].counts == {"pass": 2, "fail": 2, "not run": 1, "uncovered": 1}
+
+
+def test_parametrized_cases_take_one_line_and_failures_are_named() -> None:
+    run = sample_run()
+    run.cases = [case(f"t_p[{i}]", "failed" if i == 3 else "passed", ["VCU"], ["VCU-A-01"]) for i in range(6)]
+    run.cases.append(case("t_q", "skipped", ["VCU"], ["VCU-A-01"]))
+    section = build_conformance(run)
+    assert section is not None
+    row = next(r for r in section.nodes[0].rows if r.requirement.id == "VCU-A-01")
+    (p, q) = row.groups
+    assert (p.name, p.outcomes, [c.name for c in p.failed]) == ("t_p", {"passed": 5, "failed": 1}, ["t_p[3]"])
+    assert (q.name, q.outcomes) == ("t_q", {"skipped": 1})
+    html = render_html(run)
+    assert '<a href="#case-1">t_p</a> ×6:' in html and '<a href="#case-4">t_p[3]</a>' in html
 
 
 def test_no_contract_and_no_marks_means_no_section() -> None:

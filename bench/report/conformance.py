@@ -36,9 +36,41 @@ class CaseLink:
 
 
 @dataclass
+class CaseGroup:
+    """The cases of one test function (its parameters together), so that a requirement checked by thirty
+    parametrized cases takes one line; the ones that failed are listed by their parameters."""
+
+    name: str               # the test function's name, without parameters
+    cases: list[CaseLink]
+
+    @property
+    def outcomes(self) -> dict[str, int]:
+        return dict(Counter(c.outcome for c in self.cases))
+
+    @property
+    def failed(self) -> list[CaseLink]:
+        return [c for c in self.cases if c.outcome in _FAILED]
+
+
+@dataclass
 class Row:
     requirement: RequirementInfo
     cases: list[CaseLink] = field(default_factory=list)
+
+    @property
+    def groups(self) -> list[CaseGroup]:
+        """The cases that ran or were skipped, grouped by test function, in report order."""
+        groups: dict[str, CaseGroup] = {}
+        for case in self.cases:
+            if case.outcome == "deselected":
+                continue
+            base = case.nodeid.partition("[")[0]
+            groups.setdefault(base, CaseGroup(case.name.partition("[")[0], [])).cases.append(case)
+        return list(groups.values())
+
+    @property
+    def deselected(self) -> int:
+        return sum(1 for c in self.cases if c.outcome == "deselected")
 
     @property
     def ran(self) -> int:
