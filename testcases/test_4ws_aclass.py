@@ -16,10 +16,16 @@ cross-checked:
 
 from __future__ import annotations
 
+import pytest
+
 
 from testcases import oracle_4ws as oracle
 from testcases.common_4ws import mean_since
 from testcases.stimulus import STIMULUS
+
+pytestmark = [pytest.mark.dut("PLANT"), pytest.mark.req("PLANT-DYN-02", "PLANT-DYN-05"),
+              pytest.mark.reference_only("SBW", reason="reads the simulated SBW's true pinion angle "
+                                                "(PLANT_SbwAngles), which the plant has only while it simulates the SBW")]
 
 #: docs/spec/vehicles.md B, "Derived (linear 2-DOF)": value, printed decimals (tolerance = half a unit of the last one)
 PUBLISHED = {"K [s²/m²]": (1.90e-3, 0.005e-3), "characteristic speed [km/h]": (82.6, 0.05),

@@ -20,6 +20,8 @@ Reported side by side: peak |β|, |r|, |a_y|, the smallest clearance to a cone l
 
 from __future__ import annotations
 
+import pytest
+
 import math
 
 import numpy as np
@@ -28,6 +30,10 @@ from bench.results import Series
 from testcases import oracle_4ws as oracle
 from testcases.common_4ws import STRATEGIES, Run, driver_model, plot_side_by_side, start
 from testcases.path_driver import Path, PreviewDriver, Transition
+
+pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-13"),
+              pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
+                                          "BENCH_VcuConfig (OFF, FEEDBACK), which a real VCU ignores")]
 
 SPEED_KMH = 80.0            # issue 5 / [P3] Fig. 7
 RUN_IN = 30.0               # m from the driver's take-over to section 1

@@ -16,6 +16,8 @@ work, the smallest cone clearance and the path error, side by side.
 
 from __future__ import annotations
 
+import pytest
+
 import math
 
 import numpy as np
@@ -24,6 +26,10 @@ from bench.results import Series
 from testcases import oracle_4ws as oracle
 from testcases.common_4ws import STRATEGIES, Run, driver_model, plot_side_by_side, start
 from testcases.path_driver import Path, PreviewDriver, Transition
+
+pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-14"),
+              pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
+                                          "BENCH_VcuConfig (OFF, FEEDBACK), which a real VCU ignores")]
 
 SPEED_KMH = 40.0          # issue 5 / [P3] Fig. 8
 MU = 0.3                  # issue 5 (low friction)

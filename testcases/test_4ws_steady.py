@@ -14,6 +14,8 @@ WHL_Status_FL/FR), r is PLANT_Motion.YawRate, β is PLANT_Dynamics.Sideslip (gro
 
 from __future__ import annotations
 
+import pytest
+
 import math
 
 from testcases import oracle_4ws as oracle
@@ -58,6 +60,8 @@ def _report(bench, strategy: str, results: list[dict[str, float]], runs: list[Ru
     plot_side_by_side(bench, runs, f"{strategy} steps", t_from=-0.2, xlabel="time since the hand-wheel step [s]")
 
 
+@pytest.mark.dut("VCU")
+@pytest.mark.req("VCU-4WS-02", "VCU-4WS-06", "PLANT-DYN-01")
 def test_feedforward_zero_sideslip(bench):
     results, runs = [], []
     for speed in SPEEDS_KMH:
@@ -73,6 +77,10 @@ def test_feedforward_zero_sideslip(bench):
     _report(bench, "FEEDFORWARD", results, runs)
 
 
+@pytest.mark.dut("VCU")
+@pytest.mark.req("VCU-4WS-10", "VCU-4WS-11")
+@pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
+                                          "BENCH_VcuConfig (OFF, FEEDBACK), which a real VCU ignores")
 def test_feedback_steady_yaw_gain(bench):
     results, runs = [], []
     c2 = oracle.c2(oracle.EV)

@@ -9,10 +9,16 @@ The steady yaw rates are checked against docs/spec/formulas.md §5 for each law 
 
 from __future__ import annotations
 
+import pytest
+
 import math
 
 from testcases import oracle_4ws as oracle
 from testcases.common_4ws import STRATEGIES, Run, mean_since, plot_side_by_side, start
+
+pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-12"),
+              pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
+                                          "BENCH_VcuConfig (OFF, FEEDBACK), which a real VCU ignores")]
 
 SPEED_KMH = 80.0            # issue 5
 HAND_WHEEL = 20.0           # deg: δ_f = 1.33°, 2WS a_y ≈ 3.2 m/s² (linear range), chosen

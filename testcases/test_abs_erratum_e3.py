@@ -15,6 +15,8 @@ speeds (ABS_WheelSpeeds) of the settled window, with the reference ECU's thresho
 
 from __future__ import annotations
 
+import pytest
+
 import numpy as np
 
 from testcases import abs_common as common
@@ -25,6 +27,8 @@ HAND_WHEEL = 810.0   # deg: delta 45 deg
 SETTLE, WINDOW = 3.0, 3.0
 
 
+@pytest.mark.dut("ABS")
+@pytest.mark.req("ABS-TURN-01", "ABS-TURN-03", "ABS-OUT-01")
 def test_abs_erratum_e3(bench) -> None:
     l0, l1, l2 = common.limit("ecu_v_l0"), common.limit("ecu_v_l1"), common.limit("ecu_v_l2")
     rows = []

@@ -15,6 +15,8 @@ either detector without its measures.
 
 from __future__ import annotations
 
+import pytest
+
 import numpy as np
 
 from testcases import abs_common as common
@@ -31,6 +33,8 @@ def _rising(turns: np.ndarray) -> int:
     return int(np.count_nonzero((t[1:] != 0) & (t[:-1] == 0)) + (1 if t.size and t[0] != 0 else 0))
 
 
+@pytest.mark.dut("ABS")
+@pytest.mark.req("ABS-TURN-01", "ABS-TURN-05", "ABS-OUT-01")
 def test_abs_noise_sweep(bench) -> None:
     l0, l1, l2 = common.limit("ecu_v_l0"), common.limit("ecu_v_l1"), common.limit("ecu_v_l2")
     quiet = common.limit("sweep_quiet_noise_max")

@@ -26,6 +26,8 @@ TEST = "steady-state circular (Fig. 3-5)"
 
 
 @pytest.mark.parametrize("speed,side", CASES, ids=[f"{v:g} km/h {s}" for v, s in CASES])
+@pytest.mark.dut("ABS")
+@pytest.mark.req("ABS-TURN-01", "ABS-TURN-02", "ABS-EST-01", "ABS-EST-02", "ABS-OUT-02", "ABS-FLT-01")
 def test_abs_steady_circular(bench, speed: float, side: str) -> None:
     hand_wheel = -HAND_WHEEL if side == "left" else HAND_WHEEL     # bus: positive right
     expected_turn = 1 if side == "left" else -1                   # TurnDirection: 1 = left ([P4])

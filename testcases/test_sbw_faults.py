@@ -17,6 +17,8 @@ Limits: testcases/limits.toml [sbw].
 
 from __future__ import annotations
 
+import pytest
+
 import math
 
 import numpy as np
@@ -47,6 +49,10 @@ def _bench_timeout(bench, lim: Limits, message: str, fault_start: float) -> floa
     return last
 
 
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-FLT-05", "COM-RX-02")
+@pytest.mark.reference_only("SBW", reason="drops SBW_Pinion frames, which only the simulated SBW's frames can be, "
+                                          "and reads its true angles (PLANT_SbwAngles)")
 def test_sbw_pinion_timeout(bench) -> None:
     lim = Limits(bench)
     start(bench, SPEED_KMH)
@@ -72,6 +78,10 @@ def test_sbw_pinion_timeout(bench) -> None:
                                                                     ("SBW_HandWheel", "AliveCounter")], ylabel="-")
 
 
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-FLT-01", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
+@pytest.mark.reference_only("SBW", reason="injects the sensor fault into the simulated SBW's sensors "
+                                          "(BENCH_SbwSensorFault) and reads its true angles (PLANT_SbwAngles)")
 def test_sbw_handwheel_out_of_range(bench) -> None:
     lim = Limits(bench)
     start(bench, SPEED_KMH, "YAW_RATE")
@@ -128,6 +138,10 @@ def test_sbw_handwheel_out_of_range(bench) -> None:
     bench.plot("SbwFault (1 = HANDWHEEL_RANGE)", [("SBW_Pinion", "SbwFault")], ylabel="value")
 
 
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-FLT-04", "SBW-CTL-05", "COM-RX-02")
+@pytest.mark.reference_only("SBW", reason="selects the reference SBW's yaw-rate feedback through "
+                                          "BENCH_SbwConfig, which a real SBW ignores")
 def test_sbw_input_timeout(bench) -> None:
     lim = Limits(bench)
     start(bench, SPEED_KMH, "YAW_RATE")

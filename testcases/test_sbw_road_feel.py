@@ -11,6 +11,8 @@ off, the hand-wheel angle is at most `return_fraction_max` of the angle at relea
 
 from __future__ import annotations
 
+import pytest
+
 import numpy as np
 
 from bench.results import Series
@@ -23,6 +25,8 @@ RAMP_TIME = 6.0          # s
 HOLD = 1.0               # s at the end of the ramp before letting go
 
 
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-CTL-01", "SBW-CTL-04", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
 def test_sbw_road_feel_50kmh(bench) -> None:
     lim = Limits(bench)
     u = start(bench, SPEED_KMH)

@@ -24,6 +24,8 @@ RATIO = 1.0 / oracle.STEERING_RATIO
 
 
 @pytest.mark.parametrize("frequency", sorted(PERIODS), ids=lambda f: f"{f:g}Hz")
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-CTL-01", "SBW-CTL-03", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
 def test_sbw_sine_50kmh(bench, frequency: float) -> None:
     lim = Limits(bench)
     u = start(bench, SPEED_KMH)

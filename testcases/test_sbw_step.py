@@ -11,6 +11,8 @@ driven by the measured pinion angle. Limits: testcases/limits.toml [sbw].
 
 from __future__ import annotations
 
+import pytest
+
 import numpy as np
 
 from bench.results import Series
@@ -23,6 +25,8 @@ HOLD_AFTER = 3.0      # s after the step (the 2-DOF yaw response settles within 
 RATIO = 1.0 / oracle.STEERING_RATIO   # road-wheel angle per hand-wheel (pinion) angle
 
 
+@pytest.mark.dut("SBW", "PLANT")
+@pytest.mark.req("SBW-CTL-01", "SBW-CTL-02", "SBW-OUT-01", "SBW-OUT-02", "PLANT-DYN-02", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
 def test_sbw_step_50kmh(bench) -> None:
     lim = Limits(bench)
     u = start(bench, lim["step_speed"])

@@ -37,6 +37,10 @@ def _steady_gain(bench, speed_kmh: float, mode: str, g_r: float) -> tuple[float,
 
 
 @pytest.mark.parametrize("variant", sorted(VARIANTS))
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-CTL-05", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
+@pytest.mark.reference_only("SBW", reason="selects the reference SBW's yaw-rate feedback and G_r through "
+                                          "BENCH_SbwConfig, which a real SBW ignores")
 def test_sbw_yaw_gain_across_speeds(bench, variant: str) -> None:
     lim = Limits(bench)
     g_r = lim["ideal_yaw_gain"]
