@@ -81,7 +81,7 @@ def test_speed_step_100_to_30_kmh_rear_phase_follows_the_vehicle_speed(bench):
             bench.expect("k commanded vs k(vehicle speed), worst over the deceleration", float(err[i]), 0.0,
                          abs_tol=K_TOL, detail=f"at {worst['u']:.1f} km/h, {worst['t']:.3f} s after the step "
                                                "(VCU-4WS-01: speed estimate ±1 km/h)")
-            curve = Series("k(PLANT_Motion.Speed), formulas.md §5", (t - t_step).tolist(), k_expected.tolist())
+            curve = Series("k(PLANT_Motion.Speed), docs/spec/formulas.md §5", (t - t_step).tolist(), k_expected.tolist())
             measured = Series("rear/front commanded (VCU_WheelCmd)", (t - t_step).tolist(), k.tolist())
             bench.plot_series("k during the 100 → 30 km/h step", [curve, measured],
                               xlabel="time since the step [s]", ylabel="k = δ_r/δ_f [-]")
