@@ -4,6 +4,7 @@ properties, the report's conformance section), and the section's verdicts on han
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -327,7 +328,7 @@ def test_skip_reason_names_the_external_nodes() -> None:
 
 # -- the section and the JUnit properties on hand-made results -----------------------------------------------
 def catalogue() -> list[RequirementInfo]:
-    return [RequirementInfo(rid, f"title of {rid}", "docs/contract/x.md", i) for i, rid in enumerate(
+    return [RequirementInfo(rid, f"title of {rid}", "contract/x.md", i) for i, rid in enumerate(
         ["COM-E2E-01", "COM-E2E-02", "VCU-A-01", "VCU-A-02", "VCU-A-03", "VCU-A-04", "VCU-A-05", "WHL-S-01", "ABS-X-01"], 1)]
 
 
@@ -417,7 +418,7 @@ def test_parts_keep_the_catalogue_and_old_parts_still_load(tmp_path: Path) -> No
     del old["requirements"], old["deselected"]
     for c in old["cases"]:
         del c["duts"], c["reqs"]
-    (tmp_path / "old.json").write_text(__import__("json").dumps(old))
+    (tmp_path / "old.json").write_text(json.dumps(old))
     loaded = results_io.load(tmp_path / "old.json")
     assert loaded.requirements == [] and loaded.cases[0].duts == []
     # two workers deselect the same case; a case deselected by -k on one worker but run by another stays run
