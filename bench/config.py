@@ -10,6 +10,7 @@ import glob
 import math
 import tomllib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -47,8 +48,9 @@ class ProjectConfig:
     contract: tuple[Path, ...] = ()              # the contract documents ([contract] documents, globs resolved)
     requirements: tuple[Requirement, ...] = ()   # every requirement of those documents, in document order
 
-    def requirement(self, requirement_id: str) -> Requirement | None:
-        return next((r for r in self.requirements if r.id == requirement_id), None)
+    @cached_property
+    def requirement_ids(self) -> frozenset[str]:
+        return frozenset(r.id for r in self.requirements)
 
 
 def find_config(start: Path | None = None) -> Path:

@@ -11,7 +11,7 @@ checks can be tested without running pytest.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
 
 import pytest
@@ -81,7 +81,7 @@ def read_marks(item: pytest.Item) -> CaseMarks:
     return marks
 
 
-def check_marks(marks: CaseMarks, nodes: Collection[str], requirements: Mapping[str, object],
+def check_marks(marks: CaseMarks, nodes: Collection[str], requirements: Collection[str],
                 documents: str) -> list[str]:
     """What is wrong with the case's markers against the databases' nodes and the contract's ids."""
     problems = list(marks.problems)

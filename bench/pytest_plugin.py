@@ -127,8 +127,7 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
         if not marks.any:
             continue
         project, nodes = _facts(item.config)
-        requirements = {r.id: r for r in project.requirements}
-        for problem in check_marks(marks, nodes, requirements, _documents(project)):
+        for problem in check_marks(marks, nodes, project.requirement_ids, _documents(project)):
             problems.setdefault((item.nodeid.partition("[")[0], problem), []).append(item.nodeid)
     if problems:
         lines = [f"{ids[0] if len(ids) == 1 else f'{base}[...] ({len(ids)} parametrized cases)'}: {problem}"
