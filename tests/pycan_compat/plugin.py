@@ -4,7 +4,7 @@ Loaded by scripts/python-can-suite (`-p tests.pycan_compat.plugin`). The test fi
 them: they open buses by the interface name "virtual", which this plugin points at the bench's
 `bench_virtual` (bench.bus:VirtualTimeBus); python-can's own virtual bus cannot be opened at all while it runs,
 so a test that silently ran on it would fail, not pass. The `.mcap` format comes in through
-bench_mcap_test.py (a ReaderWriterTest subclass, as python-can declares its formats).
+mcap_format.py (a ReaderWriterTest subclass, as python-can declares its formats).
 """
 
 from __future__ import annotations
