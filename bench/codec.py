@@ -3,8 +3,16 @@
 cantools' database is the single source of truth; from it each message gets a precompiled codec
 for its little-endian integer signals (shift, mask, scale), so the hot path of the restbus and of
 the monitor costs a few integer operations per signal. Messages the fast path cannot handle
-(big-endian, float or multiplexed signals) fall back to cantools. `tests/test_codec.py` proves
-both agree bit for bit on every message of the contract.
+(big-endian, float or multiplexed signals, or a signal whose values a double cannot hold exactly,
+e.g. 64-bit raw values) fall back to cantools, whose integer arithmetic is exact.
+
+Either way the codec equals cantools (`Message.encode(..., scaling=True, strict=False)` and
+`Message.decode(..., decode_choices=False)`) bit for bit, or raises where cantools raises, with an
+error of the same class: a raw value that does not fit its bit field raises `EncodeError` (never
+wraps), a payload shorter than the message raises `DecodeError`, a longer one is cut to the
+message's length. `encode(..., strict=True)` adds cantools' strict checks (exactly the signals
+needed, values inside the DBC range). `tests/test_codec.py` (the contract's messages) and
+`tests/test_codec_cantools.py` (every message of cantools' own test DBCs) prove it.
 """
 
 from __future__ import annotations
@@ -12,17 +20,41 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
+import bitstruct
 import cantools
-from cantools.database.can import Database, Message
+from cantools.database import errors as cantools_errors
+from cantools.database.can import Database, Message, Signal
 
 from bench import e2e
 from bench.errors import DatabaseError, SignalError
 
 
-class DecodeError(ValueError):
-    """A payload the database cannot decode (e.g. an unknown multiplexer value)."""
+class DecodeError(cantools_errors.DecodeError, ValueError):
+    """A payload the database cannot decode (shorter than the message, an unknown multiplexer value).
+    A cantools DecodeError too, so code written against cantools catches it."""
+
+
+#: What cantools raises for a raw value its bit field cannot hold: bitstruct's C extension raises
+#: OverflowError, the pure-Python bitstruct (cantools' fallback) raises bitstruct.Error.
+_FIELD_OVERFLOW: tuple[type[Exception], ...] = (OverflowError, bitstruct.Error)
+
+
+class EncodeError(SignalError, cantools_errors.EncodeError, OverflowError, bitstruct.Error):
+    """A value whose raw number does not fit its signal's bit field. It is each class cantools may raise
+    for that (OverflowError or bitstruct.Error, by bitstruct build) and cantools' EncodeError, so a
+    handler written for either catches it; a SignalError, so the bench reports it in one line."""
+
+
+class _Misfit(Exception):
+    """A raw value outside its bit field on the fast path: cantools' encoding decides what to raise."""
+
+
+#: Doubles hold every integer up to 2**53; a signal whose raw and physical values stay below this (a
+#: margin of one bit) is encoded and decoded with floats exactly as cantools' integer arithmetic does.
+_EXACT_LIMIT = 1 << 52
 
 #: A decoded value may exceed the DBC range by this fraction of the scale (rounding) and still be valid.
 RANGE_SLACK = 0.5
@@ -88,18 +120,29 @@ class MessageCodec:
                     and layout.get("Checksum") == (e2e.CHECKSUM_BYTE * 8, 8, "little_endian"))
         self.fast = (
             not message.is_multiplexed()
-            and all(s.byte_order == "little_endian" and not s.is_float for s in message.signals)
+            and all(s.byte_order == "little_endian" and not s.is_float and _float_exact(s)
+                    for s in message.signals)
         )
         inf = math.inf
         self._bounds: dict[str, tuple[float, float]] = {
             s.name: (-inf if s.minimum is None else s.minimum - RANGE_SLACK * abs(s.scale),
                      inf if s.maximum is None else s.maximum + RANGE_SLACK * abs(s.scale))
             for s in self.signals}
+        # Decoding: without an offset when no signal has one (x + 0.0 differs from x only for x = -0.0,
+        # which a positive scale never gives); one loop either way, so the values come in signal order.
+        self._no_offset = all(s.offset == 0 and s.scale > 0 for s in self.signals)
         self._unpack = tuple(
             (s.name, s.start, (1 << s.length) - 1, (1 << (s.length - 1)) if s.signed else 0,
-             1 << s.length, s.scale, s.offset)
+             1 << s.length, s.scale, s.offset)[: 6 if self._no_offset else 7]
             for s in self.signals
         )
+        # Encoding, by the arithmetic a signal needs (identity, scale only, scale and offset): the fewer
+        # operations, the faster; every form gives the same raw value as cantools' conversion.
+        fields = [(s.name, s.start, (1 << s.length) - 1, *_raw_limits(s.length, s.signed), s.scale, s.offset)
+                  for s in self.signals]
+        self._pack_identity = tuple(f[:5] for f in fields if f[5] == 1 and f[6] == 0)
+        self._pack_scaled = tuple(f[:6] for f in fields if f[5] != 1 and f[6] == 0)
+        self._pack_linear = tuple(f for f in fields if f[6] != 0)
 
     # -- values ---------------------------------------------------------------------------------
     def start_values(self) -> dict[str, float]:
@@ -133,27 +176,84 @@ class MessageCodec:
         return number
 
     # -- frames ---------------------------------------------------------------------------------
-    def encode(self, values: Mapping[str, float]) -> bytearray:
-        """Payload with every signal from `values` (checked physical values); E2E bytes zero."""
+    def encode(self, values: Mapping[str, float], strict: bool = False) -> bytearray:
+        """Payload with every signal from `values` (physical values; E2E bytes zero), as cantools encodes it.
+
+        A raw value outside its bit field raises EncodeError (never wraps). `strict` adds cantools'
+        own strict checks (cantools' EncodeError): exactly the signals the frame needs, each inside
+        its DBC range; the bench's default leaves the range to `checked` (half a step of slack)."""
+        if strict:
+            self.message.assert_signals_encodable(values, scaling=True)   # type: ignore[arg-type]
         if not self.fast:
-            data = self.message.encode(dict(values), scaling=True, strict=False, padding=False)
-            return bytearray(data)
+            return self._encode_cantools(values)
         word = 0
-        for name, start, mask, _, _, scale, offset in self._unpack:
-            raw = round((values[name] - offset) / scale)
-            word |= (raw & mask) << start
+        try:
+            for name, start, mask, lo, hi in self._pack_identity:
+                raw = round(values[name])
+                if not lo <= raw <= hi:
+                    raise _Misfit
+                word |= (raw & mask) << start
+            for name, start, mask, lo, hi, scale in self._pack_scaled:
+                raw = round(values[name] / scale)
+                if not lo <= raw <= hi:
+                    raise _Misfit
+                word |= (raw & mask) << start
+            for name, start, mask, lo, hi, scale, offset in self._pack_linear:
+                raw = round((values[name] - offset) / scale)
+                if not lo <= raw <= hi:
+                    raise _Misfit
+                word |= (raw & mask) << start
+        except Exception:   # noqa: BLE001 - not a number that fits (a name, NaN, too large...): cantools decides
+            return self._encode_cantools(values)
         return bytearray(word.to_bytes(self.length, "little"))
 
+    def _encode_cantools(self, values: Mapping[str, float]) -> bytearray:
+        """cantools' encoding, or its error; a raw value that does not fit its field raises EncodeError."""
+        data = values if isinstance(values, dict) else dict(values)
+        try:
+            encoded = self.message.encode(data, scaling=True, strict=False, padding=False)
+        except _FIELD_OVERFLOW as exc:
+            raise EncodeError(f"{self.name}: {self._misfit(data) or exc}") from exc
+        return bytearray(encoded)
+
+    def _misfit(self, values: Mapping[str, object]) -> str | None:
+        """Which value does not fit its field, as cantools converts it (for the error message)."""
+        for sig in self.message.signals:
+            value = values.get(sig.name)
+            if sig.is_float or not isinstance(value, (int, float)):
+                continue
+            try:
+                raw = sig.conversion.numeric_scaled_to_raw(value)
+            except (ArithmeticError, ValueError):
+                continue
+            lo, hi = _raw_limits(sig.length, sig.is_signed)
+            if not lo <= raw <= hi:
+                kind = "signed" if sig.is_signed else "unsigned"
+                return (f"{sig.name} = {value!r} is raw {raw}, outside its {sig.length}-bit {kind} field "
+                        f"[{lo}, {hi}]")
+        return None
+
     def decode(self, data: bytes | bytearray) -> dict[str, float]:
-        """Physical values of every signal (enumerations as numbers)."""
+        """Physical values of every signal (enumerations as numbers), as cantools decodes them; a payload
+        shorter than the message raises DecodeError, a longer one is read up to the message's length."""
         if not self.fast:
             try:
                 decoded = self.message.decode(bytes(data), decode_choices=False, scaling=True)
             except Exception as exc:   # cantools' DecodeError and friends: bus data never raises here
                 raise DecodeError(f"{self.name}: {exc}") from None
-            return {k: float(v) for k, v in decoded.items()}
+            return {k: v if type(v) is int and not -_EXACT_LIMIT <= v <= _EXACT_LIMIT else float(v)
+                    for k, v in decoded.items()}
+        if len(data) < self.length:
+            raise DecodeError(f"{self.name}: {len(data)} bytes, the message has {self.length}")
         word = int.from_bytes(data, "little")
         out: dict[str, float] = {}
+        if self._no_offset:
+            for name, start, mask, sign_bit, span, scale in self._unpack:
+                raw = (word >> start) & mask
+                if raw & sign_bit:
+                    raw -= span
+                out[name] = raw * scale
+            return out
         for name, start, mask, sign_bit, span, scale, offset in self._unpack:
             raw = (word >> start) & mask
             if raw & sign_bit:
@@ -184,6 +284,22 @@ class MessageCodec:
             else:
                 out[name] = self.physical(name, value)
         return out
+
+
+def _raw_limits(length: int, signed: bool) -> tuple[int, int]:
+    if signed:
+        return -(1 << (length - 1)), (1 << (length - 1)) - 1
+    return 0, (1 << length) - 1
+
+
+def _float_exact(signal: Signal) -> bool:
+    """Whether doubles give exactly cantools' numbers for this integer signal: cantools computes in
+    integers when scale and offset are integers, so every raw value times the scale, plus the offset,
+    must stay where doubles hold integers exactly."""
+    lo, hi = _raw_limits(signal.length, signal.is_signed)
+    scale, offset = Fraction(signal.scale), Fraction(signal.offset)
+    largest = max(abs(lo), abs(hi)) * abs(scale) + abs(offset)
+    return max(abs(lo), abs(hi)) <= _EXACT_LIMIT and largest <= _EXACT_LIMIT
 
 
 class Codebook:

@@ -1,4 +1,5 @@
-"""The fast codec derived from the DBC agrees with cantools bit for bit on every message."""
+"""The fast codec derived from the DBC agrees with cantools bit for bit on every message of the contract, and
+never wraps a value its bit field cannot hold (tests/test_codec_cantools.py: the same over cantools' test DBCs)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.codec import Codebook, MessageCodec, load_codebook
+from cantools.database import errors as cantools_errors
+
+from bench.codec import Codebook, EncodeError, MessageCodec, load_codebook
 from bench.errors import SignalError
 from bench.paths import BENCH_DBC, CHASSIS_DBC
 
@@ -38,8 +41,7 @@ def test_fast_path_matches_cantools(codebook: Codebook, name: str) -> None:
         assert ours == theirs
         decoded = codec.decode(ours)
         reference = codec.message.decode(theirs, decode_choices=False, scaling=True)
-        for key, value in reference.items():
-            assert math.isclose(decoded[key], float(value), rel_tol=1e-12, abs_tol=1e-12), key
+        assert decoded == reference   # exactly: the same arithmetic as cantools
 
     check()
 
@@ -62,3 +64,28 @@ def test_start_values_lie_in_range(codebook: Codebook) -> None:
     for codec in codebook.by_id.values():
         values = codec.start_values()
         assert codec.out_of_range(values) == [], codec.name
+
+
+def test_a_value_beyond_its_bit_field_raises_rather_than_wraps(codebook: Codebook) -> None:
+    """SteerAngleCmd: 16 signed bits at 0.01 deg hold [-327.68, 327.67]; one step beyond used to wrap to the
+    other end (327.68 went on the wire as -327.68)."""
+    codec = codebook["VCU_WheelCmd_FL"]
+    values = codec.start_values()
+    assert codec.encode(values | {"SteerAngleCmd": 327.67})[:2] == b"\xff\x7f"
+    assert codec.encode(values | {"SteerAngleCmd": -327.68})[:2] == b"\x00\x80"
+    for beyond in (327.68, -327.69, 1e6):
+        with pytest.raises(EncodeError, match=r"SteerAngleCmd = .* outside its 16-bit signed field") as caught:
+            codec.encode(values | {"SteerAngleCmd": beyond})
+        assert isinstance(caught.value, (SignalError, OverflowError, cantools_errors.EncodeError))
+
+
+def test_strict_encoding_refuses_what_cantools_strict_refuses(codebook: Codebook) -> None:
+    """strict=True: the DBC range [-90, 90] holds (cantools' EncodeError); the default leaves it to `checked`."""
+    codec = codebook["VCU_WheelCmd_FL"]
+    values = codec.start_values()
+    assert codec.encode(values | {"SteerAngleCmd": 90.0}, strict=True)[:2] == (9000).to_bytes(2, "little")
+    assert codec.encode(values | {"SteerAngleCmd": 90.01})[:2] == (9001).to_bytes(2, "little")
+    with pytest.raises(cantools_errors.EncodeError, match="SteerAngleCmd"):
+        codec.encode(values | {"SteerAngleCmd": 90.01}, strict=True)
+    with pytest.raises(cantools_errors.EncodeError, match="not required"):
+        codec.encode(values | {"Nope": 1.0}, strict=True)

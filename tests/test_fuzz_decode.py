@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 
 from bench.cli import main
-from bench.codec import Codebook, load_codebook
+from bench.codec import Codebook, DecodeError, load_codebook
 from bench.dbccheck import check_text
 from bench.errors import BenchError
 from bench.logread import MAGIC, read_decoded, read_frames, read_steps, summarise
@@ -56,13 +56,16 @@ def test_decode_any_payload_of_the_right_length(codec: Any, data: bytes) -> None
 
 @settings(max_examples=300, deadline=None)
 @given(st.sampled_from(CODECS), st.binary(max_size=64))
-def test_decode_other_lengths_reads_as_zero_padded_or_cut(codec: Any, data: bytes) -> None:
-    """What decode does with a wrong length (the monitor never asks it to, see below): no exception; a short
-    payload reads as if padded with zero bytes, a long one as if cut to the message's length."""
+def test_decode_other_lengths_raises_if_short_or_reads_cut(codec: Any, data: bytes) -> None:
+    """What decode does with a wrong length (the monitor never asks it to, see below), as cantools does: a
+    short payload raises the bench's DecodeError (a cantools DecodeError), a long one reads as if cut to the
+    message's length."""
     assume(len(data) != codec.length)
-    values = codec.decode(data)
-    as_frame = (data + bytes(codec.length))[: codec.length]
-    assert values == codec.decode(as_frame)
+    if len(data) < codec.length:
+        with pytest.raises(DecodeError):
+            codec.decode(data)
+        return
+    assert codec.decode(data) == codec.decode(data[: codec.length])
 
 
 # -- the monitor ----------------------------------------------------------------------------------------------
