@@ -21,6 +21,7 @@ from typing import Any
 
 import can
 
+from bench.busopts import BusOptions
 from bench.errors import ConfigError
 
 VIRTUAL = "virtual"   # the name users give on the command line for the embedded default
@@ -202,19 +203,20 @@ def is_virtual(interface: str) -> bool:
     return interface in (VIRTUAL, "bench_virtual")
 
 
-def open_bus(interface: str, channel: str | None) -> can.BusABC:
-    """Open a bus by python-can interface name; errors name the interface and channel."""
+def open_bus(interface: str, channel: str | None, options: BusOptions | None = None) -> can.BusABC:
+    """Open a bus by python-can interface name with `options` (bitrate, CAN FD, [bus] table); errors name the
+    interface and channel. The in-process virtual bus has no bit timing: it ignores `options`."""
     if is_virtual(interface):
         return VirtualTimeBus(channel=channel or "bench")
     if interface not in can.interfaces.VALID_INTERFACES:
         raise ConfigError(f"unknown python-can interface {interface!r} "
                           f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
-    kwargs: dict[str, Any] = {}
+    kwargs: dict[str, Any] = options.kwargs() if options is not None else {}
     if interface == "udp_multicast":
-        kwargs["hop_limit"] = UDP_MULTICAST_HOP_LIMIT
+        kwargs["hop_limit"] = UDP_MULTICAST_HOP_LIMIT   # never a user's choice: the frames stay on this host
         channel = channel or UDP_MULTICAST_DEFAULT_GROUP
     if interface == "socketcan":
-        kwargs["receive_own_messages"] = False
+        kwargs.setdefault("receive_own_messages", False)
     if not channel:
         raise ConfigError(f"interface {interface!r} needs a channel (--channel)")
     try:
@@ -222,5 +224,33 @@ def open_bus(interface: str, channel: str | None) -> can.BusABC:
         if interface == "udp_multicast":
             _tune_udp_socket(bus)
         return bus
-    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
-        raise ConfigError(f"cannot open interface {interface!r} channel {channel!r}: {exc}") from None
+    except Exception as exc:   # drivers raise anything (vendor DLL errors, TypeError on a bad [bus] key)
+        message = f"cannot open interface {interface!r} channel {channel!r}: {type(exc).__name__}: {exc}"
+        _forget_half_open(exc)
+        raise ConfigError(message.replace("\n", " ")) from None
+
+
+def _forget_half_open(exc: BaseException) -> None:
+    """A driver that fails inside its __init__ leaves a half-built bus whose finaliser later logs "was not
+    properly shut down" under the one-line error; there is nothing to shut down, so mark it so (python-can's
+    BusABC flag)."""
+    tb = exc.__traceback__
+    while tb is not None:
+        candidate = tb.tb_frame.f_locals.get("self")
+        if isinstance(candidate, can.BusABC):
+            candidate._is_shutdown = True
+        tb = tb.tb_next
+
+
+def probe_bus(interface: str, channel: str | None, options: BusOptions | None = None) -> None:
+    """Open the bus once and close it: a bus that cannot be opened stops a run before its first case."""
+    if is_virtual(interface):
+        return
+    open_bus(interface, channel, options).shutdown()
+
+
+def check_channel(interface: str, channel: str | None, option: str = "--channel") -> None:
+    """`--channel` on the in-process virtual bus is a mistake (the user meant a real bus), not a no-op."""
+    if is_virtual(interface) and channel:
+        raise ConfigError(f"{option} {channel}: the in-process virtual bus has no channels; "
+                          "name the interface too (e.g. --interface socketcan --channel vcan0)")

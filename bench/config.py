@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.bus import VIRTUAL, is_virtual
+from bench.busopts import BusOptions, positive_int
 from bench.contract import Requirement, load_requirements
 from bench.errors import ConfigError
 from bench.paths import ROOT
@@ -47,6 +48,7 @@ class ProjectConfig:
     latency: tuple[LatencyPair, ...] = ()
     contract: tuple[Path, ...] = ()              # the contract documents ([contract] documents, globs resolved)
     requirements: tuple[Requirement, ...] = ()   # every requirement of those documents, in document order
+    bus: BusOptions = BusOptions()               # [bus]: python-can arguments (bitrate, fd, data_bitrate, ...)
 
     @cached_property
     def requirement_ids(self) -> frozenset[str]:
@@ -109,6 +111,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         testcases=base / string("testcases"),
         reports=base / string("reports"),
         latency=_latency_pairs(path, data.get("timing", {})),
+        bus=_bus_table(path, data.get("bus", {})),
         **_contract(path, text, data.get("contract", {})),
     )
 
@@ -139,6 +142,37 @@ def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
         documents.extend(f for f in files if f not in documents)
     requirements = load_requirements(documents)
     return {"contract": tuple(documents), "requirements": tuple(requirements.values())}
+
+
+#: [bus] keys the command line owns: a project file that fixed them would silently beat --interface/--channel.
+_BUS_CLI_ONLY = ("interface", "channel")
+
+
+def _bus_table(path: Path, table: Any) -> BusOptions:
+    """[bus] bitrate = 500000, fd = true, data_bitrate = 2000000, and any other python-can bus argument
+    (e.g. PCAN's f_clock_mhz, Vector's app_name), passed to `can.Bus` as given."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [bus] must be a table")
+    cli_only = [k for k in _BUS_CLI_ONLY if k in table]
+    if cli_only:
+        raise ConfigError(f"{path}: [bus] {', '.join(cli_only)}: give it on the command line "
+                          f"(--{' / --'.join(cli_only)}), not in bench.toml")
+    extra = {k: v for k, v in table.items() if k not in ("bitrate", "fd", "data_bitrate")}
+    for key, value in extra.items():
+        if isinstance(value, (dict, list)) and key != "can_filters":
+            raise ConfigError(f"{path}: [bus] {key}: python-can bus arguments are plain values, got {value!r}")
+    fd = table.get("fd")
+    if fd is not None and not isinstance(fd, bool):
+        raise ConfigError(f"{path}: [bus] fd must be true or false, got {fd!r}")
+    options = BusOptions(
+        bitrate=positive_int(f"{path}: [bus] bitrate", table["bitrate"]) if "bitrate" in table else None,
+        fd=fd,
+        data_bitrate=(positive_int(f"{path}: [bus] data_bitrate", table["data_bitrate"])
+                      if "data_bitrate" in table else None),
+        extra=extra)
+    if options.data_bitrate is not None and options.fd is False:
+        raise ConfigError(f"{path}: [bus] data_bitrate needs fd = true")
+    return options
 
 
 def _line_of(text: str, needle: str) -> int:
@@ -203,6 +237,7 @@ class RunSettings:
     channel: str | None = None
     external: list[str] = field(default_factory=list)
     vehicle: str | None = None
+    bus: BusOptions = field(default_factory=BusOptions)   # from the command line; over [bus] and the databases
 
     @property
     def virtual_time(self) -> bool:

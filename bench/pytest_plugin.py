@@ -20,6 +20,8 @@ from pathlib import Path
 
 import pytest
 
+from bench.bus import check_channel
+from bench.busopts import BusOptions
 from bench.case import Case
 from bench.codec import load_codebook
 from bench.config import ProjectConfig, RunSettings, load_config
@@ -51,6 +53,13 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--bench-interface", default="virtual",
                     help="python-can interface, or 'virtual' for the in-process virtual-time bus (default)")
     group.addoption("--bench-channel", default=None, help="channel of the interface (e.g. vcan0)")
+    group.addoption("--bench-bitrate", type=int, default=None, metavar="BIT/S",
+                    help="nominal bitrate (default: bench.toml [bus] bitrate, else the databases' Baudrate)")
+    group.addoption("--bench-fd", action="store_true", default=None, dest="bench_fd", help="CAN FD")
+    group.addoption("--bench-no-fd", action="store_false", default=None, dest="bench_fd",
+                    help="classic CAN even where [bus] or the databases say CAN FD")
+    group.addoption("--bench-data-bitrate", type=int, default=None, metavar="BIT/S",
+                    help="CAN FD data-phase bitrate")
     group.addoption("--bench-external", action="append", default=[], metavar="NODE",
                     help="a node that is real (not simulated); 'all' = every node but the stimulus")
     group.addoption("--bench-fault", action="append", default=[], metavar="SPEC",
@@ -67,6 +76,10 @@ def pytest_configure(config: pytest.Config) -> None:
     config.stash[_RUN_KEY] = None
     config.stash[_DESELECTED_KEY] = []
     config.stash[_PENDING_KEY] = []
+    try:
+        check_channel(config.getoption("--bench-interface"), config.getoption("--bench-channel"), "--bench-channel")
+    except BenchError as exc:
+        raise pytest.UsageError(str(exc)) from None
     if _xdist_controller(config):
         # Workers inherit the controller's options: decide the one output folder for all of them here.
         if config.getoption("--bench-interface") not in ("virtual", "bench_virtual"):
@@ -190,7 +203,10 @@ def _run(config: pytest.Config) -> BenchRun:
         project = load_config(_config_path(config))
         settings = RunSettings(interface=config.getoption("--bench-interface"),
                                channel=config.getoption("--bench-channel"),
-                               external=list(config.getoption("--bench-external")))
+                               external=list(config.getoption("--bench-external")),
+                               bus=BusOptions(bitrate=config.getoption("--bench-bitrate"),
+                                              fd=config.getoption("bench_fd"),
+                                              data_bitrate=config.getoption("--bench-data-bitrate")))
         out = config.getoption("--bench-out")
         out_dir = Path(out) if out else default_out_dir(project.reports)
         faults = [parse_fault(spec) for spec in config.getoption("--bench-fault")]
@@ -202,7 +218,10 @@ def _run(config: pytest.Config) -> BenchRun:
         for item, report, call in config.stash[_PENDING_KEY]:   # cases skipped before the run started
             _record(run, item, report, call)
         config.stash[_PENDING_KEY].clear()
-        run.start()
+        try:
+            run.start()
+        except BenchError as exc:   # a bus that cannot be opened: one line and stop, not an error per case
+            pytest.exit(f"bench: {exc}", returncode=pytest.ExitCode.USAGE_ERROR)
         run.session.faults.extend(faults)
         if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
             signal.signal(signal.SIGTERM, _terminate)

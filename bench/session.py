@@ -11,6 +11,7 @@ import itertools
 from collections.abc import Callable, Sequence
 
 from bench.bus import is_virtual, open_bus
+from bench.busopts import BusOptions, contract_options
 from bench.clock import Clock, Scheduler, VirtualClock, WallClock
 from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig, RunSettings
@@ -40,6 +41,13 @@ def resolve_external(codebook: Codebook, stimulus: Sequence[str], external: Sequ
     return names
 
 
+def resolve_bus_options(project: ProjectConfig, given: BusOptions, codebook: Codebook) -> BusOptions:
+    """The bus settings of a run: the command line's over bench.toml's [bus] over the databases' (the contract)."""
+    options = given.over(project.bus).over(contract_options(codebook.databases))
+    options.check()
+    return options
+
+
 class BenchSession:
     """Everything one process needs to take part in a bench run."""
 
@@ -57,6 +65,7 @@ class BenchSession:
         if is_virtual(settings.interface) and not channel:
             channel = f"bench-{next(_virtual_channels)}"   # sessions in one process never mix
         self.channel = channel
+        self.bus_options = resolve_bus_options(project, settings.bus, self.codebook)
         self.stations: list[Station] = []
         self.runner: Station | None = None
         self.plant: Station | None = None
@@ -85,7 +94,7 @@ class BenchSession:
 
     def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence, *,
                  every_tick: bool = True) -> Station:
-        bus = open_bus(self.settings.interface, self.channel)
+        bus = open_bus(self.settings.interface, self.channel, self.bus_options)
         stamp = getattr(self.clock, "stamp", None)   # real time: frames get their receive timestamps
         return Station(name, bus, Restbus(self.codebook, nodes), monitor, self.now, behaviours, stamp,
                        every_tick=every_tick)

@@ -29,8 +29,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.handler(args))
     except BenchError as exc:
-        Console(stderr=True, soft_wrap=True).print(f"[bold red]bench {args.command}: error:[/] {escape(str(exc))}",
-                                                  highlight=False)
+        console = Console(stderr=True, soft_wrap=True)
+        for problem in getattr(exc, "problems", None) or [str(exc)]:   # one line per bad input
+            console.print(f"[bold red]bench {args.command}: error:[/] {escape(problem)}", highlight=False)
         return 2
     except KeyboardInterrupt:
         return 130

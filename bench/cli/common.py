@@ -1,18 +1,103 @@
-"""Options shared by the subcommands that reach a bus."""
+"""Options shared by the subcommands that reach a bus, declared once, and the checks they share.
+
+A bad value is a `ConfigError` (one line, exit 2, printed by `bench.cli.main`), found before a bus is
+used or a case runs.
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
+import tempfile
+from pathlib import Path
+
+from bench.bus import is_virtual
+from bench.busopts import BusOptions
+from bench.codec import Codebook, load_codebook
+from bench.config import ProjectConfig
+from bench.errors import ConfigError
+from bench.session import resolve_bus_options
 
 
-def add_bus_options(parser: argparse.ArgumentParser, default_interface: str) -> None:
-    parser.add_argument("--interface", "-i", default=default_interface,
-                        help=f"python-can interface, or 'virtual' for the in-process virtual-time bus "
-                             f"(default: {default_interface})")
-    parser.add_argument("--channel", "-c", default=None, help="channel (e.g. vcan0, a multicast group)")
+def _bitrate(text: str) -> int:
+    try:
+        value = int(text, 10)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of bit/s") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number of bit/s")
+    return value
+
+
+def add_bus_options(parser: argparse.ArgumentParser, default_interface: str, channel_help: str = "") -> None:
+    """--interface, --channel, --bitrate, --fd/--no-fd, --data-bitrate, --config."""
+    bus = parser.add_argument_group("bus")
+    bus.add_argument("--interface", "-i", default=default_interface,
+                     help=f"python-can interface (pcan, kvaser, vector, socketcan, udp_multicast, ...), or "
+                          f"'virtual' for the in-process virtual-time bus (default: {default_interface})")
+    bus.add_argument("--channel", "-c", default=None,
+                     help=channel_help or "channel (e.g. PCAN_USBBUS1, 0, can0, a multicast group); "
+                                          "not for the virtual bus")
+    bus.add_argument("--bitrate", type=_bitrate, default=None, metavar="BIT/S",
+                     help="nominal bitrate (default: [bus] bitrate of bench.toml, else the databases' "
+                          "Baudrate attribute, the contract's bus); the virtual bus ignores it")
+    bus.add_argument("--fd", action=argparse.BooleanOptionalAction, default=None,
+                     help="CAN FD (default: [bus] fd, else on when the databases' BusType is CAN FD)")
+    bus.add_argument("--data-bitrate", type=_bitrate, default=None, metavar="BIT/S",
+                     help="CAN FD data-phase bitrate (needs --fd)")
+    bus.add_argument("--config", default=None,
+                     help="the project's bench.toml ([bus] table: further python-can arguments; "
+                          "default: found from here)")
+
+
+def add_node_options(parser: argparse.ArgumentParser) -> None:
+    """--external and --fault: which nodes are real, which faults the bench injects."""
     parser.add_argument("--external", nargs="+", action="extend", default=[], metavar="NODE",
                         help="nodes that are real, not simulated ('all' = every node but the stimulus)")
     parser.add_argument("--fault", action="append", default=[], metavar="SPEC",
                         help="inject a fault: KIND:TARGET[:PARAM]@START[-END], e.g. drop:VCU_WheelCmd_FL@2-3 "
                              "(kinds: see bench/faults.py)")
-    parser.add_argument("--config", default=None, help="the project's bench.toml (default: found from here)")
+
+
+def given_bus_options(args: argparse.Namespace) -> BusOptions:
+    """What the command line says about the bus (None where it says nothing)."""
+    return BusOptions(bitrate=args.bitrate, fd=args.fd, data_bitrate=args.data_bitrate)
+
+
+def check_out_dir(out_dir: Path, force: bool) -> None:
+    """The report folder: a folder (or creatable), writable, and not a previous report unless --force.
+    Created here, so that pytest never meets a folder it cannot write."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(f"--out {out_dir}: is a file, not a folder")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not force:
+        raise ConfigError(f"--out {out_dir}: folder exists and is not empty (a previous report?); "
+                          "give another folder, or --force to write into it")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out_dir):
+            pass
+    except OSError as exc:
+        raise ConfigError(f"--out {out_dir}: cannot write there: {exc.strerror or exc}") from None
+    if not os.access(out_dir, os.W_OK | os.X_OK):   # a folder the probe could use but the run could not
+        raise ConfigError(f"--out {out_dir}: cannot write there: permission denied")
+
+
+class InputProblems(ConfigError):
+    """Several bad inputs found by one pre-run check: `bench.cli.main` prints each on its own line."""
+
+    def __init__(self, problems: list[str]) -> None:
+        super().__init__("; ".join(problems))
+        self.problems = problems
+
+
+def reject_virtual(interface: str) -> None:
+    """For the commands that share a bus with other processes (plant, monitor, replay)."""
+    if is_virtual(interface):
+        raise ConfigError("--interface virtual: the in-process virtual bus cannot be reached from another "
+                          "process; use udp_multicast, socketcan or a hardware interface")
+
+
+def bus_options_for(project: ProjectConfig, args: argparse.Namespace) -> tuple[BusOptions, Codebook]:
+    """The bus settings of a command (command line over [bus] over the databases) and the databases."""
+    codebook = load_codebook(project.databases)
+    return resolve_bus_options(project, given_bus_options(args), codebook), codebook

@@ -28,8 +28,9 @@ from rich.table import Table
 from rich.text import Text
 
 from bench import e2e
-from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, is_virtual, open_bus
-from bench.codec import MessageCodec, load_codebook
+from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
+from bench.cli.common import add_bus_options, bus_options_for, reject_virtual
+from bench.codec import MessageCodec
 from bench.config import load_config
 from bench.errors import BenchError, ConfigError
 from bench.monitor import TIMEOUT_CYCLES, MessageState, Monitor
@@ -48,11 +49,8 @@ class MonitorError(BenchError):
 def register(sub: Any) -> None:
     parser = sub.add_parser("monitor", help="live view of every message on a bus (rates, values, E2E, timeouts)",
                             description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--interface", "-i", default="udp_multicast",
-                        help="python-can interface (default: udp_multicast, hop limit 0)")
-    parser.add_argument("--channel", "-c", default=None,
-                        help=f"channel (e.g. vcan0; udp_multicast default {UDP_MULTICAST_DEFAULT_GROUP})")
-    parser.add_argument("--config", default=None, help="the project's bench.toml (default: found from here)")
+    add_bus_options(parser, "udp_multicast",
+                    f"channel (e.g. can0, PCAN_USBBUS1; udp_multicast default {UDP_MULTICAST_DEFAULT_GROUP})")
     parser.add_argument("--duration", type=float, default=None, help="stop after S seconds (default: Ctrl-C)")
     parser.add_argument("--window", type=float, default=DEFAULT_WINDOW,
                         help=f"s of frames for the rate and cycle columns (default {DEFAULT_WINDOW:g})")
@@ -246,6 +244,8 @@ def render(live: LiveMonitor, now: float, source: str, elapsed: float) -> Group:
     if live.unknown:
         top = ", ".join(f"{key} ×{count}" for key, count in live.unknown.most_common(8))
         parts.append(Text(f"unknown: {top}", style="yellow"))
+    for found in sorted(monitor.duplicates.values(), key=lambda d: d.frame_id):   # findings before symptoms
+        parts.append(Text(f"{found.describe()} (from {found.t:.3f} s, {found.frames} frames)", style="bold red"))
     if monitor.invalid_log:
         last = monitor.invalid_log[-3:]
         parts.append(Text("last invalid: " + "; ".join(f"{f.message} {f.reason} at {f.t:.3f} s" for f in last),
@@ -257,17 +257,15 @@ def render(live: LiveMonitor, now: float, source: str, elapsed: float) -> Group:
 
 # -- command ---------------------------------------------------------------------------------------------
 def run(args: argparse.Namespace) -> int:
-    if is_virtual(args.interface):
-        raise ConfigError("--interface virtual: the in-process virtual bus cannot be reached from another "
-                          "process; use udp_multicast, socketcan or a hardware interface")
+    reject_virtual(args.interface)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration: {args.duration} is not a positive number of seconds")
     if not (math.isfinite(args.window) and 0.05 <= args.window <= 600):
         raise ConfigError(f"--window: {args.window} is not a number of seconds in [0.05, 600]")
     project = load_config(Path(args.config) if args.config else None)
-    codebook = load_codebook(project.databases)
+    options, codebook = bus_options_for(project, args)
     live = LiveMonitor(Monitor(codebook, keep_history=False), args.window)
-    bus = open_bus(args.interface, args.channel)
+    bus = open_bus(args.interface, args.channel, options)
     channel = args.channel or (UDP_MULTICAST_DEFAULT_GROUP if args.interface == "udp_multicast" else "")
     source = f"{args.interface} {channel}".strip()
     host0 = time.monotonic()

@@ -13,8 +13,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from bench.bus import is_virtual
-from bench.cli.common import add_bus_options
+from bench.cli.common import add_bus_options, add_node_options, given_bus_options, reject_virtual
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError
 from bench.faults import parse_fault
@@ -30,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                             description="Run the plant and every simulated ECU on a bus in real time "
                                         "until SIGINT/SIGTERM or --duration.")
     add_bus_options(parser, "udp_multicast")
+    add_node_options(parser)
     parser.add_argument("--vehicle", default=None, help="vehicle of the plant at start (BENCH_Control may change it)")
     parser.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     parser.set_defaults(handler=run)
@@ -40,24 +40,35 @@ def _report_invalid(console: Console, monitor: Monitor, shown: int) -> int:
     few of them), so that a user of an external ECU sees why, not only how many. Returns the new count."""
     new = monitor.invalid_frames - shown
     if new > 0:
-        for record in monitor.invalid_log[-new:][:INVALID_SHOWN]:
+        records = monitor.invalid_log[-new:]
+        # a message with two senders is said once (_report_duplicates), not with its counter errors
+        own = [r for r in records if r.arbitration_id not in monitor.duplicates]
+        for record in own[:INVALID_SHOWN]:
             console.print(f"  invalid at t={record.t:.3f} s: {record.message} (0x{record.arbitration_id:X}): "
                           f"{record.reason}", highlight=False, markup=False)
-        if new > INVALID_SHOWN:
-            console.print(f"  ... and {new - INVALID_SHOWN} more", highlight=False)
+        if len(own) > INVALID_SHOWN:
+            console.print(f"  ... and {len(own) - INVALID_SHOWN} more", highlight=False)
+        if len(own) < len(records):
+            console.print(f"  ... and {len(records) - len(own)} of messages with two senders", highlight=False)
     return monitor.invalid_frames
+
+
+def _report_duplicates(console: Console, monitor: Monitor, shown: set[int]) -> None:
+    """Say each identifier with two senders once, with its evidence (bench.monitor.DuplicateSender)."""
+    for frame_id, found in sorted(monitor.duplicates.items()):
+        if frame_id not in shown:
+            shown.add(frame_id)
+            console.print(f"  {found.describe()} (from t={found.t:.3f} s)", highlight=False, markup=False)
 
 
 def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
-    if is_virtual(args.interface):
-        raise ConfigError("--interface virtual: the in-process virtual bus cannot be reached from another "
-                          "process; use udp_multicast, socketcan or a hardware interface")
+    reject_virtual(args.interface)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration: {args.duration} is not a positive number of seconds")
     project = load_config(Path(args.config) if args.config else None)
     settings = RunSettings(interface=args.interface, channel=args.channel, external=args.external,
-                           vehicle=args.vehicle)
+                           vehicle=args.vehicle, bus=given_bus_options(args))
     faults = [parse_fault(spec) for spec in args.fault]
     session = BenchSession(project, settings, role="plant")
     session.faults.extend(faults)
@@ -77,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.monotonic()
     next_status = STATUS_PERIOD
     shown = 0   # invalid frames of the plant's monitor already reported (monitor.invalid_frames)
+    duplicates: set[int] = set()   # identifiers with two senders already reported
     try:
         while not stop["now"] and session.now() < end:
             session.run_until(min(end, session.scheduler.now + 0.1), lambda: stop["now"])
@@ -84,9 +96,13 @@ def run(args: argparse.Namespace) -> int:
                 next_status += STATUS_PERIOD
                 console.print(f"t={session.now():7.1f} s  sent {plant.sent}  received "
                               f"{plant.monitor.frames - plant.sent}  invalid {plant.monitor.invalid_frames}  "
-                              f"max lag {getattr(session.clock, 'max_lag', 0.0) * 1000:.1f} ms", highlight=False)
+                              f"max lag {getattr(session.clock, 'max_lag', 0.0) * 1000:.1f} ms"
+                              + (f"  two senders {len(plant.monitor.duplicates)}" if plant.monitor.duplicates else ""),
+                              highlight=False)
+                _report_duplicates(console, plant.monitor, duplicates)
                 shown = _report_invalid(console, plant.monitor, shown)
     finally:
         session.close()
+    _report_duplicates(console, plant.monitor, duplicates)   # also when it stopped before a status line
     console.print(f"bench plant: stopped after {time.monotonic() - wall0:.1f} s, sent {plant.sent} frames")
     return 0

@@ -19,10 +19,13 @@ from typing import Any
 
 import can
 from rich.console import Console
+from rich.markup import escape
 
-from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, is_virtual, open_bus
-from bench.errors import ConfigError
-from bench.logread import read_frames
+from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
+from bench.cli.common import add_bus_options, bus_options_for, reject_virtual
+from bench.config import load_config
+from bench.errors import ConfigError, LogError
+from bench.logread import MAGIC, read_frames
 
 DIRECTIONS = ("tx", "rx", "all")
 
@@ -31,10 +34,8 @@ def register(sub: Any) -> None:
     parser = sub.add_parser("replay", help="replay a run log (MCAP) onto a bus with the recorded timing",
                             description=__doc__)
     parser.add_argument("file", type=Path, help="the run log (.mcap)")
-    parser.add_argument("--interface", "-i", default="udp_multicast",
-                        help="python-can interface (default: udp_multicast, hop limit 0)")
-    parser.add_argument("--channel", "-c", default=None,
-                        help=f"channel (e.g. vcan0; udp_multicast default {UDP_MULTICAST_DEFAULT_GROUP})")
+    add_bus_options(parser, "udp_multicast",
+                    f"channel (e.g. can0, PCAN_USBBUS1; udp_multicast default {UDP_MULTICAST_DEFAULT_GROUP})")
     parser.add_argument("--speed", type=float, default=1.0, help="time factor: 2 plays twice as fast (default 1)")
     parser.add_argument("--direction", choices=DIRECTIONS, default="all",
                         help="only the frames the logging bench sent (tx), received (rx), or all (default)")
@@ -42,15 +43,18 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    console = Console(stderr=True)
-    if is_virtual(args.interface):
-        raise ConfigError("--interface virtual: the in-process virtual bus cannot be reached from another "
-                          "process; use udp_multicast, socketcan or a hardware interface")
+    console = Console(stderr=True, soft_wrap=True)
+    reject_virtual(args.interface)
     if not (math.isfinite(args.speed) and args.speed > 0):
         raise ConfigError(f"--speed: {args.speed} is not a positive number")
+    project = load_config(Path(args.config) if args.config else None)
+    options, _ = bus_options_for(project, args)
     frames = read_frames(args.file)
     first = next(frames, None)                 # a missing or non-MCAP file fails here, before the bus opens
-    bus = open_bus(args.interface, args.channel)
+    if first is None:
+        cut = "" if log_is_complete(args.file) else " (the log ends early: a killed run's, or cut)"
+        raise LogError(f"{args.file}: no frames to replay{cut}")
+    bus = open_bus(args.interface, args.channel, options)
     sent = skipped = failed = 0
     wall0 = time.perf_counter()
     interrupted = False
@@ -82,9 +86,26 @@ def run(args: argparse.Namespace) -> int:
     extra = f", {skipped} error frames skipped" if skipped else ""
     extra += f", [red]{failed} failed to send[/]" if failed else ""
     console.print(f"bench replay: {state}, sent {sent} frames in {took:.2f} s{extra}", highlight=False)
+    if not interrupted and not log_is_complete(args.file):
+        console.print(f"[yellow]bench replay: warning:[/] {escape(str(args.file))} ends early (no footer: a killed "
+                      "run's log, or cut); its frames up to the cut were sent", highlight=False)
     if interrupted:
         return 130
     return 1 if failed else 0
+
+
+def log_is_complete(path: Path) -> bool:
+    """Whether a run log ends as a closed MCAP file does: with the magic after its footer. A killed run's
+    log, or a copy cut short, lacks it; the stream reader then ends quietly at the cut."""
+    try:
+        with path.open("rb") as file:
+            size = file.seek(0, 2)
+            if size < 2 * len(MAGIC):
+                return False
+            file.seek(size - len(MAGIC))
+            return file.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
 
 
 def _chain(first: Any, rest: Iterator[Any]) -> Iterator[Any]:

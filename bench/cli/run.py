@@ -3,22 +3,27 @@
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
 
 import can
 import pytest
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
-from bench.bus import is_virtual
-from bench.cli.common import add_bus_options
-from bench.codec import load_codebook
+from bench.bus import check_channel, is_virtual, probe_bus
+from bench.busopts import BusOptions
+from bench.cli.common import (InputProblems, add_bus_options, add_node_options, check_out_dir,
+                              given_bus_options)
+from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig, load_config
-from bench.errors import ConfigError
-from bench.faults import parse_fault
+from bench.errors import BenchError
+from bench.faults import FaultPlan, parse_fault
 from bench.marks import split_names
 from bench.run import default_out_dir
-from bench.session import resolve_external
+from bench.session import resolve_bus_options, resolve_external
 
 OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "skipped": "yellow",
                  "aborted": "bold magenta"}
@@ -29,11 +34,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                             description="Run the test cases (default: testcases/ on the in-process "
                                         "virtual-time bus) and write report.html, run.mcap, junit.xml.")
     add_bus_options(parser, "virtual")
+    add_node_options(parser)
     parser.add_argument("-k", dest="keyword", default=None, help="only cases matching this pytest -k expression")
     parser.add_argument("--dut", nargs="+", action="extend", default=[], metavar="NODE",
                         help="only the cases that judge NODE (@pytest.mark.dut); the report's conformance section "
                              "lists the others as deselected")
-    parser.add_argument("--out", default=None, help="output folder (default: a new folder under reports/)")
+    parser.add_argument("--out", default=None, help="output folder (default: a new folder under reports/); "
+                                                    "an existing non-empty one only with --force")
+    parser.add_argument("--force", "--overwrite", action="store_true",
+                        help="write into an existing --out folder that is not empty (its reports are replaced)")
     parser.add_argument("-n", dest="workers", default=None, metavar="N",
                         help="run the cases in N processes (pytest-xdist; 'auto' = one per core), each with its own "
                              "in-process virtual bus and MCAP log; one merged report")
@@ -42,7 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 class _Progress:
-    """A pytest plugin that shows one line per case and a summary table at the end."""
+    """A pytest plugin that shows one line per case and a summary table at the end.
+
+    Case ids are printed escaped (a parameter id like `[left]` is text, not rich markup); with -n the
+    controller collects nothing itself, so the total comes from the first worker's collection."""
 
     def __init__(self, console: Console) -> None:
         self.console = console
@@ -53,20 +65,30 @@ class _Progress:
     def pytest_collectreport(self, report: pytest.CollectReport) -> None:
         if report.failed:
             self.collect_errors.append(f"{report.nodeid}: {report.longreprtext}")
-            self.console.print(f"[bold red]cannot collect {report.nodeid}[/]\n{report.longreprtext}",
-                               highlight=False, markup=True)
+            self.console.print(f"[bold red]cannot collect {escape(report.nodeid)}[/]", highlight=False)
+            self.console.print(report.longreprtext, highlight=False, markup=False)
 
     def pytest_collection_finish(self, session: pytest.Session) -> None:
-        self.total = len(session.items)
-        self.console.print(f"bench: {self.total} cases")
+        if getattr(session.config.option, "numprocesses", None):
+            return                                  # the xdist controller: the workers collect
+        self._announce(len(session.items))
+
+    @pytest.hookimpl(optionalhook=True)
+    def pytest_xdist_node_collection_finished(self, node: object, ids: list[str]) -> None:
+        if not self.total:
+            self._announce(len(ids))
+
+    def _announce(self, total: int) -> None:
+        self.total = total
+        self.console.print(f"bench: {self.total} cases", highlight=False)
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         if report.when == "call" or (report.when == "setup" and not report.passed):
             self.done += 1
             outcome = "error" if (report.when == "setup" and report.failed) else report.outcome
             style = OUTCOME_STYLE.get(outcome, "")
-            self.console.print(f"[{self.done:>3}/{self.total}] [{style}]{outcome:<7}[/] {report.nodeid} "
-                               f"[dim]({report.duration:.2f} s)[/]", highlight=False)
+            self.console.print(f"\\[{self.done:>3}/{self.total}] [{style}]{outcome:<7}[/] "
+                               f"{escape(report.nodeid)} [dim]({report.duration:.2f} s)[/]", highlight=False)
             if report.failed:
                 self.console.print(report.longreprtext, highlight=False, markup=False)
 
@@ -77,58 +99,110 @@ def _short(nodeid: str) -> str:
     return path.rsplit("/", 1)[-1].removesuffix(".py") + sep + rest
 
 
-def _check_before_running(project: ProjectConfig, args: argparse.Namespace) -> None:
-    """What the bench needs before any case starts: databases that load, known nodes and interface.
-    A mistake here is one clear error (exit 2), not an error in every case."""
-    codebook = load_codebook(project.databases)
-    resolve_external(codebook, project.stimulus, args.external)
+def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_dir: Path) -> None:
+    """Every input, before pytest starts: databases, nodes, interface and channel, bus settings, faults,
+    the report folder and, last, the bus itself (opened once and closed). Each problem is one line and
+    the run does not start (exit 2), rather than an error in every case."""
+    problems: list[str] = []
+
+    def check(action: object, *arguments: object) -> object:
+        try:
+            return action(*arguments)  # type: ignore[operator]
+        except BenchError as exc:
+            problems.extend(getattr(exc, "problems", None) or [str(exc)])
+            return None
+
+    codebook = load_codebook(project.databases)   # a database that does not load makes every other check moot
+    check(resolve_external, codebook, project.stimulus, args.external)
     unknown = [n for n in split_names(args.dut) if n not in codebook.nodes]
     if unknown:
-        raise ConfigError(f"--dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(codebook.nodes)})")
-    if not is_virtual(args.interface) and args.interface not in can.interfaces.VALID_INTERFACES:
-        raise ConfigError(f"--interface: unknown python-can interface {args.interface!r} "
-                          f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
+        problems.append(f"--dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(codebook.nodes)})")
+    interface_known = is_virtual(args.interface) or args.interface in can.interfaces.VALID_INTERFACES
+    if not interface_known:
+        problems.append(f"--interface: unknown python-can interface {args.interface!r} "
+                        f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
+    check(check_channel, args.interface, args.channel)
+    if args.workers and not is_virtual(args.interface):
+        problems.append("-n: parallel workers each need their own in-process virtual bus; "
+                        f"--interface {args.interface} is one shared bus")
+    options = check(resolve_bus_options, project, given_bus_options(args), codebook)
+    for spec in args.fault:
+        problems.extend(_fault_problems(spec, codebook))
+    check(check_out_dir, out_dir, args.force)
+    if not problems and interface_known:
+        assert isinstance(options, BusOptions)
+        check(probe_bus, args.interface, args.channel, options)
+    if problems:
+        raise InputProblems(problems)
+
+
+def _fault_problems(spec: str, codebook: Codebook) -> list[str]:
+    """A --fault spec that parses and names a message, node or identifier of the databases."""
+    try:
+        FaultPlan(codebook).add(parse_fault(spec))
+    except BenchError as exc:
+        text = str(exc)
+        return [text if spec in text else f"--fault {spec!r}: {text}"]
+    return []
+
+
+def _rootdir(project: ProjectConfig, paths: list[str]) -> Path:
+    """The folder case ids are relative to: the project's, or for cases outside it the cases' own common
+    folder (so that a single file elsewhere keeps its name in the ids and the JUnit class names)."""
+    base = project.path.parent.resolve()
+    folders = [p if p.is_dir() else p.parent for p in (Path(x.partition("::")[0]).resolve() for x in paths)]
+    if all(f.is_relative_to(base) for f in folders):
+        return base
+    return Path(os.path.commonpath(folders))
 
 
 def run(args: argparse.Namespace) -> int:
     from bench.pytest_plugin import finished_run
 
-    console = Console()
+    console = Console(soft_wrap=not sys.stdout.isatty())   # a CI log keeps whole lines, never cut at 80 columns
     project = load_config(Path(args.config) if args.config else None)
     out_dir = Path(args.out) if args.out else default_out_dir(project.reports)
-    pytest_args = [*(args.paths or [str(project.testcases)]), "-p", "no:terminal", "-p", "no:cacheprovider",
-                   "--rootdir", str(project.path.parent), "--bench-out", str(out_dir),
+    _check_before_running(project, args, out_dir)
+    paths = args.paths or [str(project.testcases)]
+    pytest_args = [*paths, "-p", "no:terminal", "-p", "no:cacheprovider",
+                   "--rootdir", str(_rootdir(project, paths)), "--bench-out", str(out_dir),
                    "--bench-interface", args.interface, "--bench-config", str(project.path)]
     if args.channel:
         pytest_args += ["--bench-channel", args.channel]
+    if args.bitrate is not None:
+        pytest_args += ["--bench-bitrate", str(args.bitrate)]
+    if args.fd is not None:
+        pytest_args += ["--bench-fd" if args.fd else "--bench-no-fd"]
+    if args.data_bitrate is not None:
+        pytest_args += ["--bench-data-bitrate", str(args.data_bitrate)]
     for node in args.external:
         pytest_args += ["--bench-external", node]
     for node in args.dut:
         pytest_args += ["--bench-dut", node]
     for spec in args.fault:
-        parse_fault(spec)                      # a bad spec is a clear error before pytest starts
         pytest_args += ["--bench-fault", spec]
     if args.keyword:
         pytest_args += ["-k", args.keyword]
     if args.workers:
-        if not is_virtual(args.interface):
-            raise ConfigError("-n: parallel workers each need their own in-process virtual bus; "
-                              f"--interface {args.interface} is one shared bus")
         pytest_args += ["-n", args.workers]
-    _check_before_running(project, args)
     progress = _Progress(console)
     code = pytest.main(pytest_args, plugins=[progress])
     result = finished_run()
     if result is None:
-        console.print(f"[bold red]bench run: no case ran[/] (pytest exit code {int(code)})")
+        console.print(f"[bold red]bench run: no case ran[/] (pytest exit code {int(code)})", highlight=False)
         return int(code) or 1
     table = Table(title=f"bench run: {result.verdict}")
-    for column in ("case", "outcome", "steps", "bench s", "wall s"):
-        table.add_column(column)
+    table.add_column("case", overflow="fold")   # whole names: parametrized cases differ only at the end
+    for column in ("outcome", "steps", "bench s", "wall s"):
+        table.add_column(column, no_wrap=True)
     for case in result.cases:
         passed = sum(1 for s in case.steps if s.verdict == "pass")
-        table.add_row(_short(case.nodeid), f"[{OUTCOME_STYLE.get(case.outcome, '')}]{case.outcome}[/]",
+        table.add_row(escape(_short(case.nodeid)), f"[{OUTCOME_STYLE.get(case.outcome, '')}]{case.outcome}[/]",
                       f"{passed}/{len(case.steps)}", f"{case.sim_time:.2f}", f"{case.wall_time:.2f}")
+    # Not a terminal (a CI log): as wide as the longest row, so no name is folded or cut.
+    names = max((len(_short(c.nodeid)) for c in result.cases), default=0)
+    if not console.is_terminal:
+        console.width = max(console.width, names + 48)
     console.print(table)
     counts = result.counts
     console.print(", ".join(f"{n} {k}" for k, n in counts.items() if n) +
