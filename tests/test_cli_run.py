@@ -1,0 +1,94 @@
+"""`bench run`'s terminal output and case names (issue 16, finding 5 and the smaller ones of 11).
+
+The cases live in a file outside the repository, as a user's would, with parameter ids that look like rich
+markup (`[left]`, `[dry]`, `[drop:…]`) and one longer than a CI log's 80 columns; stdout is a pipe (not a
+terminal), as in CI.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from bench.paths import ROOT
+
+LONG = "a_parameter_identifier_long_enough_that_the_whole_case_name_is_wider_than_eighty_columns"
+PARAMS = ["left", "dry", "drop:VCU_WheelCmd_FL", "bold red", LONG]
+CASES = f'''
+import pytest
+
+
+@pytest.mark.parametrize("which", {PARAMS!r}, ids={PARAMS!r})
+def test_side(bench, which):
+    bench.run(0.02)
+    bench.expect_true("ran " + which, True)
+'''
+
+
+def bench_run(folder: Path, *argv: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES", "FORCE_COLOR", "TERM")}
+    return subprocess.run([sys.executable, "-m", "bench", "run", str(folder / "test_user.py"), "--out",
+                           str(folder / "out"), *argv], cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
+
+
+@pytest.fixture(scope="module")
+def user_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subprocess.CompletedProcess]:
+    folder = tmp_path_factory.mktemp("user")
+    (folder / "test_user.py").write_text(CASES, encoding="utf-8")
+    result = bench_run(folder)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return folder, result
+
+
+def test_parameter_ids_are_shown_as_text(user_run: tuple[Path, subprocess.CompletedProcess]) -> None:
+    """Finding 5: every id in the progress lines and once per row of the summary table, whole."""
+    _, result = user_run
+    for param in PARAMS:
+        progress = [line for line in result.stdout.splitlines() if line.endswith(")") and f"test_side[{param}]" in line]
+        assert len(progress) == 1, (param, result.stdout)
+        rows = [line for line in result.stdout.splitlines() if f"test_user::test_side[{param}]" in line]
+        assert len(rows) == 1, (param, result.stdout)
+    assert "…" not in result.stdout
+
+
+def test_lines_are_not_cut_at_80_columns(user_run: tuple[Path, subprocess.CompletedProcess]) -> None:
+    _, result = user_run
+    [line] = [line for line in result.stdout.splitlines() if line.startswith("[") and LONG in line]
+    assert len(line) > 80 and line.endswith(" s)")
+    summary = [line for line in result.stdout.splitlines() if "bench time" in line]
+    assert len(summary) == 1 and summary[0].endswith("invalid")
+
+
+def test_a_file_outside_the_project_keeps_its_name(user_run: tuple[Path, subprocess.CompletedProcess]) -> None:
+    """Finding 11: the node id is `test_user.py::...`, not `::...`, and JUnit's classname is not empty."""
+    folder, result = user_run
+    assert "] passed  test_user.py::test_side[left]" in result.stdout
+    assert "  ::test_side" not in result.stdout
+    cases = ET.parse(folder / "out" / "junit.xml").getroot().iter("testcase")
+    assert {case.get("classname") for case in cases} == {"test_user"}
+
+
+def test_header_without_a_channel_names_only_the_interface(
+        user_run: tuple[Path, subprocess.CompletedProcess]) -> None:
+    folder, _ = user_run
+    html = (folder / "out" / "report.html").read_text(encoding="utf-8")
+    header = re.search(r"<dt>Interface</dt><dd>(.*?)</dd>", html, re.S)
+    assert header is not None and "virtual" in header.group(1) and "channel" not in header.group(1)
+
+
+def test_progress_counts_the_cases_with_workers(tmp_path: Path) -> None:
+    """Finding 11: with -n the controller collects nothing itself; the total is the workers' collection."""
+    pytest.importorskip("xdist")
+    (tmp_path / "test_user.py").write_text(CASES, encoding="utf-8")
+    result = bench_run(tmp_path, "-n", "2", "-k", "left or dry or bold")
+    assert result.returncode == 0, result.stdout + result.stderr
+    counters = re.findall(r"^\[\s*(\d+)/(\d+)\]", result.stdout, re.M)
+    assert sorted(int(done) for done, _ in counters) == [1, 2, 3], result.stdout
+    assert {total for _, total in counters} == {"3"}
+    assert "bench: 3 cases" in result.stdout

@@ -1,0 +1,136 @@
+"""Bad input is stopped before the first case (issue 16, findings 1 and 2, and `--channel` on the virtual bus).
+
+Each problem is one line naming the input (`bench run: error: ...`), exit 2, no traceback, and nothing of a
+run is written: no case runs, no report appears, an existing folder keeps its contents.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench.cli import main
+from bench.paths import ROOT
+
+MINI = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"
+
+
+def errors(capsys: pytest.CaptureFixture[str], argv: list[str]) -> list[str]:
+    """The error lines of an in-process `bench run` that must stop at the door (pytest is never started)."""
+    assert main(["run", str(MINI), *argv]) == 2
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.out + captured.err and "AssertionError" not in captured.out + captured.err
+    assert "cases" not in captured.out            # the progress plugin never announced a collection
+    lines = captured.err.strip().splitlines()
+    assert lines and all(line.startswith("bench run: error: ") for line in lines), lines
+    return lines
+
+
+# -- finding 1: a bus that cannot be opened ------------------------------------------------------------------
+@pytest.mark.parametrize("interface", ["socketcan", "udp_multicast"])
+def test_bus_that_cannot_be_opened_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                               interface: str) -> None:
+    [line] = errors(capsys, ["--interface", interface, "--channel", "nonsense", "--out", str(tmp_path / "out")])
+    assert "cannot open interface" in line and repr(interface) in line and "'nonsense'" in line, line
+    assert not (tmp_path / "out" / "report.html").exists()
+
+
+def test_plain_pytest_stops_once_when_the_bus_cannot_be_opened(tmp_path: Path) -> None:
+    """The plugin's own path: one line and stop, not a traceback in the first case and an assertion in the rest."""
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(MINI),
+                             "--bench-interface", "udp_multicast", "--bench-channel", "nonsense",
+                             "--bench-out", str(tmp_path / "out")],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    output = result.stdout + result.stderr
+    assert result.returncode == 4, output                 # pytest's usage error, not "tests failed"
+    assert output.count("cannot open interface 'udp_multicast' channel 'nonsense'") == 1, output
+    assert "assert self.session is not None" not in output and "passed" not in output
+
+
+def test_channel_on_the_virtual_bus_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    [line] = errors(capsys, ["--channel", "vcan0", "--out", str(tmp_path / "out")])
+    assert line.startswith("bench run: error: --channel vcan0:") and "virtual bus" in line
+    assert main(["plant", "--channel", "x", "--interface", "virtual"]) == 2   # plant never takes the virtual bus
+
+
+def test_channel_on_the_virtual_bus_in_plain_pytest(tmp_path: Path) -> None:
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(MINI),
+                             "--bench-channel", "vcan0", "--bench-out", str(tmp_path / "out")],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 4 and "--bench-channel vcan0" in result.stderr, result.stdout + result.stderr
+
+
+# -- finding 2: the output folder -------------------------------------------------------------------------
+def test_out_is_a_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "notadir").write_text("mine")
+    [line] = errors(capsys, ["--out", str(tmp_path / "notadir")])
+    assert "--out" in line and "is a file" in line
+    assert (tmp_path / "notadir").read_text() == "mine"
+
+
+def test_out_below_a_file_cannot_be_written(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "notadir").write_text("mine")
+    [line] = errors(capsys, ["--out", str(tmp_path / "notadir" / "sub")])
+    assert "--out" in line and "cannot write there" in line
+
+
+def test_out_on_a_read_only_file_system(capsys: pytest.CaptureFixture[str]) -> None:
+    """/proc takes no new folders, even for root (these tests may run as root, where chmod stops nothing)."""
+    [line] = errors(capsys, ["--out", "/proc/bench-report"])
+    assert "--out /proc/bench-report" in line and "cannot write there" in line
+
+
+def test_existing_report_folder_is_not_overwritten(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.html").write_text("the previous run's report")
+    [line] = errors(capsys, ["--out", str(out)])
+    assert "not empty" in line and "--force" in line
+    assert (out / "report.html").read_text() == "the previous run's report"
+
+
+def test_force_writes_into_an_existing_folder(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.html").write_text("the previous run's report")
+    (out / "notes.txt").write_text("mine")
+    result = subprocess.run([sys.executable, "-m", "bench", "run", str(MINI), "-k", "normal_mode", "--out", str(out),
+                             "--force"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "test_normal_mode_drives_straight" in (out / "report.html").read_text()
+    assert (out / "notes.txt").read_text() == "mine"         # replaced: the reports; kept: anything else
+
+
+def test_empty_existing_folder_is_fine(tmp_path: Path) -> None:
+    """An empty folder (e.g. made by a CI step) is no previous report."""
+    result = subprocess.run([sys.executable, "-m", "bench", "run", str(MINI), "-k", "normal_mode", "--out",
+                             str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+# -- every problem at once, one line each ------------------------------------------------------------------
+def test_every_problem_is_its_own_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "notadir").write_text("")
+    lines = errors(capsys, ["--external", "BOGUS", "--dut", "NOPE", "--fault", "drop:NoSuchMsg@1-2",
+                            "--fault", "drop:VCU_WheelCmd_FL@3-2", "--out", str(tmp_path / "notadir")])
+    assert len(lines) == 5, lines
+    for needle in ("--external", "--dut", "NoSuchMsg", "VCU_WheelCmd_FL@3-2", "--out"):
+        assert sum(needle in line for line in lines) == 1, (needle, lines)
+
+
+def test_data_bitrate_without_fd(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    [line] = errors(capsys, ["--interface", "udp_multicast", "--data-bitrate", "2000000",
+                             "--out", str(tmp_path / "out")])
+    assert "--data-bitrate 2000000" in line and "--fd" in line
+
+
+def test_bad_config_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "bench.toml"
+    config.write_text(f'[bench]\ndatabases = ["{ROOT}/dbc/chassis.dbc", "{ROOT}/dbc/bench.dbc"]\n'
+                      'stimulus = ["DRIVER", "TESTER"]\nplant = "chassis"\ntestcases = "."\nreports = "r"\n'
+                      '[bus]\nbitrate = -5\n')
+    [line] = errors(capsys, ["--config", str(config), "--out", str(tmp_path / "out")])
+    assert str(config) in line and "[bus] bitrate" in line
