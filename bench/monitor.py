@@ -9,7 +9,13 @@ Two clocks per message (docs/spec/e2e.md "Timeout and resynchronisation"): the c
 from the last *valid* frame; the counter resynchronises only after a real reception gap, measured from
 the last frame of the message, valid or not, so that a stream of rejected frames can never time itself
 back into acceptance.
+
+Two senders of one identifier (a second plant on the channel, a real ECU while its node is still simulated)
+are one finding per message (`Monitor.duplicates`, DuplicateSender) with its evidence, not only thousands of
+counter errors: a frame received within a few cycles of this station's own frame of the identifier, or,
+after a sequence error, two counter streams that each advance by 1 and take turns (bench.e2e.SenderTracker).
 """
+
 
 from __future__ import annotations
 
@@ -30,6 +36,10 @@ HISTORY_CAP = 3000       # frames of decoded history per message (30 s at a 10 m
 INTERVALS_CAP = 5000     # frame intervals per message for cycle-time checks (50 s at 10 ms; the report's
                          # timing section keeps its own whole-run histogram, bench/timing.py)
 INVALID_CAP = 20000      # invalid-frame records
+# Two senders of one identifier (a finding of its own, not thousands of counter errors):
+SENDERS_CALM = 32        # accepted frames in a row after which the counter streams are no longer followed
+FOREIGN_CYCLES = 3       # a frame received within this many cycles of this station's own frame of the
+FOREIGN_S = 1.0          # identifier (FOREIGN_S without a cycle time) comes from another sender
 
 FrameSink = Callable[[float, int, bytes, str, bool, str, "MessageCodec | None", "Mapping[str, float] | None"], None]
 
@@ -53,10 +63,30 @@ class MessageState:
     history_v: list[tuple[float, ...]] = field(default_factory=list)
     intervals_dropped: int = 0
     history_dropped: int = 0
+    last_data: bytes = b""                   # the previous frame's payload (a re-sent frame is no second sender)
+    last_tx: float | None = None             # bench time this station last sent the message itself
+    senders: e2e.SenderTracker | None = None  # counter streams, followed after a sequence error
+    calm: int = 0                            # accepted frames in a row while they are followed
 
     @property
     def invalid_count(self) -> int:
         return sum(self.invalid.values())
+
+
+@dataclass(slots=True)
+class DuplicateSender:
+    """A finding: two senders of one identifier, with the evidence that showed it first. One per message:
+    later frames that show it only count."""
+
+    frame_id: int
+    message: str
+    t: float                  # bench time it was first shown, s
+    evidence: str
+    frames: int = 1           # frames that showed it (alternating counter streams, foreign frames)
+    last: float = 0.0         # bench time of the last of them, s
+
+    def describe(self) -> str:
+        return f"two senders of 0x{self.frame_id:03X} ({self.message}): {self.evidence}"
 
 
 @dataclass(slots=True)
@@ -82,6 +112,7 @@ class Monitor:
         self.invalid_log: list[InvalidFrame] = []
         self.invalid_dropped = 0
         self.frames = 0
+        self.duplicates: dict[int, DuplicateSender] = {}   # identifier -> finding (docs/spec/e2e.md)
 
     # -- frames ------------------------------------------------------------------------------
     def on_frame(self, t: float, arbitration_id: int, data: bytes, direction: str,
@@ -102,20 +133,31 @@ class Monitor:
         if state.last_valid is not None and not state.timed_out_flag and cycle is not None \
                 and t - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
             self._time_out(state)   # the consumer went 3 cycles without a valid frame: record the timeout
-        if state.last_seen is not None:
-            if cycle is not None and t - state.last_seen > e2e.RESYNC_GAP_CYCLES * cycle + TIME_EPS:
+        prev_seen, prev_data = state.last_seen, state.last_data
+        if prev_seen is not None:
+            if cycle is not None and t - prev_seen > e2e.RESYNC_GAP_CYCLES * cycle + TIME_EPS:
                 state.rx.resync()   # a real reception gap (no frame at all): the sender may have restarted
+                state.senders = None
             if self.keep_intervals:
                 state.intervals.append(t - state.last_seen)
                 if len(state.intervals) > 2 * INTERVALS_CAP:
                     state.intervals_dropped += _trim(state.intervals, INTERVALS_CAP)
         state.last_seen = t
+        state.last_data = data
         state.frames += 1
+        if direction == "tx":
+            state.last_tx = t
+        elif state.last_tx is not None and \
+                t - state.last_tx <= (FOREIGN_CYCLES * cycle if cycle else FOREIGN_S) + TIME_EPS:
+            self._duplicate(state, t, arbitration_id, "frames received while this station sends it")
         kind = reason = ""
         values = None
         length_ok = len(data) == codec.length
         if codec.e2e:
+            reference = state.rx.reference
             kind, reason = _e2e_verdict(state.rx, arbitration_id, data, length_ok)
+            if (kind or state.senders is not None) and length_ok and kind not in ("checksum", "length"):
+                self._follow_counters(state, t, arbitration_id, data, kind, reference, prev_seen, prev_data)
         if not length_ok:
             kind, reason = "length", f"length {len(data)}, DBC says {codec.length}"
         elif not kind:
@@ -148,6 +190,38 @@ class Monitor:
         if self.sink:
             self.sink(t, arbitration_id, data, direction, True, "", codec, values)
         return True
+
+    def _follow_counters(self, state: MessageState, t: float, frame_id: int, data: bytes, kind: str,
+                         reference: int | None, prev_seen: float | None, prev_data: bytes) -> None:
+        """An intact frame while the message's counters are out of sequence (or were lately): follow them as
+        streams (bench.e2e.SenderTracker) until SENDERS_CALM frames in a row are accepted."""
+        tracker = state.senders
+        if tracker is None:
+            previous = None if reference is None or prev_seen is None else (reference, prev_seen)
+            tracker = state.senders = e2e.SenderTracker(state.codec.cycle_time, previous)
+            state.calm = 0
+        if kind:
+            state.calm = 0
+        else:
+            state.calm += 1
+            if state.calm >= SENDERS_CALM:
+                state.senders = None
+                return
+        cycle = state.codec.cycle_time
+        if data == prev_data and prev_seen is not None and cycle and t - prev_seen < cycle / 4:
+            return     # the same frame again at once (a re-sent frame, the `duplicate` fault): one sender
+        streams = tracker.feed(data[e2e.COUNTER_BYTE] & 0x0F, t)
+        if streams is not None:
+            first, second = (",".join(str(c) for c in s) for s in streams)
+            self._duplicate(state, t, frame_id, f"counters {first} and {second} interleaved")
+
+    def _duplicate(self, state: MessageState, t: float, frame_id: int, evidence: str) -> None:
+        found = self.duplicates.get(frame_id)
+        if found is None:
+            self.duplicates[frame_id] = DuplicateSender(frame_id, state.codec.name, t, evidence, 1, t)
+        else:
+            found.frames += 1
+            found.last = t
 
     def note_send_failure(self, t: float, arbitration_id: int, reason: str) -> None:
         """A frame this station could not send (queue full, bus-off): logged as invalid, never applied."""

@@ -1,0 +1,233 @@
+"""Issue 16, finding 10: two senders of one identifier are one finding per message, with the identifier and
+the evidence, not only thousands of "counter 0, expected 7" lines; one broken sender never is."""
+
+from __future__ import annotations
+
+import math
+import random
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import can
+import pytest
+
+from bench import e2e
+from bench.codec import Codebook
+from bench.faults import FRAME_KINDS, Fault, FaultPlan
+from bench.monitor import Monitor
+from bench.paths import ROOT
+from bench.restbus import Restbus
+
+MESSAGE = "VCU_WheelCmd_FL"
+CYCLE = 0.01   # s, VCU_WheelCmd_FL's GenMsgCycleTime (checked below)
+
+
+def _frame(codebook: Codebook, counter: int, angle: float = 5.0) -> bytes:
+    """One frame of MESSAGE with the given counter, protected as the contract says (docs/spec/e2e.md)."""
+    codec = codebook[MESSAGE]
+    data = bytearray(codec.encode({**{s: 0.0 for s in codec.signal_names}, "SteerAngleCmd": angle}))
+    e2e.protect(codec.frame_id, data, counter)
+    return bytes(data)
+
+
+def _feed(monitor: Monitor, codebook: Codebook, frames: list[tuple[float, int, float]]) -> None:
+    frame_id = codebook[MESSAGE].frame_id
+    for t, counter, angle in frames:
+        monitor.on_frame(t, frame_id, _frame(codebook, counter, angle), "rx")
+
+
+def test_cycle_of_the_message(codebook: Codebook) -> None:
+    assert codebook[MESSAGE].cycle_time == pytest.approx(CYCLE)
+
+
+@pytest.mark.parametrize("same_payload", [False, True], ids=["other values", "same values"])
+@pytest.mark.parametrize("offset", range(16))
+def test_two_interleaved_senders_are_one_finding(codebook: Codebook, offset: int, same_payload: bool) -> None:
+    """Sender A alone, then B at the same rate half a cycle before each frame of A, its counter `offset` ahead
+    of A's next (docs/spec/e2e.md, "two interleaved senders"): one finding naming 0x120 and both streams."""
+    a = [(i * CYCLE, i % 16, 5.0) for i in range(10)]
+    both = []
+    for i in range(40):
+        t = (10 + i) * CYCLE
+        both += [(t - CYCLE / 2, (10 + offset + i) % 16, 5.0 if same_payload else -3.0), (t, (10 + i) % 16, 5.0)]
+    monitor = Monitor(codebook)
+    _feed(monitor, codebook, a + both)
+    frame_id = codebook[MESSAGE].frame_id
+    assert list(monitor.duplicates) == [frame_id]
+    found = monitor.duplicates[frame_id]
+    text = found.describe()
+    assert text.startswith(f"two senders of 0x{frame_id:03X} ({MESSAGE}): counters ")
+    assert found.t < both[12][0], "shown within the first few frames of B"
+    streams = re.fullmatch(r".*counters ([\d,]+) and ([\d,]+) interleaved", text)
+    assert streams, text
+    for stream in streams.groups():          # each stream advances by 1
+        counters = [int(c) for c in stream.split(",")]
+        assert len(counters) >= 3 and all((b - a) % 16 == 1 for a, b in zip(counters, counters[1:])), text
+    assert found.frames > 40, "the later frames count to the same finding"
+
+
+def test_two_senders_at_different_rates(codebook: Codebook) -> None:
+    """A every 10 ms, B every 30 ms (a real ECU of another variant): still two streams taking turns."""
+    frames = [(i * CYCLE, i % 16, 5.0) for i in range(100)] + [(0.1 + i * 0.03 + 0.003, (7 + i) % 16, 1.0)
+                                                               for i in range(25)]
+    monitor = Monitor(codebook)
+    _feed(monitor, codebook, sorted(frames))
+    assert list(monitor.duplicates) == [codebook[MESSAGE].frame_id]
+
+
+def _one_sender(counters: list[int], step: float = CYCLE) -> list[tuple[float, int, float]]:
+    return [(i * step, c % 16, 5.0) for i, c in enumerate(counters)]
+
+
+SINGLE_SENDER_PATTERNS = {   # docs/spec/e2e.md "Counter patterns": one sender each, however broken
+    "stuck": list(range(10)) + [10] * 50 + list(range(13, 40)),
+    "skip 1 again and again": [c for c in range(200) if c % 5],
+    "skip 2": list(range(6)) + list(range(8, 40)),
+    "one step back": [6, 7, 8, 7, 8, 9, 10, 11],
+    "counting down": [5, 6, 7] + [6 - i for i in range(40)],
+    "stale frame now and then": sum(([c, c + 1, c + 2, c + 3, c - 1] for c in range(0, 100, 4)), []),
+    "restart with a jump, twice": list(range(20)) + list(range(5, 30)) + list(range(11, 40)),
+    "each frame twice, 2 ms apart": [c for c in range(40) for _ in range(2)],
+}
+
+
+@pytest.mark.parametrize("name", SINGLE_SENDER_PATTERNS)
+def test_one_broken_sender_is_no_second_sender(codebook: Codebook, name: str) -> None:
+    counters = SINGLE_SENDER_PATTERNS[name]
+    if name.startswith("each frame twice"):
+        frames = [(i // 2 * CYCLE + (i % 2) * 0.002, c % 16, 5.0) for i, c in enumerate(counters)]
+    else:
+        frames = _one_sender(counters)
+    monitor = Monitor(codebook)
+    _feed(monitor, codebook, frames)
+    assert monitor.invalid_frames > 0, "the pattern is a fault the receiver rejects"
+    assert monitor.duplicates == {}, name
+
+
+@pytest.mark.parametrize("kind", FRAME_KINDS)
+def test_injected_faults_are_no_second_sender(codebook: Codebook, kind: str) -> None:
+    """Every frame fault the bench injects acts on one sender's frames: none is reported as two senders."""
+    param = {"delay": 0.015, "bitflip": 3, "counter_jump": 5, "checksum_value": 7, "checksum_offset": 1}.get(kind, 0.0)
+    plan = FaultPlan(codebook)
+    plan.add(Fault(kind, MESSAGE, 0.2, 0.6, param))
+    restbus = Restbus(codebook, codebook[MESSAGE].senders)
+    slot = restbus.periodic[MESSAGE]
+    monitor = Monitor(codebook)
+    frame_id = codebook[MESSAGE].frame_id
+    delayed: list[tuple[float, bytes]] = []
+    for i in range(100):
+        t = i * CYCLE
+        ready = [d for d in delayed if d[0] <= t + 1e-9]
+        delayed = [d for d in delayed if d[0] > t + 1e-9]
+        for _, data in ready:
+            monitor.on_frame(t, frame_id, data, "rx")
+        for delay, data in plan.apply(t, frame_id, restbus.build(slot)):
+            if delay > 0:
+                delayed.append((t + delay, data))
+            else:
+                monitor.on_frame(t, frame_id, data, "rx")
+    assert monitor.duplicates == {}, kind
+
+
+def test_a_frame_of_an_identifier_this_station_sends(codebook: Codebook) -> None:
+    """The station knows what it sends: a received frame of one of its own identifiers is a second sender,
+    whatever its counter (here the very counter the station sends next)."""
+    monitor = Monitor(codebook)
+    frame_id = codebook[MESSAGE].frame_id
+    for i in range(5):
+        monitor.on_frame(i * CYCLE, frame_id, _frame(codebook, i), "tx")
+    assert monitor.duplicates == {}
+    monitor.on_frame(4.5 * CYCLE, frame_id, _frame(codebook, 5, angle=-1.0), "rx")
+    found = monitor.duplicates[frame_id]
+    assert "received while this station sends it" in found.describe() and found.t == pytest.approx(0.045)
+    # a node the bench stopped simulating long ago (its frames now come from a real ECU) is no finding
+    other = Monitor(codebook)
+    other.on_frame(0.0, frame_id, _frame(codebook, 0), "tx")
+    other.on_frame(1.0, frame_id, _frame(codebook, 9), "rx")
+    assert other.duplicates == {}
+
+
+def test_two_senders_on_the_virtual_bus(codebook: Codebook) -> None:
+    """In process: the bench's VCU and a second VCU on one virtual bus. The runner's monitor (which sends
+    neither) shows it by the counters, the first VCU's station by a frame of its own identifier."""
+    from bench.bus import VirtualTimeBus
+    from bench.station import Station
+
+    channel = f"dup-{random.randint(0, 1 << 30)}"
+    buses = [VirtualTimeBus(channel=channel) for _ in range(3)]
+    clock = {"t": 0.0}
+    stations = []
+    for name, bus, start in (("vcu-1", buses[0], 0), ("vcu-2", buses[1], 9)):
+        restbus = Restbus(codebook, {"VCU"})
+        for slot in restbus.periodic.values():
+            slot.counter = start       # the second VCU's counters 9 ahead
+        stations.append(Station(name, bus, restbus, Monitor(codebook), lambda: clock["t"]))
+    watcher = Monitor(codebook)
+    try:
+        for tick in range(200):
+            clock["t"] = tick * 0.001
+            for i, station in enumerate(stations):
+                if tick >= 20 * i:    # the second VCU starts 20 ms later
+                    station.tick(tick, clock["t"], 0.001)
+            msg = buses[2].recv(0.0)
+            while msg is not None:
+                watcher.on_frame(clock["t"], msg.arbitration_id, bytes(msg.data), "rx")
+                msg = buses[2].recv(0.0)
+    finally:
+        for bus in buses:
+            bus.shutdown()
+    frame_id = codebook[MESSAGE].frame_id
+    assert frame_id in watcher.duplicates, watcher.invalid_log[:5]
+    assert frame_id in stations[0].monitor.duplicates
+    assert "received while this station sends it" in stations[0].monitor.duplicates[frame_id].describe()
+
+
+def _group() -> str:
+    return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+
+
+def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
+    """Two `bench plant` on one udp_multicast group (hop limit 0, loopback only): each says which
+    identifiers have a second sender, and a listener's monitor (as `bench monitor` runs it) finds them by the
+    counters alone."""
+    group = _group()
+    command = [sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast", "--channel", group,
+               "--duration", "4"]
+    listener = can.Bus(interface="udp_multicast", channel=group, receive_own_messages=False)
+    watcher = Monitor(codebook)
+    stop = threading.Event()
+
+    def listen() -> None:
+        t0 = time.monotonic()
+        while not stop.is_set():
+            msg = listener.recv(0.1)
+            if msg is not None:
+                watcher.on_frame(time.monotonic() - t0, msg.arbitration_id, bytes(msg.data), "rx",
+                                 msg.is_extended_id, msg.is_error_frame)
+
+    thread = threading.Thread(target=listen, daemon=True)
+    thread.start()
+    first = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        time.sleep(0.7)
+        second = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=60)
+        first_output, _ = first.communicate(timeout=60)
+    finally:
+        if first.poll() is None:
+            first.send_signal(signal.SIGINT)
+            first.communicate(timeout=30)
+        stop.set()
+        thread.join(timeout=2)
+        listener.shutdown()
+    frame_id = codebook[MESSAGE].frame_id
+    for output in (first_output, second.stdout + second.stderr):
+        assert f"two senders of 0x{frame_id:03X} ({MESSAGE})" in output, output[-3000:]
+        lines = [line for line in output.splitlines() if f"two senders of 0x{frame_id:03X}" in line]
+        assert len(lines) == 1, "one line per message, not one per frame"
+    assert frame_id in watcher.duplicates, watcher.invalid_log[:5]
+    assert "interleaved" in watcher.duplicates[frame_id].describe()
+    assert not math.isnan(watcher.duplicates[frame_id].t)
