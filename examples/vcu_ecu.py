@@ -1,418 +1,773 @@
-"""A stand-alone VCU for the 4WIS EV: only python-can, cantools and the contract DBC (dbc/chassis.dbc).
+"""A stand-alone VCU for the 4WIS EV, written from the contract documents alone.
 
-It plays node VCU the way a real ECU would, so that the bench can judge it as an external node
-(`bench plant --external VCU` simulates everything else; `bench run --external all` runs the campaign):
+Node `VCU` of `dbc/chassis.dbc`, built only from README.md, `docs/contract/common.md`, `docs/contract/vcu.md`,
+`docs/contract/vcu-4ws.md`, `docs/spec/*.md` and the DBC, as an outside supplier would (issue 13). It reads
+`DRV_MotionRequest`, `DRV_Steering`, the four `WHL_Status_xx` and `IMU_Motion`, judges every frame by the
+receiver rules of `docs/spec/e2e.md`, and sends `VCU_WheelCmd_FL/FR/RL/RR` (10 ms), `VCU_VehicleState` and
+`VCU_RotationCentre` (20 ms) with AliveCounter and CRC-8 Checksum. Comments cite the requirement ids.
 
-- reads DRV_MotionRequest (DriveMode, PivotX, PivotY, TargetSpeed), DRV_Steering (HandWheelAngle) and the four
-  WHL_Status_xx (wheel faults; angles and speeds for the speed estimate), checking each frame's length,
-  AliveCounter, CRC-8/SAE-J1850 Checksum and signal ranges (docs/spec/e2e.md);
-- every 5 ms computes the wheel commands by docs/spec/formulas.md §2 (rotation about a point, [P0] eq. 1-10 with
-  erratum E1 corrected) and §3 (the curvature angle X of [P2]), written here from the formulas;
-- sends VCU_WheelCmd_FL/FR/RL/RR every 10 ms, VCU_VehicleState and VCU_RotationCentre every 20 ms, each with
-  AliveCounter and Checksum.
+Run it as the external VCU of the bench (three processes on one host):
 
-Modes (docs/spec/vehicles.md A; every one a rotation about a point S, [P0] §1.2):
-  PIVOT     S = (PivotX, PivotY), v_o = TargetSpeed (positive: clockwise about S).
-  NORMAL    X = HandWheelAngle / 15 at the front-axle centre, S on the rear-axle line y = -L: x = 2L / tan X.
-  ADAPTIVE  below 20 km/h: X as above, S on y = 0 (rear wheels opposite to the front, [P0] §3): x = L / tan X.
-            Above 20 km/h [P3]'s rear-steering laws apply; this example does not implement them and
-            answers REQUEST_INVALID.
-  LATERAL   every wheel +90°, one signed speed (positive: to the right; negative rpm at +90° moves left).
-  In NORMAL and ADAPTIVE a positive TargetSpeed drives forward: v_o = v · sign(x); X = 0 drives straight.
-Faults (VCU_VehicleState.VcuFault, the first found): REQUEST_TIMEOUT (a request message older than 3 cycles),
-REQUEST_INVALID (its last frame failed a check; a request needing more than 1500 rpm on a wheel or 120 °/s of
-yaw), CENTRE_AT_ORIGIN (S within 1 cm of the origin with v ≠ 0), CENTRE_ON_WHEEL (S within 1 cm of a contact
-point), ANGLE_OVER_90 (NORMAL/ADAPTIVE: S between the wheels of an axle), WHEEL_FAULT (a WHL_Status reports a
-fault or is silent). On a fault: speeds 0, angles held at the last valid command, YawRateTarget 0.
+    bench plant --interface udp_multicast --channel 239.255.1.2 --external VCU &
+    python examples/vcu_ecu.py --interface udp_multicast --channel 239.255.1.2
+    bench run --interface udp_multicast --channel 239.255.1.2 --external all --dut VCU
 
-    python examples/vcu_ecu.py --interface socketcan --channel vcan0
-    python examples/vcu_ecu.py --interface udp_multicast --channel 239.74.163.2
+It prints a line with `running` once it is on the bus; Ctrl-C (SIGINT) stops it. Needs python-can, cantools
+and numpy only.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import queue
 import signal
 import socket
-import sys
+import threading
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from collections import Counter
+from typing import Callable
 
 import can
 import cantools
+import numpy as np
 
-DBC = Path(__file__).resolve().parent.parent / "dbc" / "chassis.dbc"
+# --- Vehicle A (docs/spec/vehicles.md A, vcu.md symbols, vcu-4ws.md symbols) ---------------------------------
+K = 0.555  # half track, m
+L = 1.38  # half wheelbase, m (formulas.md §2's L)
+WHEEL_RADIUS = 0.281  # m
+RPM_PER_MPS = 30.0 / (math.pi * WHEEL_RADIUS)  # 33.986
+HANDWHEEL_RATIO = 15.0
+WHEELS: dict[str, tuple[float, float]] = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
+MASS, A_CG, B_CG, C_F, C_R = 900.0, 1.38, 1.38, 45000.0, 55000.0  # vcu-4ws.md symbols
+WHEELBASE = A_CG + B_CG  # 2.76 m, vcu-4ws.md's L
 
-# The vehicle (docs/spec/vehicles.md A; [P0] §3): 2K = track, 2L = wheelbase, r = wheel radius.
-K, L, R = 1.11 / 2, 2.76 / 2, 0.281
-WHEELS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}   # docs/spec/formulas.md §1, +x right, +y forward
-HAND_WHEEL_RATIO = 15.0          # docs/spec/vehicles.md A (NORMAL / ADAPTIVE: X = HandWheelAngle / 15)
-LOW_SPEED_LIMIT = 20.0 / 3.6     # m/s: ADAPTIVE's opposite-phase range (docs/spec/vehicles.md A)
-MAX_RPM = 1500.0                 # the hub motors' limit (the bench's vehicle file: hub_motor_max_speed)
-MAX_YAW = 120.0                  # deg/s the VCU accepts (the bench's vehicle file: max_yaw_rate)
-TOLERANCE = 0.01                 # m: a centre this close to the origin or a contact point is on it
-AT_INFINITY = 5242.87            # VCU_RotationCentre's range end = centre at infinity (chassis.dbc comment)
-RPM_PER_MPS = 30.0 / (math.pi * R)
-TASK_S = 0.005                   # the control task's period
+# --- Limits and thresholds ------------------------------------------------------------------------------------
+MAX_RPM = 1500.0  # VCU-LIM-01
+MAX_YAW_DEG_S = 120.0  # VCU-LIM-01
+CENTRE_TOL = 0.01  # m, VCU-FLT-04 / VCU-FLT-05
+SWITCH_SPEED = 20.0 / 3.6  # m/s, VCU-MODE-06 / VCU-4WS-04
+WHEEL_GRACE_S = 0.1  # VCU-FLT-07
+RANGE_END = 5242.87  # m, VCU-OUT-07
+
 NORMAL, LATERAL, ADAPTIVE, PIVOT = 0, 1, 2, 3
-OK, AT_ORIGIN, ON_WHEEL, OVER_90, INVALID, TIMEOUT, WHEEL_FAULT = range(7)
-INPUTS = ("DRV_MotionRequest", "DRV_Steering", "WHL_Status_FL", "WHL_Status_FR", "WHL_Status_RL", "WHL_Status_RR")
+OK, CENTRE_AT_ORIGIN, CENTRE_ON_WHEEL, ANGLE_OVER_90, REQUEST_INVALID, REQUEST_TIMEOUT, WHEEL_FAULT = range(7)
+
+TASK_S = 0.005  # VCU-GEN-02: inputs evaluated at least every 10 ms; we use 5 ms
 
 
-# -- end-to-end protection (docs/spec/k-matrix.md) --------------------------------------------------------------------
-def _crc_table() -> list[int]:
-    table = []
-    for byte in range(256):
-        crc = byte
+# ==============================================================================================================
+# E2E protection (COM-E2E-01/02, docs/spec/e2e.md)
+# ==============================================================================================================
+def crc8_sae_j1850(data: bytes) -> int:
+    """CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, final XOR 0xFF (COM-E2E-02)."""
+    crc = 0xFF
+    for byte in data:
+        crc ^= byte
         for _ in range(8):
             crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-        table.append(crc)
-    return table
-
-
-CRC_TABLE = _crc_table()
-
-
-def checksum(frame_id: int, data: bytes) -> int:
-    """CRC-8/SAE-J1850 (poly 0x1D, init 0xFF, final XOR 0xFF) over id low byte, id high byte, data bytes 0-6."""
-    crc = 0xFF
-    for byte in (frame_id & 0xFF, frame_id >> 8, *data[:7]):
-        crc = CRC_TABLE[crc ^ byte]
     return crc ^ 0xFF
 
 
-def protect(frame_id: int, payload: bytes, counter: int) -> bytes:
-    data = bytearray(payload)
-    data[6] = (data[6] & 0xF0) | (counter & 0x0F)
-    data[7] = checksum(frame_id, data)
-    return bytes(data)
+def frame_checksum(arbitration_id: int, data: bytes) -> int:
+    """COM-E2E-02: CRC over the identifier's low byte, its high byte, then data bytes 0-6."""
+    return crc8_sae_j1850(bytes([arbitration_id & 0xFF, (arbitration_id >> 8) & 0xFF]) + bytes(data[:7]))
 
 
-# -- docs/spec/formulas.md §2 and §3 ----------------------------------------------------------------------------------
-def wheel_command(x: float, y: float, v_o: float, px: float, py: float) -> tuple[float, float]:
-    """Angle (deg, in (-90, 90]) and speed (rpm) of the wheel at (px, py) for a rotation about S = (x, y).
-
-    Wheel velocity ω × (P - S) with ω = v_o / r_o clockwise: (ω (py - y), ω (x - px)). Heading at angle β
-    (0 = +y, clockwise): tan β = (py - y) / (x - px) ([P0] eq. 1-4), speed along it
-    n = 30 v_o (x - px) / (π r r_o cos β) (eq. 7-10, E1 corrected); x = px gives +90° with the speed of
-    ω (py - y) (the paper's -90° is +90° rolling backwards)."""
-    r_o = math.hypot(x, y)
-    omega = v_o / r_o if r_o > 0.0 else 0.0
-    num, den = py - y, x - px
-    if den == 0.0:
-        return 90.0, omega * num * RPM_PER_MPS
-    beta = math.atan(num / den)
-    return math.degrees(beta), omega * den / math.cos(beta) * RPM_PER_MPS
+assert crc8_sae_j1850(b"123456789") == 0x4B  # COM-E2E-02 check value
+assert frame_checksum(0x110, bytes(8)) == 0x3D  # COM-E2E-02 example
 
 
-def heading_deg(num: float, den: float) -> float:
-    """An angle (0 = +y, clockwise) with tan = num / den, in (-90, 90] (for the curvature angle, §3)."""
-    if den == 0.0:
-        return 0.0 if num == 0.0 else 90.0
-    return math.degrees(math.atan(num / den))
+class E2EReceiver:
+    """The receiver of one message: the states and transitions of docs/spec/e2e.md (COM-RX-01, COM-RX-02)."""
 
+    NODATA, VALID, INVALID = "NODATA", "VALID", "INVALID"
+    REVALIDATION_FRAMES = 2
 
-class Plan:
-    """One valid command set."""
-
-    def __init__(self, mode: int, angles: list[float], rpm: list[float], centre: tuple[float, float] | None,
-                 curvature: float, yaw: float, direction: tuple[float, float]) -> None:
-        self.mode, self.angles, self.rpm, self.centre = mode, angles, rpm, centre
-        self.curvature, self.yaw, self.direction = curvature, yaw, direction
-
-
-STRAIGHT = Plan(NORMAL, [0.0] * 4, [0.0] * 4, None, 0.0, 0.0, (0.0, 1.0))
-
-
-def rotation_plan(mode: int, x: float, y: float, v_o: float, curvature: float,
-                  direction: tuple[float, float]) -> tuple[int, Plan | None]:
-    if v_o != 0.0 and math.hypot(x, y) < TOLERANCE:
-        return AT_ORIGIN, None
-    if any(math.hypot(x - px, y - py) < TOLERANCE for px, py in WHEELS.values()):
-        return ON_WHEEL, None
-    commands = [wheel_command(x, y, v_o, px, py) for px, py in WHEELS.values()]
-    r_o = math.hypot(x, y)
-    yaw = math.degrees(v_o / r_o) if r_o > 0.0 else 0.0
-    return OK, Plan(mode, [a for a, _ in commands], [n for _, n in commands], (x, y), curvature, yaw, direction)
-
-
-def plan_for(mode: int, px: float, py: float, v: float, hand_wheel: float) -> tuple[int, Plan | None]:
-    """The fault and, when OK, the plan for one request."""
-    if mode == LATERAL:
-        n = v * RPM_PER_MPS        # +90° both ways, the sign in the speed (docs/contract/vcu.md VCU-MODE-08)
-        fault, plan = OK, Plan(mode, [90.0] * 4, [n] * 4, None, 90.0, 0.0, (1.0, 0.0))
-    elif mode == PIVOT:
-        r_o = math.hypot(px, py)
-        direction = (-py / r_o, px / r_o) if r_o > 0.0 else (0.0, 1.0)
-        fault, plan = rotation_plan(mode, px, py, v, heading_deg(L - py, px), direction)
-    elif mode in (NORMAL, ADAPTIVE):
-        x_deg = hand_wheel / HAND_WHEEL_RATIO
-        if mode == ADAPTIVE and abs(v) >= LOW_SPEED_LIMIT:
-            return INVALID, None                       # [P3]'s laws: not in this example
-        if abs(x_deg) >= 90.0:
-            return OVER_90, None
-        if x_deg == 0.0:
-            n = v * RPM_PER_MPS
-            fault, plan = OK, Plan(mode, [0.0] * 4, [n] * 4, None, 0.0, 0.0, (0.0, 1.0))
-        else:
-            tan_x = math.tan(math.radians(x_deg))
-            x, y = (2.0 * L / tan_x, -L) if mode == NORMAL else (L / tan_x, 0.0)
-            if abs(x) < K:                             # S between the wheels of an axle
-                return OVER_90, None
-            v_o = v if x > 0.0 else -v
-            fault, plan = rotation_plan(mode, x, y, v_o, x_deg + 0.0, (0.0, 1.0))
-    else:
-        return INVALID, None
-    if plan is not None and (max(abs(n) for n in plan.rpm) > MAX_RPM or abs(plan.yaw) > MAX_YAW):
-        return INVALID, None
-    return fault, plan
-
-
-def rigid_fit(angles: list[float], rpms: list[float]) -> tuple[float, float]:
-    """Velocity (vx, vy) of the geometric centre from the four wheels (least squares over a rigid motion:
-    v(P) = (vx + ω py, vy - ω px), ω clockwise; each wheel's speed along its heading, none across it)."""
-    rows: list[tuple[float, float, float, float]] = []
-    for (px, py), angle, rpm in zip(WHEELS.values(), angles, rpms):
-        a = math.radians(angle)
-        hx, hy, nx, ny = math.sin(a), math.cos(a), math.cos(a), -math.sin(a)
-        rows.append((hx, hy, hx * py - hy * px, rpm / RPM_PER_MPS))
-        rows.append((nx, ny, nx * py - ny * px, 0.0))
-    m = [[sum(r[i] * r[j] for r in rows) for j in range(3)] + [sum(r[i] * r[3] for r in rows)] for i in range(3)]
-    for col in range(3):                               # Gauss-Jordan with partial pivoting
-        pivot = max(range(col, 3), key=lambda i: abs(m[i][col]))
-        if abs(m[pivot][col]) < 1e-12:
-            return 0.0, 0.0
-        m[col], m[pivot] = m[pivot], m[col]
-        for i in range(3):
-            if i != col:
-                f = m[i][col] / m[col][col]
-                m[i] = [a - f * b for a, b in zip(m[i], m[col])]
-    return m[0][3] / m[0][0], m[1][3] / m[1][1]
-
-
-# -- the ECU ----------------------------------------------------------------------------------------------
-class Input:
-    """One received message: its last valid values and whether its last frame passed the checks (length,
-    AliveCounter +1, Checksum, signal ranges)."""
-
-    def __init__(self, message: cantools.database.can.Message) -> None:
+    def __init__(self, message: cantools.database.Message) -> None:
         self.message = message
-        self.timeout = 3 * message.cycle_time / 1000.0       # docs/spec/k-matrix.md: 3 x the cycle time
-        self.t_valid = -math.inf                             # time of the last valid frame
-        self.counter: int | None = None
-        self.valid = False                                   # the last frame passed the checks
-        self.values: dict[str, float] = {}
-        self._raw = b""
-        self.verbose = False
+        self.cycle_s = message.cycle_time / 1000.0
+        self.state = self.NODATA
+        self.reference: int | None = None
+        self.good = 0
+        self.last_frame_t: float | None = None
+        self.last_accepted_t: float | None = None
+        self.values: dict[str, float] | None = None
+        self.last_rejected = False  # the last received frame was rejected ("invalid" in vcu.md)
+        self.resyncs = 0  # resynchronisations after a reception gap (a source that restarted)
+        self.accepted = self.rejected = 0  # for --stats
 
-    def update(self, now: float, data: bytes) -> None:
-        message = self.message
-        if not self.fresh(now):
-            self.counter = None                              # resynchronise after a timeout
-        counter = data[6] & 0x0F if len(data) == 8 else None
-        if len(data) != message.length:
-            why = f"length {len(data)}"
-        elif data[7] != checksum(message.frame_id, data):
-            why = "checksum"
-        elif self.counter is not None and counter != (self.counter + 1) % 16:
-            why = f"counter {counter} after {self.counter}"
+    def on_frame(self, data: bytes, t: float) -> bool:
+        """Judge one frame; return whether it was accepted and its values applied."""
+        if self.last_frame_t is not None and t - self.last_frame_t > 3 * self.cycle_s:
+            self._resynchronise()  # e2e.md "Timeout and resynchronisation": only after a real reception gap
+        self.last_frame_t = t
+        accepted = self._judge_protection(data) and self._apply_if_in_range(data, t)
+        self.last_rejected = not accepted
+        self.accepted += accepted
+        self.rejected += not accepted
+        return accepted
+
+    def timed_out(self, now: float) -> bool:
+        """COM-RX-02: no accepted frame for more than 3 cycles, or never one since power-up."""
+        return self.last_accepted_t is None or now - self.last_accepted_t > 3 * self.cycle_s
+
+    def _resynchronise(self) -> None:
+        self.state, self.reference, self.good = self.NODATA, None, 0
+        self.resyncs += 1
+
+    def _judge_protection(self, data: bytes) -> bool:
+        """The transition table of e2e.md; every intact frame becomes the new reference counter."""
+        intact = len(data) == self.message.length == 8 and frame_checksum(self.message.frame_id, data) == data[7]
+        if not intact:  # ERROR: the reference counter stays
+            if self.state != self.NODATA:
+                self.state, self.good = self.INVALID, 0
+            return False
+        counter = data[6] & 0x0F
+        delta = None if self.reference is None else (counter - self.reference) % 16
+        self.reference = counter
+        if self.state == self.NODATA:  # INITIAL
+            self.state = self.VALID
+            return True
+        if delta != 1:  # REPEATED or WRONG_SEQUENCE
+            self.state, self.good = self.INVALID, 0
+            return False
+        if self.state == self.VALID:
+            return True
+        self.good += 1  # INVALID: re-validation, COM-RX-01 "the first in-sequence frame is still rejected"
+        if self.good >= self.REVALIDATION_FRAMES:
+            self.state, self.good = self.VALID, 0
+            return True
+        return False
+
+    def _apply_if_in_range(self, data: bytes, t: float) -> bool:
+        """COM-VAL-01 / COM-RX-01: a frame with a signal outside its DBC range is rejected, no E2E error."""
+        values = self.message.decode(bytes(data), decode_choices=False)
+        for signal in self.message.signals:
+            value = values[signal.name]
+            if not math.isfinite(value):
+                return False
+            if signal.minimum is not None and value < signal.minimum - 1e-9:
+                return False
+            if signal.maximum is not None and value > signal.maximum + 1e-9:
+                return False
+        self.values = values
+        self.last_accepted_t = t
+        return True
+
+
+class E2ESender:
+    """COM-E2E-01/02/03: write the signals, then the AliveCounter (+1 per frame), then the Checksum."""
+
+    def __init__(self, message: cantools.database.Message) -> None:
+        self.message = message
+        self.counter = 0  # COM-E2E-01: the first value after power-up is free
+
+    def frame(self, values: dict[str, float]) -> can.Message:
+        raw = {s.name: _raw_on_grid(s, values.get(s.name, s.initial or 0)) for s in self.message.signals}
+        raw["AliveCounter"], raw["Checksum"] = self.counter, 0
+        data = bytearray(self.message.encode(raw, scaling=False, strict=False))  # COM-FRM-01: unused bits 0
+        data[7] = frame_checksum(self.message.frame_id, data)
+        self.counter = (self.counter + 1) % 16
+        return can.Message(arbitration_id=self.message.frame_id, data=bytes(data), is_extended_id=False)
+
+
+def _raw_on_grid(signal: cantools.database.Signal, value: float) -> int:
+    """COM-VAL-01: a finite value on the raw grid within [min|max]; a non-finite value sends the start value."""
+    if not math.isfinite(value):
+        return int(signal.raw_initial or 0)
+    raw = round((value - signal.offset) / signal.scale)
+    lo = math.ceil((signal.minimum - signal.offset) / signal.scale - 1e-9)
+    hi = math.floor((signal.maximum - signal.offset) / signal.scale + 1e-9)
+    return int(min(max(raw, lo), hi))
+
+
+# ==============================================================================================================
+# Kinematics: rotation about a point (VCU-MODE-01, docs/spec/formulas.md §2)
+# ==============================================================================================================
+@dataclass(frozen=True)
+class Command:
+    """One executed command: what the VCU sends while it is the last valid one (VCU-OUT-*)."""
+
+    mode: int
+    angles: dict[str, float]  # deg, (-90, +90]
+    speeds: dict[str, float]  # rpm
+    curvature: float  # deg, VCU-OUT-03
+    yaw_rate: float  # deg/s, VCU-OUT-04
+    centre: tuple[float, float]  # m, as sent (VCU-OUT-06/07)
+    forward: tuple[float, float]  # direction positive v moves the centre (VCU-OUT-05 sign)
+
+
+POWER_UP = Command(  # VCU-GEN-03
+    mode=NORMAL,
+    angles={w: 0.0 for w in WHEELS},
+    speeds={w: 0.0 for w in WHEELS},
+    curvature=0.0,
+    yaw_rate=0.0,
+    centre=(RANGE_END, 0.0),
+    forward=(0.0, 1.0),
+)
+
+
+def wheel_angle(centre: tuple[float, float], wheel: tuple[float, float]) -> float:
+    """VCU-MODE-01: beta_i = atan((y_i - y)/(x - x_i)) in degrees, +90 at x = x_i."""
+    (x, y), (xi, yi) = centre, wheel
+    return 90.0 if x == xi else math.degrees(math.atan((yi - y) / (x - xi)))
+
+
+def rotation(centre: tuple[float, float], v_o: float) -> tuple[dict[str, float], dict[str, float], float]:
+    """Wheel angles (deg), speeds (rpm) and omega (rad/s, clockwise) about S at centre speed v_o (VCU-MODE-01)."""
+    x, y = centre
+    r_o = math.hypot(x, y)
+    omega = 0.0 if v_o == 0.0 else v_o / r_o  # VCU-MODE-03: v_o = 0 needs no division
+    angles: dict[str, float] = {}
+    speeds: dict[str, float] = {}
+    for name, (xi, yi) in WHEELS.items():
+        beta = wheel_angle(centre, (xi, yi))
+        b = math.radians(beta)
+        # projection of the wheel's rigid-body velocity on its heading (VCU-MODE-01, erratum E1 corrected)
+        rpm = RPM_PER_MPS * omega * ((yi - y) * math.sin(b) + (x - xi) * math.cos(b))
+        if round(beta, 2) <= -90.0:  # COM-VAL-02 / VCU-MODE-01: -90 is not a bus angle: +90, rolling the other way
+            beta, rpm = beta + 180.0, -rpm
+        angles[name], speeds[name] = beta, rpm
+    return angles, speeds, omega
+
+
+def centre_at_infinity(heading_deg: float) -> tuple[float, float]:
+    """VCU-OUT-07: (cos theta, -sin theta) scaled until one coordinate reaches the range end."""
+    dx, dy = math.cos(math.radians(heading_deg)), -math.sin(math.radians(heading_deg))
+    scale = RANGE_END / max(abs(dx), abs(dy))
+    return _snap(dx * scale), _snap(dy * scale)
+
+
+def _snap(value: float) -> float:
+    """Clear the float noise of cos(90 deg) so that LATERAL sends exactly (0, -5242.87)."""
+    return 0.0 if abs(value) < 1e-6 else value
+
+
+def saturate_centre(centre: tuple[float, float]) -> tuple[float, float]:
+    """VCU-OUT-06: each coordinate saturated separately to +/-5242.87 m."""
+    return tuple(max(-RANGE_END, min(RANGE_END, c)) for c in centre)  # type: ignore[return-value]
+
+
+def translation(mode: int, heading_deg: float, v: float, curvature: float) -> Command:
+    """A translation: every wheel at one angle, every speed n = 30 v/(pi r) (VCU-MODE-07, VCU-MODE-08)."""
+    theta = math.radians(heading_deg)
+    return Command(
+        mode=mode,
+        angles={w: heading_deg for w in WHEELS},
+        speeds={w: RPM_PER_MPS * v for w in WHEELS},
+        curvature=curvature,
+        yaw_rate=0.0,  # VCU-OUT-04: 0 for a translation
+        centre=centre_at_infinity(heading_deg),
+        forward=(math.sin(theta), math.cos(theta)),
+    )
+
+
+# ==============================================================================================================
+# Requests: one plan per mode (VCU-REQ-*, VCU-MODE-*, VCU-4WS-*)
+# ==============================================================================================================
+@dataclass(frozen=True)
+class Plan:
+    """A request turned into a centre (or a translation) before the fault checks of VCU-FLT-03 step 4."""
+
+    mode: int
+    v: float  # TargetSpeed, m/s
+    centre: tuple[float, float] | None = None  # None: a translation
+    heading: float = 0.0  # common heading of a translation, deg
+    curvature: float = 0.0  # X, deg (VCU-OUT-03)
+    steered_by_handwheel: bool = False  # NORMAL / ADAPTIVE: the checks of VCU-FLT-06 apply
+    rear_axle_angle: float = 0.0  # ADAPTIVE at speed, deg
+
+
+def zero_sideslip_ratio(u: float) -> float:
+    """VCU-4WS-02: k(u) = (-b + m a u^2/(C_r L)) / (a + m b u^2/(C_f L)) (formulas.md §5.3)."""
+    u2 = u * u
+    return (-B_CG + MASS * A_CG * u2 / (C_R * WHEELBASE)) / (A_CG + MASS * B_CG * u2 / (C_F * WHEELBASE))
+
+
+def plan_pivot(pivot_x: float, pivot_y: float, v: float) -> Plan:
+    """VCU-MODE-02: S = (PivotX, PivotY) as received, v_o = v; VCU-OUT-03: X = heading at (0, L) about S."""
+    if (pivot_x, pivot_y) == (0.0, L):
+        curvature = 0.0
+    else:
+        curvature = wheel_angle((pivot_x, pivot_y), (0.0, L))
+    return Plan(mode=PIVOT, v=v, centre=(pivot_x, pivot_y), curvature=curvature)
+
+
+def plan_normal(handwheel: float, v: float) -> Plan:
+    """VCU-MODE-04: X = HandWheelAngle/15, S = (2L/tan X, -L); X = 0 is straight (VCU-MODE-07)."""
+    x_angle = handwheel / HANDWHEEL_RATIO
+    if x_angle == 0.0:
+        return Plan(mode=NORMAL, v=v, heading=0.0, curvature=0.0, steered_by_handwheel=True)
+    centre = (2 * L / _tan_deg(x_angle), -L)
+    return Plan(mode=NORMAL, v=v, centre=centre, curvature=x_angle, steered_by_handwheel=True)
+
+
+def plan_adaptive(handwheel: float, v: float, u: float) -> Plan:
+    """VCU-MODE-06 / VCU-4WS-04: below 20 km/h of the vehicle's speed u VCU-MODE-05, at and above VCU-4WS-02."""
+    x_angle = handwheel / HANDWHEEL_RATIO
+    if u < SWITCH_SPEED:
+        if x_angle == 0.0:  # VCU-MODE-07
+            return Plan(mode=ADAPTIVE, v=v, heading=0.0, curvature=0.0, steered_by_handwheel=True)
+        centre = (L / _tan_deg(x_angle), 0.0)  # VCU-MODE-05: centre on y = 0, rear mirrors front
+        return Plan(mode=ADAPTIVE, v=v, centre=centre, curvature=x_angle, steered_by_handwheel=True)
+    rear = zero_sideslip_ratio(u) * x_angle  # VCU-4WS-02: delta_r = k(u) X
+    tan_front, tan_rear = _tan_deg(x_angle), _tan_deg(rear)
+    if tan_front == tan_rear:  # VCU-4WS-05: parallel headings are a translation (straight included)
+        return Plan(mode=ADAPTIVE, v=v, heading=x_angle, curvature=x_angle, steered_by_handwheel=True,
+                    rear_axle_angle=rear)
+    x_s = WHEELBASE / (tan_front - tan_rear)  # VCU-4WS-05: perpendiculars at the axle centres (0, +/-L)
+    y_s = L - x_s * tan_front
+    return Plan(mode=ADAPTIVE, v=v, centre=(x_s, y_s), curvature=x_angle, steered_by_handwheel=True,
+                rear_axle_angle=rear)
+
+
+def plan_lateral(v: float) -> Plan:
+    """VCU-MODE-08: every wheel at +90 deg, sign of v in the speed; CurvatureAngle +90 (VCU-OUT-03)."""
+    return Plan(mode=LATERAL, v=v, heading=90.0, curvature=90.0)
+
+
+def _tan_deg(angle: float) -> float:
+    return math.tan(math.radians(angle))
+
+
+def centre_fault(plan: Plan) -> int:
+    """VCU-FLT-03 step 4: CENTRE_AT_ORIGIN, then CENTRE_ON_WHEEL, then ANGLE_OVER_90."""
+    if plan.steered_by_handwheel and (abs(plan.curvature) >= 90.0 or abs(plan.rear_axle_angle) >= 90.0):
+        return ANGLE_OVER_90  # VCU-FLT-06 (|X| >= 90, or the rear angle at speed reaches 90)
+    if plan.centre is None:
+        return OK
+    x, y = plan.centre
+    if math.hypot(x, y) < CENTRE_TOL and plan.v != 0.0:
+        return CENTRE_AT_ORIGIN  # VCU-FLT-04
+    if any(math.hypot(x - xi, y - yi) < CENTRE_TOL for xi, yi in WHEELS.values()):
+        return CENTRE_ON_WHEEL  # VCU-FLT-05
+    if plan.steered_by_handwheel and abs(x) < K:
+        return ANGLE_OVER_90  # VCU-FLT-06: centre strictly between the wheels of an axle
+    return OK
+
+
+def centre_speed(plan: Plan) -> float:
+    """VCU-REQ-01: v_o = v in PIVOT; NORMAL/ADAPTIVE forward is clockwise about a centre with x > 0."""
+    if plan.mode == PIVOT or plan.centre is None:
+        return plan.v
+    return plan.v if plan.centre[0] > 0 else -plan.v
+
+
+def execute(plan: Plan) -> Command:
+    """The wheel commands and state outputs of a plan without a centre fault (VCU-MODE-*, VCU-OUT-*)."""
+    if plan.centre is None:
+        return translation(plan.mode, plan.heading, plan.v, plan.curvature)
+    v_o = centre_speed(plan)
+    angles, speeds, omega = rotation(plan.centre, v_o)
+    x, y = plan.centre
+    r_o = math.hypot(x, y)
+    if plan.mode == PIVOT:  # VCU-OUT-05: clockwise about S, (-y, x)/r_o
+        forward = (-y / r_o, x / r_o) if r_o > 0 else (0.0, 1.0)
+    else:
+        forward = (0.0, 1.0)
+    return Command(
+        mode=plan.mode,
+        angles=angles,
+        speeds=speeds,
+        curvature=plan.curvature,
+        yaw_rate=math.degrees(omega),  # VCU-OUT-04
+        centre=saturate_centre(plan.centre),  # VCU-OUT-06
+        forward=forward,
+    )
+
+
+def exceeds_limits(command: Command) -> bool:
+    """VCU-LIM-01: more than 1500 rpm on a wheel or 120 deg/s of yaw rate."""
+    return any(abs(n) > MAX_RPM for n in command.speeds.values()) or abs(command.yaw_rate) > MAX_YAW_DEG_S
+
+
+# ==============================================================================================================
+# Vehicle speed (VCU-OUT-05, VCU-4WS-01)
+# ==============================================================================================================
+def _rigid_fit_matrix() -> np.ndarray:
+    """Least-squares pseudo-inverse of u_i = (v_x + w y_i, v_y - w x_i) over the four wheels (VCU-OUT-05)."""
+    rows = []
+    for xi, yi in WHEELS.values():
+        rows.append([1.0, 0.0, yi])
+        rows.append([0.0, 1.0, -xi])
+    return np.linalg.pinv(np.array(rows))
+
+
+RIGID_FIT = _rigid_fit_matrix()
+
+
+def rigid_fit(status: dict[str, tuple[float, float]]) -> tuple[float, float, float]:
+    """(v_x, v_y, omega) of the centre from each wheel's (SteerAngle deg, WheelSpeed rpm) (VCU-OUT-05)."""
+    velocities = []
+    for name in WHEELS:
+        angle, rpm = status[name]
+        speed = rpm / RPM_PER_MPS
+        a = math.radians(angle)
+        velocities += [speed * math.sin(a), speed * math.cos(a)]
+    v_x, v_y, omega = RIGID_FIT @ np.array(velocities)
+    return float(v_x), float(v_y), float(omega)
+
+
+def signed_vehicle_speed(v_x: float, v_y: float, forward: tuple[float, float]) -> float:
+    """VCU-OUT-05: |(v_x, v_y)| signed by its projection on the direction positive v moves the centre."""
+    magnitude = math.hypot(v_x, v_y)
+    return -magnitude if v_x * forward[0] + v_y * forward[1] < 0 else magnitude
+
+
+@dataclass
+class SpeedEstimator:
+    """VCU-4WS-01: the vehicle's forward speed from the wheels while they roll, LongAccel while they slip.
+
+    Every task it predicts u + u_dot dt (u_dot = LongAccel + omega v_x, the body-frame term removed) and takes the
+    wheels' forward speed when it lies within 0.3 m/s of the prediction (the rule vcu-4ws.md gives as the
+    reference's). A prediction can lose its reference (the bench restarts the vehicle at another speed): when
+    the wheels' own acceleration has agreed with the IMU's for `RESYNC_S` while the two speeds disagree, the
+    wheels roll without slip and their speed is taken.
+    """
+
+    WINDOW = 0.3  # m/s
+    RESYNC_S = 0.3  # s
+    ACCEL_AGREE = 1.5  # m/s^2
+    u: float | None = None
+    _last_wheel_u: float | None = None
+    _wheel_accel: float = 0.0
+    _agree_since: float | None = None
+
+    def update(self, now: float, dt: float, wheels: tuple[float, float, float] | None,
+               imu: dict[str, float] | None, sources_restarted: bool) -> float | None:
+        if wheels is None:  # wheels timed out: keep predicting from the IMU, or hold
+            if self.u is not None and imu is not None:
+                self.u += imu["LongAccel"] * dt
+            self._last_wheel_u = None
+            return self.u
+        v_x, u_wheels, _ = wheels
+        self._track_wheel_accel(u_wheels, dt)
+        if self.u is None or imu is None or sources_restarted:
+            self.u = u_wheels
+            self._agree_since = None
+            return self.u
+        u_dot = imu["LongAccel"] + math.radians(imu["YawRate"]) * v_x
+        predicted = self.u + u_dot * dt
+        if abs(u_wheels - predicted) <= self.WINDOW:
+            self.u, self._agree_since = u_wheels, None
+        elif self._wheels_roll_freely(now, u_dot):
+            self.u, self._agree_since = u_wheels, None
         else:
-            why = ""
-        valid = not why
-        self.counter = counter
-        if valid and data[:7] != self._raw:                  # decode only when the payload changed
-            values = message.decode(data, decode_choices=False, scaling=True)
-            for sig in message.signals:
-                slack = 0.5 * abs(sig.scale)
-                value = values[sig.name]
-                if (sig.minimum is not None and value < sig.minimum - slack) or \
-                        (sig.maximum is not None and value > sig.maximum + slack):
-                    valid, why = False, f"{sig.name} = {value:g} out of range"
-            if valid:
-                self.values = {k: float(v) for k, v in values.items()}
-                self._raw = data[:7]
-        self.valid = valid
-        if valid:
-            self.t_valid = now
-        elif self.verbose:
-            print(f"vcu_ecu: {now:9.3f} s {message.name} invalid: {why}", file=sys.stderr, flush=True)
+            self.u = predicted
+        return self.u
 
-    def fresh(self, now: float) -> bool:
-        """A valid frame within the last 3 cycles."""
-        return now - self.t_valid <= self.timeout
+    def _track_wheel_accel(self, u_wheels: float, dt: float) -> None:
+        if self._last_wheel_u is not None and dt > 0:
+            raw = (u_wheels - self._last_wheel_u) / dt
+            alpha = min(1.0, dt / 0.05)  # 50 ms low-pass
+            self._wheel_accel += alpha * (raw - self._wheel_accel)
+        self._last_wheel_u = u_wheels
+
+    def _wheels_roll_freely(self, now: float, u_dot: float) -> bool:
+        if abs(self._wheel_accel - u_dot) > self.ACCEL_AGREE:
+            self._agree_since = None
+            return False
+        if self._agree_since is None:
+            self._agree_since = now
+        return now - self._agree_since >= self.RESYNC_S
+
+
+# ==============================================================================================================
+# The VCU: inputs, one evaluation, outputs
+# ==============================================================================================================
+@dataclass
+class Outputs:
+    """What the next frames carry (VCU-GEN-02: all written by one evaluation)."""
+
+    command: Command = POWER_UP
+    speeds: dict[str, float] = field(default_factory=lambda: dict(POWER_UP.speeds))
+    yaw_rate: float = 0.0
+    fault: int = REQUEST_TIMEOUT  # VCU-GEN-03 / VCU-FLT-01: no request received yet
+    vehicle_speed: float = 0.0
 
 
 class Vcu:
-    def __init__(self, db: cantools.database.Database) -> None:
-        self.db = db
-        self.inputs = {name: Input(db.get_message_by_name(name)) for name in INPUTS}
-        self.by_id = {i.message.frame_id: i for i in self.inputs.values()}
-        self.held = STRAIGHT
-        self.fault = TIMEOUT
-        self.rpm = [0.0] * 4
-        self.speed = 0.0
-        self._cache: tuple[tuple[float, ...], tuple[int, Plan | None]] | None = None
+    """Receivers, the evaluation of VCU-FLT-03 and the resulting outputs."""
 
-    def step(self, now: float) -> None:
-        """The control task (every 5 ms)."""
-        fault, plan = self.decide(now)
-        if fault == OK and self.wheel_fault(now):
-            fault = WHEEL_FAULT
-        self.fault = fault
-        if fault == OK and plan is not None:
-            self.held, self.rpm = plan, plan.rpm
-        else:
-            self.rpm = [0.0] * 4
-        self.speed = self.speed_estimate(now)
+    def __init__(self, db: cantools.database.Database, start: float) -> None:
+        self.start = start
+        self.rx = {name: E2EReceiver(db.get_message_by_name(name)) for name in
+                   ["DRV_MotionRequest", "DRV_Steering", "IMU_Motion"] + [f"WHL_Status_{w}" for w in WHEELS]}
+        self.by_id = {r.message.frame_id: r for r in self.rx.values()}
+        self.last_executed = POWER_UP  # VCU-FLT-08: 0 deg before any executed command
+        self.out = Outputs()
+        self.speed = SpeedEstimator()
+        self._last_eval: float | None = None
+        self._resyncs_seen = 0
 
-    def decide(self, now: float) -> tuple[int, Plan | None]:
-        request, steering = self.inputs["DRV_MotionRequest"], self.inputs["DRV_Steering"]
-        if not request.fresh(now):
-            return TIMEOUT, None
-        if not request.valid:
-            return INVALID, None
-        v = request.values
-        mode, px, py, speed = int(v["DriveMode"]), v["PivotX"], v["PivotY"], v["TargetSpeed"]
-        hand_wheel = 0.0
-        if mode in (NORMAL, ADAPTIVE):
-            if not steering.fresh(now):
-                return TIMEOUT, None
-            if not steering.valid:
-                return INVALID, None
-            hand_wheel = steering.values["HandWheelAngle"]
-        key = (mode, px, py, speed, hand_wheel)
-        if self._cache is None or self._cache[0] != key:
-            self._cache = (key, plan_for(mode, px, py, speed, hand_wheel))
-        return self._cache[1]
+    def receive(self, msg: can.Message, t: float) -> None:
+        receiver = self.by_id.get(msg.arbitration_id)
+        if receiver is not None and not msg.is_extended_id and not msg.is_remote_frame:
+            receiver.on_frame(bytes(msg.data), t)
 
-    def wheel_fault(self, now: float) -> bool:
-        for corner in WHEELS:
-            status = self.inputs[f"WHL_Status_{corner}"]
-            if not status.fresh(now) or status.values.get("WheelFault", 0.0) != 0.0:
+    # --- one evaluation (VCU-GEN-02) ---
+    def evaluate(self, now: float) -> Outputs:
+        dt = TASK_S if self._last_eval is None else now - self._last_eval
+        self._last_eval = now
+        wheels = self._wheel_fit(now)
+        u = self.speed.update(now, dt, wheels, self._valid("IMU_Motion", now), self._sources_restarted())
+        fault, command = self._decide(now, u)
+        if fault == OK:  # VCU-FLT-10: no latching, executed at once
+            self.last_executed = command
+            speeds, yaw = command.speeds, command.yaw_rate
+        else:  # VCU-FLT-08: speeds 0 exactly, angles/mode/curvature/centre held, yaw 0
+            command = self.last_executed
+            speeds, yaw = {w: 0.0 for w in WHEELS}, 0.0
+        vehicle_speed = 0.0 if wheels is None else signed_vehicle_speed(wheels[0], wheels[1], command.forward)
+        self.out = Outputs(command=command, speeds=speeds, yaw_rate=yaw, fault=fault, vehicle_speed=vehicle_speed)
+        return self.out
+
+    def _decide(self, now: float, u: float | None) -> tuple[int, Command | None]:
+        """VCU-FLT-03: the first fault that applies, in this order; else the command to execute."""
+        request_rx, steering_rx = self.rx["DRV_MotionRequest"], self.rx["DRV_Steering"]
+        if request_rx.timed_out(now):
+            return REQUEST_TIMEOUT, None  # step 1, VCU-FLT-01
+        if request_rx.last_rejected:
+            return REQUEST_INVALID, None  # step 2, VCU-FLT-02.1
+        request = request_rx.values
+        assert request is not None
+        mode, v = int(request["DriveMode"]), float(request["TargetSpeed"])
+        if mode in (NORMAL, ADAPTIVE):  # step 3: DRV_Steering only in NORMAL and ADAPTIVE (VCU-GEN-01)
+            if steering_rx.timed_out(now):
+                return REQUEST_TIMEOUT, None  # VCU-FLT-01
+            if steering_rx.last_rejected:
+                return REQUEST_INVALID, None  # VCU-FLT-02.2
+        plan = self._plan(mode, v, request, u)
+        fault = centre_fault(plan)  # step 4
+        if fault != OK:
+            return fault, None
+        command = execute(plan)
+        if exceeds_limits(command):
+            return REQUEST_INVALID, None  # step 5, VCU-LIM-01 / VCU-FLT-02.3
+        if self._wheel_fault(now) or (mode == ADAPTIVE and u is None):
+            return WHEEL_FAULT, None  # step 6, VCU-FLT-07 (VCU-4WS-01: no estimate without the wheels)
+        return OK, command
+
+    def _plan(self, mode: int, v: float, request: dict[str, float], u: float | None) -> Plan:
+        """VCU-REQ-01: the mode selects the plan; PivotX/Y in PIVOT only, HandWheelAngle in NORMAL/ADAPTIVE."""
+        if mode == PIVOT:
+            return plan_pivot(float(request["PivotX"]), float(request["PivotY"]), v)
+        if mode == LATERAL:
+            return plan_lateral(v)
+        steering = self.rx["DRV_Steering"].values
+        assert steering is not None
+        handwheel = float(steering["HandWheelAngle"])
+        if mode == NORMAL:
+            return plan_normal(handwheel, v)
+        return plan_adaptive(handwheel, v, 0.0 if u is None else u)
+
+    def _wheel_fault(self, now: float) -> bool:
+        """VCU-FLT-07: a wheel timed out or WheelFault != 0; silent or CMD_TIMEOUT ignored in the first 100 ms."""
+        in_grace = now - self.start < WHEEL_GRACE_S
+        for name in WHEELS:
+            rx = self.rx[f"WHL_Status_{name}"]
+            if rx.timed_out(now):
+                if in_grace and rx.values is None:
+                    continue
+                return True
+            code = int(rx.values["WheelFault"]) if rx.values else 0
+            if code != 0 and not (in_grace and code == 3):
                 return True
         return False
 
-    def speed_estimate(self, now: float) -> float:
-        statuses = [self.inputs[f"WHL_Status_{c}"] for c in WHEELS]
-        if not all(s.fresh(now) for s in statuses):
-            return 0.0
-        vx, vy = rigid_fit([s.values["SteerAngle"] for s in statuses], [s.values["WheelSpeed"] for s in statuses])
-        dx, dy = self.held.direction
-        magnitude = math.hypot(vx, vy)
-        return magnitude if vx * dx + vy * dy >= 0.0 else -magnitude
+    def _wheel_fit(self, now: float) -> tuple[float, float, float] | None:
+        """VCU-OUT-05: the rigid fit of the four wheels, None while any WHL_Status_xx is timed out."""
+        status = {}
+        for name in WHEELS:
+            values = self._valid(f"WHL_Status_{name}", now)
+            if values is None:
+                return None
+            status[name] = (float(values["SteerAngle"]), float(values["WheelSpeed"]))
+        return rigid_fit(status)
 
-    def outputs(self) -> dict[str, dict[str, float]]:
-        held = self.held
-        out = {f"VCU_WheelCmd_{c}": {"SteerAngleCmd": clamp(a, 90.0), "WheelSpeedCmd": clamp(n, 3000.0)}
-               for c, a, n in zip(WHEELS, held.angles, self.rpm)}
-        out["VCU_VehicleState"] = {"ActiveMode": held.mode, "VehicleSpeed": clamp(round(self.speed, 2), 80.0),
-                                   "YawRateTarget": clamp(held.yaw if self.fault == OK else 0.0, 300.0),
-                                   "CurvatureAngle": clamp(held.curvature, 90.0), "VcuFault": self.fault}
-        if held.centre is None:          # a translation: the centre at infinity, right of the common heading
-            theta = math.radians(held.angles[0])
-            right = (math.cos(theta), -math.sin(theta))
-            scale = AT_INFINITY / max(abs(right[0]), abs(right[1]))
-            cx, cy = right[0] * scale, right[1] * scale
-        else:
-            cx, cy = clamp(held.centre[0], AT_INFINITY), clamp(held.centre[1], AT_INFINITY)
-        out["VCU_RotationCentre"] = {"RotationCentreX": cx, "RotationCentreY": cy}
-        return out
+    def _valid(self, name: str, now: float) -> dict[str, float] | None:
+        rx = self.rx[name]
+        return None if rx.timed_out(now) else rx.values
+
+    def _sources_restarted(self) -> bool:
+        """The wheels and the IMU resynchronised after a reception gap: the vehicle's sensors restarted."""
+        total = sum(self.rx[n].resyncs for n in ["IMU_Motion"] + [f"WHL_Status_{w}" for w in WHEELS])
+        restarted, self._resyncs_seen = total != self._resyncs_seen, total
+        return restarted
 
 
-def clamp(value: float, bound: float) -> float:
-    return max(-bound, min(bound, value))
+# ==============================================================================================================
+# Frames out (VCU-GEN-01, VCU-OUT-*)
+# ==============================================================================================================
+class Transmitter:
+    """Builds the VCU's frames from the latest outputs (COM-E2E-*, COM-VAL-01)."""
+
+    def __init__(self, db: cantools.database.Database) -> None:
+        self.wheel_cmd = {w: E2ESender(db.get_message_by_name(f"VCU_WheelCmd_{w}")) for w in WHEELS}
+        self.state = E2ESender(db.get_message_by_name("VCU_VehicleState"))
+        self.centre = E2ESender(db.get_message_by_name("VCU_RotationCentre"))
+
+    def wheel_frames(self, out: Outputs) -> list[can.Message]:
+        """VCU-OUT-01: SteerAngleCmd and WheelSpeedCmd of each wheel."""
+        return [self.wheel_cmd[w].frame({"SteerAngleCmd": out.command.angles[w], "WheelSpeedCmd": out.speeds[w]})
+                for w in WHEELS]
+
+    def state_frames(self, out: Outputs) -> list[can.Message]:
+        """VCU-OUT-02..07: VCU_VehicleState and VCU_RotationCentre."""
+        state = self.state.frame({
+            "VehicleSpeed": out.vehicle_speed,  # VCU-OUT-05
+            "ActiveMode": out.command.mode,  # VCU-OUT-02
+            "YawRateTarget": out.yaw_rate,  # VCU-OUT-04
+            "CurvatureAngle": out.command.curvature,  # VCU-OUT-03
+            "VcuFault": out.fault,  # VCU-FLT-*
+        })
+        x, y = out.command.centre
+        centre = self.centre.frame({"RotationCentreX": x, "RotationCentreY": y})  # VCU-OUT-06/07
+        return [state, centre]
 
 
-class Sender:
-    """The VCU's messages at their DBC cycle times, each encoded again only when its values change."""
-
-    def __init__(self, db: cantools.database.Database, bus: can.BusABC, now: float) -> None:
-        self.bus = bus
-        self.slots = []
-        for message in db.messages:
-            if "VCU" in message.senders and message.cycle_time:
-                self.slots.append({"message": message, "period": message.cycle_time / 1000.0, "due": now,
-                                   "counter": 0, "values": None, "payload": b""})
-
-    def send_due(self, now: float, outputs: dict[str, dict[str, float]]) -> None:
-        for slot in self.slots:
-            if now < slot["due"]:
-                continue
-            slot["due"] = max(slot["due"] + slot["period"], now)
-            message = slot["message"]
-            values = outputs[message.name]
-            if values != slot["values"]:
-                slot["values"] = values
-                slot["payload"] = message.encode({**values, "AliveCounter": 0, "Checksum": 0}, scaling=True)
-            data = protect(message.frame_id, slot["payload"], slot["counter"])
-            slot["counter"] = (slot["counter"] + 1) % 16
-            try:
-                self.bus.send(can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=False))
-            except can.CanError as exc:
-                print(f"vcu_ecu: send {message.name} failed: {exc}", file=sys.stderr)
-
-    def next_due(self) -> float:
-        return min(slot["due"] for slot in self.slots)
-
-
-def hear_only_own_group(bus: can.BusABC) -> None:
-    """udp_multicast on Linux: a socket hears every group joined on the host unless IP_MULTICAST_ALL is 0, so
-    another bench on another group would reach this ECU (python-can keeps the socket in a private attribute)."""
-    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
-    if sock is not None and sock.family == socket.AF_INET:
+# ==============================================================================================================
+# Running on a bus
+# ==============================================================================================================
+def receive_loop(bus: can.BusABC, inbox: queue.SimpleQueue, stop: threading.Event) -> None:
+    """Timestamp every frame on arrival; the control task judges them in order of arrival."""
+    while not stop.is_set():
         try:
-            sock.setsockopt(socket.IPPROTO_IP, getattr(socket, "IP_MULTICAST_ALL", 49), 0)
-        except OSError:
+            msg = bus.recv(timeout=0.1)
+        except can.CanError:
+            continue
+        if msg is not None:
+            inbox.put((time.monotonic(), msg))
+
+
+@dataclass
+class TaskStats:
+    """What --stats prints: faults per evaluation, late tasks, frames per input message."""
+
+    faults: Counter = field(default_factory=Counter)
+    skipped_slots: int = 0
+    max_late_ms: float = 0.0
+
+    def report(self, vcu: Vcu) -> str:
+        inputs = " ".join(f"{name}:{rx.accepted}/{rx.rejected}/{rx.resyncs}" for name, rx in vcu.rx.items())
+        line = (f"stats faults={dict(sorted(self.faults.items()))} skipped={self.skipped_slots} "
+                f"max_late={self.max_late_ms:.1f}ms accepted/rejected/resyncs {inputs}")
+        self.faults.clear()
+        self.skipped_slots, self.max_late_ms = 0, 0.0
+        return line
+
+
+def control_loop(vcu: Vcu, tx: Transmitter, inbox: queue.SimpleQueue, stop: threading.Event,
+                 send: Callable[[can.Message], None], stats_every: float = 0.0) -> None:
+    """The 5 ms task on an absolute grid: drain, evaluate, send wheels every 10 ms and state every 20 ms."""
+    tick, next_t = 0, time.monotonic()
+    stats, next_stats = TaskStats(), time.monotonic() + stats_every
+    while not stop.is_set():
+        now = time.monotonic()
+        if next_t > now:
+            time.sleep(next_t - now)
+            now = time.monotonic()
+        stats.max_late_ms = max(stats.max_late_ms, (now - next_t) * 1000.0)
+        while True:  # frames received up to now (VCU-GEN-02)
+            try:
+                t, msg = inbox.get_nowait()
+            except queue.Empty:
+                break
+            vcu.receive(msg, t)
+        out = vcu.evaluate(now)
+        stats.faults[out.fault] += 1
+        if tick % 2 == 0:  # COM-CYC-01: 10 ms
+            for frame in tx.wheel_frames(out):
+                send(frame)
+        if tick % 4 == 0:  # COM-CYC-01: 20 ms
+            for frame in tx.state_frames(out):
+                send(frame)
+        missed = max(0, int((time.monotonic() - next_t) / TASK_S) - 1)
+        stats.skipped_slots += missed
+        tick += 1 + missed  # a late task skips the slots it missed instead of sending a burst
+        next_t += TASK_S * (1 + missed)
+        if stats_every and now >= next_stats:
+            print(stats.report(vcu), flush=True)
+            next_stats = now + stats_every
+
+
+def make_sender(bus: can.BusABC) -> Callable[[can.Message], None]:
+    """VCU-GEN-01: never stop sending; a full transmit buffer costs one frame, not the node."""
+    def send(frame: can.Message) -> None:
+        try:
+            bus.send(frame, timeout=0.005)
+        except can.CanError:
             pass
+    return send
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--interface", default="udp_multicast", help="python-can interface")
-    parser.add_argument("--channel", default="239.74.163.2", help="channel (udp_multicast: the group)")
-    parser.add_argument("--seconds", type=float, default=math.inf, help="stop after this long (default: SIGINT)")
-    parser.add_argument("--verbose", action="store_true", help="print every invalid frame received, and why")
-    args = parser.parse_args()
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    default_dbc = Path(__file__).resolve().parent.parent / "dbc" / "chassis.dbc"
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--interface", default="udp_multicast", help="python-can interface (default udp_multicast)")
+    parser.add_argument("--channel", default=None, help="python-can channel (e.g. 239.255.1.2, vcan0)")
+    parser.add_argument("--bitrate", type=int, default=None, help="bitrate, for interfaces that take one")
+    parser.add_argument("--dbc", type=Path, default=default_dbc, help="the chassis DBC (default: dbc/chassis.dbc)")
+    parser.add_argument("--stats", type=float, default=0.0, metavar="S",
+                        help="print faults, late tasks and received frames every S seconds (diagnosis)")
+    return parser.parse_args(argv)
 
-    db = cantools.database.load_file(str(DBC))
-    vcu = Vcu(db)
-    for item in vcu.inputs.values():
-        item.verbose = args.verbose
-    kwargs = {"hop_limit": 0} if args.interface == "udp_multicast" else {}   # never leave this host
-    filters = [{"can_id": frame_id, "can_mask": 0x7FF, "extended": False} for frame_id in vcu.by_id]
-    try:
-        bus = can.Bus(interface=args.interface, channel=args.channel, can_filters=filters, **kwargs)
-    except (can.CanError, OSError, ValueError) as exc:
-        print(f"vcu_ecu: cannot open {args.interface} {args.channel}: {exc}", file=sys.stderr)
-        return 2
+
+def open_bus(args: argparse.Namespace) -> can.BusABC:
+    kwargs: dict[str, object] = {"interface": args.interface}
+    if args.channel is not None:
+        kwargs["channel"] = args.channel
+    if args.bitrate is not None:
+        kwargs["bitrate"] = args.bitrate
     if args.interface == "udp_multicast":
-        hear_only_own_group(bus)
-    stop = {"now": False}
-    signal.signal(signal.SIGINT, lambda *_: stop.update(now=True))
-    signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
-    t0 = time.monotonic()
-    sender = Sender(db, bus, 0.0)
-    next_task = 0.0
-    print(f"vcu_ecu: running on {args.interface} {args.channel}", flush=True)
+        kwargs["hop_limit"] = 0  # keep the traffic on this host, as the bench does
+    bus = can.Bus(**kwargs)
+    if args.interface == "udp_multicast":
+        only_own_group(bus)
+    return bus
+
+
+def only_own_group(bus: can.BusABC) -> None:
+    """Receive only our multicast group: python-can binds to the port on every address, and Linux then delivers
+    every group any process on the host joined on that port (IP_MULTICAST_ALL defaults to 1). Other benches'
+    frames would look like a second sender to the E2E receivers (docs/spec/e2e.md)."""
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None:
+        return
+    ip_multicast_all, ipv6_multicast_all = 49, 29  # linux/in.h, linux/in6.h
     try:
-        while not stop["now"] and (now := time.monotonic() - t0) < args.seconds:
-            if now >= next_task:
-                next_task = max(next_task + TASK_S, now)
-                vcu.step(now)
-            if now >= sender.next_due():
-                sender.send_due(now, vcu.outputs())
-            msg = bus.recv(max(0.0, min(next_task, sender.next_due()) - (time.monotonic() - t0)))
-            while msg is not None:
-                target = vcu.by_id.get(msg.arbitration_id)
-                if target is not None and not msg.is_extended_id:
-                    target.update(time.monotonic() - t0, bytes(msg.data))
-                msg = bus.recv(0.0)
+        if sock.family == socket.AF_INET:
+            sock.setsockopt(socket.IPPROTO_IP, ip_multicast_all, 0)
+        else:
+            sock.setsockopt(socket.IPPROTO_IPV6, ipv6_multicast_all, 0)
+    except OSError:
+        pass  # not Linux: no such leak to close
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    db = cantools.database.load_file(str(args.dbc))
+    bus = open_bus(args)
+    stop, inbox = threading.Event(), queue.SimpleQueue()
+    vcu, tx = Vcu(db, time.monotonic()), Transmitter(db)
+    receiver = threading.Thread(target=receive_loop, args=(bus, inbox, stop), daemon=True)
+    receiver.start()
+    for signum in (signal.SIGINT, signal.SIGTERM):  # also when started in the background (SIGINT ignored there)
+        signal.signal(signum, lambda *_: stop.set())
+    print(f"VCU running on {args.interface} {args.channel or ''}".rstrip(), flush=True)
+    try:
+        control_loop(vcu, tx, inbox, stop, make_sender(bus), args.stats)
     finally:
+        stop.set()
+        receiver.join(timeout=1.0)
         bus.shutdown()
-    print("vcu_ecu: stopped", flush=True)
+        print("VCU stopped", flush=True)
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())
