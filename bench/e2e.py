@@ -151,9 +151,12 @@ class Receiver:
 # -- two senders of one message (docs/spec/e2e.md "Counter patterns": two interleaved senders) -----------
 # The receiver above only rejects; it cannot say *why*. After a sequence error the monitor follows the
 # message's counters as streams, each advancing by 1: one broken sender (frozen, skipped, stale, counting
-# down) leaves at most one stream that keeps advancing, two senders leave two that take turns.
+# down) leaves at most one stream that keeps advancing; two senders leave two that take turns for as long
+# as both send. One sender whose frames were held back for a while (a delay that ends) also leaves two
+# streams taking turns, the held-back frames and the new ones, but only for as many frames as it held back:
+# a finding needs both streams to have carried more than 16 frames (every counter value, and then some).
 STREAMS_KEPT = 4        # streams followed at once (the least recently fed is forgotten)
-STREAM_FRAMES = 3       # frames each of the two streams needs ...
+STREAM_FRAMES = COUNTER_MODULO + 1   # frames each of the two streams needs ...
 STREAM_SWITCHES = 4     # ... and how often the frames alternate between them (A B A B A)
 STREAM_EVIDENCE = 4     # counters of each stream quoted as evidence
 STREAM_GAP_CYCLES = 4   # a stream without a frame for longer than this many cycles has ended: a counter that

@@ -15,6 +15,7 @@ from bench import results_io
 from bench.codec import Codebook, MessageCodec
 from bench.errors import BenchError
 from bench.logproc import LogProcess
+from bench.monitor import DuplicateSender, Monitor
 from bench.config import ProjectConfig, RunSettings
 from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
 from bench.session import BenchSession
@@ -133,6 +134,9 @@ class BenchRun:
         if session is not None:   # the report's timing section (bench.timing); never raises
             run.tables.extend(self.timing.tables(session.codebook))
             run.tables.append(database_table(session.codebook))
+            found = duplicates_table([s.monitor for s in (session.runner, session.plant) if s is not None])
+            if found is not None:   # a finding of its own, first among the tables
+                run.tables.insert(0, found)
         try:
             if session is not None:
                 session.close()
@@ -155,6 +159,20 @@ def write_reports(run: RunResult, out_dir: Path) -> None:
 
     write_html(run, out_dir / HTML_NAME)
     write_junit(run, out_dir / JUNIT_NAME)
+
+
+def duplicates_table(monitors: list[Monitor]) -> Table | None:
+    """Identifiers with two senders (bench.monitor.DuplicateSender), one row each, with the evidence; the
+    first monitor's finding of an identifier wins. None when there is none."""
+    found: dict[int, DuplicateSender] = {}
+    for monitor in monitors:
+        for frame_id, finding in monitor.duplicates.items():
+            found.setdefault(frame_id, finding)
+    if not found:
+        return None
+    rows = [[f"0x{f.frame_id:03X}", f.message, f.describe(), f"{f.t:.3f}", str(f.frames)]
+            for _, f in sorted(found.items())]
+    return Table("Findings: two senders of one identifier", ["id", "message", "finding", "from [s]", "frames"], rows)
 
 
 def database_table(codebook: Codebook) -> Table:
