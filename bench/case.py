@@ -8,6 +8,8 @@ to its end and fails if any step failed (the pytest plugin does that).
 from __future__ import annotations
 
 import math
+import re
+from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
@@ -16,12 +18,36 @@ from bench.checks import StepLog, percentile, tolerance_text, within
 from bench.errors import BenchError
 from bench.faults import KINDS, Fault
 from bench.monitor import InvalidFrame
-from bench.results import CaseResult, Plot, Series, Table
+from bench.results import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
 
 SCENARIO_MESSAGE, SCENARIO_SIGNAL = "BENCH_Control", "ScenarioId"
 SCENARIO_ACK_MESSAGE, SCENARIO_ACK_SIGNAL = "PLANT_Status", "ScenarioIdAck"
 SCENARIO_ACK_TIMEOUT = 2.0   # s a plant has to acknowledge a new scenario
+GAP_CYCLES = 2.5             # a plotted signal's line breaks where frames are this many cycles apart
+_NUMBER = re.compile(r"\d+(?:\.\d+)?")
+
+
+class NoFrames(float):
+    """What value() returns for a message with no valid frame now: NaN that knows why, so that a
+    check records "no frames of MSG" (or "MSG timed out") rather than "nan"."""
+
+    why: str
+
+    def __new__(cls, why: str) -> NoFrames:
+        value = super().__new__(cls, math.nan)
+        value.why = why
+        return value
+
+    def __repr__(self) -> str:
+        return self.why
+
+    __str__ = __repr__
+
+
+def _shown(value: float) -> float | str:
+    """A measured or expected value as a step records it: NoFrames as its reason."""
+    return value.why if isinstance(value, NoFrames) else float(value)
 
 
 class Case:
@@ -39,6 +65,11 @@ class Case:
         self._monitor = runner.monitor
         self._timers: list[_Timer] = []
         self._mark_counts()
+        self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
+        self._closed = False
+        plan = session.faults
+        self._fault_frames0 = {id(f): f.frames for f in plan.faults}   # run faults: their frames before the case
+        plan.begin_case(self.start)
 
     def _mark_counts(self) -> None:
         # absolute counts (kept + dropped), so that trimming the monitor's lists never shifts a mark
@@ -83,11 +114,32 @@ class Case:
         return cancel
 
     def close(self) -> None:
-        """End of the case: its timers stop."""
+        """End of the case: its timers stop, its case+ fault windows close, and the faults that were
+        active and the invalid frames seen during it go on its record."""
         for timer in self._timers:
             if timer in self._runner.behaviours:
                 self._runner.behaviours.remove(timer)
         self._timers.clear()
+        if self._closed:
+            return
+        self._closed = True
+        now = self.now
+        plan = self.session.faults
+        plan.end_case(now)
+        t0 = self.result.sim_start
+        records: list[FaultRecord] = []
+        for fault in plan.history + _instances(plan):
+            if fault.relative != "run" or not (fault.start <= now and fault.end >= t0):
+                continue
+            record = fault.record()
+            record.frames = fault.frames - self._fault_frames0.get(id(fault), 0)
+            records.append(record)
+        self.result.faults = records
+        monitor = self._monitor
+        self.result.invalid_frames = monitor.invalid_frames - self._case_invalid_mark
+        seen = monitor.invalid_log[max(0, self._case_invalid_mark - monitor.invalid_dropped):]
+        counts = Counter((f.message, _NUMBER.sub("N", f.reason)) for f in seen)
+        self.result.invalid = [[m, r, str(n)] for (m, r), n in sorted(counts.items(), key=lambda x: -x[1])]
 
     # -- stimulus ----------------------------------------------------------------------------------
     def set(self, message: str, **signals: float | int | str) -> None:
@@ -138,7 +190,7 @@ class Case:
         checksum_value/freeze/random/offset, silence, bus_off, flood, error_frame) starting `after` s
         from now and lasting `duration` s. Returns it; its window is in bench time."""
         start = self.now + after
-        fault = Fault(kind, target, start, start + duration, param)
+        fault = Fault(kind, target, start, start + duration, param, source=self.result.nodeid)
         if kind not in KINDS:
             raise BenchError(f"unknown fault kind {kind!r} (kinds: {', '.join(KINDS)})")
         return self.session.faults.add(fault)
@@ -157,10 +209,16 @@ class Case:
 
     # -- observation -------------------------------------------------------------------------------
     def value(self, message: str, signal: str) -> float:
-        """Latest valid value of a signal; NaN when the message is timed out or never came."""
+        """Latest valid value of a signal. With no valid frame now, a NaN (:class:`NoFrames`) that a check
+        records as "no frames of MESSAGE" (none came) or "MESSAGE timed out" (none lately)."""
         latest = self._monitor.latest(message, self.now)
         if latest is None:
-            return math.nan
+            if signal not in self.session.codebook[message].signal_names:
+                self.session.codebook[message].physical(signal, 0.0)  # raises the clear error
+            state = self._monitor.state(message)
+            if state.last_valid is None:
+                return NoFrames(f"no frames of {message}")
+            return NoFrames(f"{message} timed out (last frame at {state.last_valid:.3f} s)")
         if signal not in latest:
             self.session.codebook[message].physical(signal, 0.0)  # raises the clear error
         return latest[signal]
@@ -184,8 +242,8 @@ class Case:
         """measured within max(abs_tol, rel_tol·|expected|) of expected."""
         if abs_tol < 0 or rel_tol < 0:
             raise BenchError(f"check {name!r}: tolerances must not be negative")
-        measured, expected = float(measured), float(expected)
-        return self._steps.record(name, within(measured, expected, abs_tol, rel_tol), measured, expected,
+        ok = within(float(measured), float(expected), abs_tol, rel_tol)
+        return self._steps.record(name, ok, _shown(measured), _shown(expected),
                                   tolerance_text(abs_tol, rel_tol, unit), unit, detail)
 
     def expect_true(self, name: str, condition: bool, *, measured: float | str | None = None,
@@ -194,9 +252,8 @@ class Case:
 
     def expect_between(self, name: str, measured: float, low: float, high: float, *, unit: str = "",
                        detail: str = "") -> bool:
-        measured = float(measured)
-        ok = math.isfinite(measured) and low <= measured <= high
-        return self._steps.record(name, ok, measured, f"[{low:g}, {high:g}]", "range", unit, detail)
+        ok = math.isfinite(float(measured)) and low <= float(measured) <= high
+        return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail)
 
     def eventually(self, name: str, predicate: Callable[[], bool], within_s: float) -> bool:
         """Passes when predicate() becomes true within `within_s`; measured = the time it took."""
@@ -248,12 +305,16 @@ class Case:
             message, signal = item[0], item[1]
             label = item[2] if len(item) > 2 else f"{message}.{signal}"
             t, v = self.history(message, signal, since)
-            series.append(Series(label, (t - self.start).tolist(), v.tolist()))
-        self.result.plots.append(Plot(title, "time since case start [s]", ylabel, series))
+            cycle = self.session.codebook[message].cycle_time
+            series.append(Series(label, (t - self.start).tolist(), v.tolist(),
+                                 gap=GAP_CYCLES * cycle if cycle else None))
+        self.result.plots.append(Plot(title, "time since case start [s]", ylabel, series, x0=self.start))
 
     def plot_series(self, title: str, series: Sequence[Series], *, xlabel: str, ylabel: str,
-                    kind: str = "time") -> None:
-        self.result.plots.append(Plot(title, xlabel, ylabel, list(series), kind))  # type: ignore[arg-type]
+                    kind: str = "time", x0: float | None = None) -> None:
+        """A plot of series the case computed; `x0`: the bench time at x = 0 of a time plot whose x is
+        seconds (the report then shades fault windows on it)."""
+        self.result.plots.append(Plot(title, xlabel, ylabel, list(series), kind, x0))  # type: ignore[arg-type]
 
     def table(self, title: str, columns: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
         self.result.tables.append(Table(title, list(columns), [[_cell(c) for c in row] for row in rows]))
@@ -279,6 +340,11 @@ class _Timer:
         if t + 1e-9 >= self.next:
             self.next += self.period
             self.callback(t)
+
+
+def _instances(plan: object) -> list[Fault]:
+    """The case+ instances of the case that just ended (FaultPlan keeps them until the next begin)."""
+    return list(getattr(plan, "last_case_instances", []))
 
 
 def _cell(value: object) -> str:

@@ -41,9 +41,12 @@ class VirtualClock:
 
     def __init__(self) -> None:
         self._now = 0.0
+        self.epoch_ns = time.time_ns()
 
     def start(self) -> None:
+        """Bench time 0 now; `epoch_ns`, the wall-clock instant of the start, gives the run log its times."""
         self._now = 0.0
+        self.epoch_ns = time.time_ns()
 
     def now(self) -> float:
         return self._now
@@ -63,7 +66,8 @@ class WallClock:
 
     def start(self) -> None:
         self._t0 = time.monotonic()
-        self._epoch0 = time.time()   # the same instant in the epoch time of receive timestamps
+        self.epoch_ns = time.time_ns()   # the same instant in epoch time: the run log's times, receive stamps
+        self._epoch0 = self.epoch_ns / 1e9
 
     def now(self) -> float:
         return time.monotonic() - self._t0

@@ -2,9 +2,15 @@
 
 Faults act on the frames a station sends, after the restbus built them (so they look like a real
 broken sender: a wrong counter carries a correct checksum unless the checksum is the fault).
-Spec syntax (command line, `--fault`): `KIND:TARGET[:PARAM]@START[-END]`, times in bench seconds,
-an open END lasting to the end of the run; e.g. `drop:VCU_WheelCmd_FL@2-3`, `silence:WHL_FR@1.5-`,
-`checksum_offset:IMU_Motion:1@2-4`, `flood:0x000:8@1-2`.
+Spec syntax (command line, `--fault`): `KIND:TARGET[:PARAM]@[case+]START[-END]`, times in seconds.
+Without `case+` the window counts from the start of the run (bench time) and an open END lasts to the
+end of the run; with `case+` it counts from the start of every case, and an open END lasts to the end
+of that case. E.g. `drop:VCU_WheelCmd_FL@2-3`, `silence:WHL_FR@1.5-`, `checksum_offset:IMU_Motion:1@2-4`,
+`flood:0x000:8@1-2`, `drop:VCU_WheelCmd_FL@case+1-2` (1 s to 2 s after each case's start).
+
+Every fault is on the record: it counts the frames it acted on (dropped, delayed, duplicated,
+corrupted, silenced or babbled), and :meth:`FaultPlan.records` gives what the report, JUnit and the
+MCAP log show. :func:`validate` checks specs against the databases before a run starts.
 
 On the virtual-time bus there is no arbitration; `flood` therefore models it: a babbling node
 sending PARAM frames per millisecond at identifier TARGET takes the whole bus at or above
@@ -16,12 +22,13 @@ from __future__ import annotations
 
 import math
 import random
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from bench import e2e
 from bench.codec import Codebook
 from bench.errors import ConfigError
+from bench.results import FaultRecord
 
 FRAME_KINDS = ("drop", "delay", "duplicate", "bitflip", "counter_freeze", "counter_jump", "checksum_value",
                "checksum_freeze", "checksum_random", "checksum_offset")
@@ -30,9 +37,12 @@ BUS_KINDS = ("flood", "error_frame")
 KINDS = FRAME_KINDS + NODE_KINDS + BUS_KINDS
 FLOOD_SATURATION = 4.0   # babbling frames per ms from which lower-priority frames never win arbitration
 RANDOM_SEED = 0x5EED     # checksum_random is deterministic, so a campaign stays reproducible
+RUN, CASE = "run", "case"   # what a fault's window counts from
+CASE_PREFIX = "case+"
+COMMAND_LINE = "command line"
 
 
-@dataclass
+@dataclass(eq=False)   # identity: two faults with the same spec are two faults
 class Fault:
     kind: str
     target: str          # message name (frame kinds), node name (silence, bus_off), identifier (flood)
@@ -40,22 +50,44 @@ class Fault:
     end: float = math.inf
     param: float = 0.0   # delay s, bit index, counter jump, checksum value/offset, flood frames per ms
     frozen: int | None = field(default=None, repr=False)   # counter/checksum value at the fault's start
+    relative: str = RUN        # CASE: start/end count from each case's start (a template, see FaultPlan)
+    source: str = COMMAND_LINE  # or the node id of the case that injected it
+    frames: int = 0            # frames it acted on so far
+    parent: Fault | None = field(default=None, repr=False, compare=False)   # the case+ template it came from
 
     def active(self, t: float) -> bool:
         return self.start <= t < self.end
 
+    def hit(self, n: int = 1) -> None:
+        """Count frames the fault acted on (also on its case+ template, for the run's total)."""
+        self.frames += n
+        if self.parent is not None:
+            self.parent.frames += n
+
     def describe(self) -> str:
         end = "" if math.isinf(self.end) else f"{self.end:g}"
         param = f":{self.param:g}" if self.param else ""
-        return f"{self.kind}:{self.target}{param}@{self.start:g}-{end}"
+        where = CASE_PREFIX if self.relative == CASE else ""
+        return f"{self.kind}:{self.target}{param}@{where}{self.start:g}-{end}"
+
+    def record(self) -> FaultRecord:
+        spec = self.parent.describe() if self.parent is not None else self.describe()
+        return FaultRecord(spec=spec, source=self.source, kind=self.kind, target=self.target, start=self.start,
+                           end=None if math.isinf(self.end) else self.end, frames=self.frames,
+                           relative=self.relative)
 
 
 def parse_fault(spec: str) -> Fault:
-    """`KIND:TARGET[:PARAM]@START[-END]` -> Fault; ConfigError naming the spec and what is wrong."""
+    """`KIND:TARGET[:PARAM]@[case+]START[-END]` -> Fault; ConfigError naming the spec and what is wrong."""
     head, at, window = spec.partition("@")
     parts = head.split(":")
     if not at or len(parts) not in (2, 3):
-        raise ConfigError(f"--fault {spec!r}: expected KIND:TARGET[:PARAM]@START[-END]")
+        raise ConfigError(f"--fault {spec!r}: expected KIND:TARGET[:PARAM]@[case+]START[-END]")
+    relative = RUN
+    if window.startswith(CASE_PREFIX):
+        relative, window = CASE, window[len(CASE_PREFIX):]
+    elif window.startswith("run+"):
+        window = window[len("run+"):]
     kind, target = parts[0], parts[1]
     if kind not in KINDS:
         raise ConfigError(f"--fault {spec!r}: unknown kind {kind!r} (kinds: {', '.join(KINDS)})")
@@ -68,7 +100,47 @@ def parse_fault(spec: str) -> Fault:
         raise ConfigError(f"--fault {spec!r}: PARAM, START and END must be numbers") from None
     if not (math.isfinite(param) and math.isfinite(start) and start >= 0 and end > start):
         raise ConfigError(f"--fault {spec!r}: need 0 <= START < END and a finite PARAM")
-    return Fault(kind, target, start, end, param)
+    return Fault(kind, target, start, end, param, relative=relative)
+
+
+def check_fault(fault: Fault, codebook: Codebook) -> None:
+    """ConfigError when the fault's target or PARAM does not fit its kind and the databases."""
+    if fault.kind not in KINDS:
+        raise ConfigError(f"fault {fault.describe()}: unknown kind {fault.kind!r} (kinds: {', '.join(KINDS)})")
+    if not (fault.start >= 0 and fault.end > fault.start):
+        raise ConfigError(f"fault {fault.describe()}: need 0 <= START < END")
+    if fault.kind in FRAME_KINDS:
+        if fault.target not in codebook.by_name:
+            raise ConfigError(f"fault {fault.describe()}: unknown message {fault.target!r} (in none of the databases)")
+        if fault.kind == "bitflip" and not 0 <= fault.param < 64:
+            raise ConfigError(f"fault {fault.describe()}: bit index must be 0..63")
+        if fault.kind == "delay" and not fault.param > 0:
+            raise ConfigError(f"fault {fault.describe()}: a delay needs PARAM > 0 s")
+    elif fault.kind in NODE_KINDS:
+        if fault.target not in codebook.nodes:
+            raise ConfigError(f"fault {fault.describe()}: unknown node {fault.target!r} "
+                              f"(nodes: {', '.join(codebook.nodes)})")
+    elif fault.kind == "flood":
+        try:
+            int(fault.target, 0)
+        except ValueError:
+            raise ConfigError(f"fault {fault.describe()}: TARGET must be an identifier like 0x000") from None
+        if not fault.param > 0:
+            raise ConfigError(f"fault {fault.describe()}: PARAM must be frames per ms > 0")
+
+
+def validate(specs: Iterable[str], codebook: Codebook) -> list[str]:
+    """One line per problem of the `--fault` specs (syntax, kind, target in the databases, window,
+    PARAM); empty when all can be injected. For the command line's check before the first case."""
+    problems = []
+    for spec in specs:
+        try:
+            fault = parse_fault(spec)
+            check_fault(fault, codebook)
+        except ConfigError as exc:
+            text = str(exc)
+            problems.append(text if text.startswith("--fault") else f"--fault {spec!r}: {text.partition(': ')[2]}")
+    return problems
 
 
 class FaultPlan:
@@ -76,39 +148,57 @@ class FaultPlan:
 
     def __init__(self, codebook: Codebook) -> None:
         self.codebook = codebook
-        self.faults: list[Fault] = []
+        self.faults: list[Fault] = []       # the faults that may act now (run windows, this case's instances)
+        self.templates: list[Fault] = []    # case+ faults: an instance of each for every case
+        self.history: list[Fault] = []      # every fault of the run, in the order added (for the record)
+        self._case_instances: list[Fault] = []
+        self.last_case_instances: list[Fault] = []   # the case+ instances of the case that ended last
         self._rng = random.Random(RANDOM_SEED)
+        self.listener: Callable[[Fault], None] | None = None   # told of every fault added (the MCAP log)
 
     def add(self, fault: Fault) -> Fault:
-        self._check(fault)
-        self.faults.append(fault)
+        check_fault(fault, self.codebook)
+        if fault.relative == CASE:
+            self.templates.append(fault)
+        else:
+            self.faults.append(fault)
+        self.history.append(fault)
+        if self.listener is not None:
+            self.listener(fault)
         return fault
 
     def extend(self, faults: Iterable[Fault]) -> None:
         for fault in faults:
             self.add(fault)
 
-    def _check(self, fault: Fault) -> None:
-        if fault.kind in FRAME_KINDS:
-            self.codebook[fault.target]   # raises a clear error for an unknown message
-            if fault.kind == "bitflip" and not 0 <= fault.param < 64:
-                raise ConfigError(f"fault {fault.describe()}: bit index must be 0..63")
-            if fault.kind == "delay" and not fault.param > 0:
-                raise ConfigError(f"fault {fault.describe()}: a delay needs PARAM > 0 s")
-        elif fault.kind in NODE_KINDS:
-            if fault.target not in self.codebook.nodes:
-                raise ConfigError(f"fault {fault.describe()}: unknown node {fault.target!r}")
-        elif fault.kind == "flood":
-            try:
-                int(fault.target, 0)
-            except ValueError:
-                raise ConfigError(f"fault {fault.describe()}: TARGET must be an identifier like 0x000") from None
-            if not fault.param > 0:
-                raise ConfigError(f"fault {fault.describe()}: PARAM must be frames per ms > 0")
+    def begin_case(self, t: float) -> list[Fault]:
+        """A case starts at bench time `t`: every case+ fault gets its window in this case."""
+        self.end_case(t)
+        for template in self.templates:
+            instance = Fault(template.kind, template.target, t + template.start, t + template.end, template.param,
+                             source=template.source, parent=template)
+            self._case_instances.append(instance)
+            self.faults.append(instance)
+        return list(self._case_instances)
+
+    def end_case(self, t: float) -> None:
+        """The case ends at `t`: its case+ windows close (an open END lasts to here)."""
+        if not self._case_instances:
+            return
+        for instance in self._case_instances:
+            instance.end = min(instance.end, t)
+            if instance in self.faults:
+                self.faults.remove(instance)
+        self.last_case_instances = self._case_instances
+        self._case_instances = []
+
+    def records(self) -> list[FaultRecord]:
+        """Every fault of the run (case+ ones once, with their frames summed over the cases)."""
+        return [fault.record() for fault in self.history]
 
     @property
     def any(self) -> bool:
-        return bool(self.faults)
+        return bool(self.faults or self.templates)
 
     # -- applied by stations ----------------------------------------------------------------------
     def babble(self, t: float, dt: float) -> list[tuple[int, bytes, bool]]:
@@ -120,8 +210,10 @@ class FaultPlan:
             if fault.kind == "flood":
                 count = max(1, round(fault.param * dt * 1000.0))
                 out.extend((int(fault.target, 0), bytes(8), False) for _ in range(count))
+                fault.hit(count)
             elif fault.kind == "error_frame":
                 out.append((0, b"", True))
+                fault.hit()
         return out
 
     def apply(self, t: float, frame_id: int, data: bytes) -> list[tuple[float, bytes]]:
@@ -137,14 +229,17 @@ class FaultPlan:
             kind = fault.kind
             if kind in NODE_KINDS:
                 if fault.target in codec.senders:
+                    fault.hit()
                     return []
                 continue
             if kind == "flood":
                 if fault.param >= FLOOD_SATURATION and frame_id > int(fault.target, 0):
+                    fault.hit()
                     return []
                 continue
             if kind not in FRAME_KINDS or fault.target != codec.name:
                 continue
+            fault.hit()
             if kind == "drop":
                 return []
             if kind == "delay":

@@ -27,6 +27,8 @@ BATCH_FRAMES = 2000      # hand over at least this often ...
 BATCH_SECONDS = 0.2      # ... and at least every 0.2 s of wall time
 CLOSE_TIMEOUT = 120.0    # s the child may take to write what it still has
 _STEP = "step"
+_META = "meta"
+_ORIGIN = "origin"
 
 
 class LogProcess:
@@ -60,6 +62,14 @@ class LogProcess:
 
     def step(self, t: float, level: int, name: str, message: str) -> None:
         self._batch.append((_STEP, t, level, name, message))
+
+    def origin(self, epoch_ns: int, realtime: bool) -> None:
+        """The epoch time (ns) of bench time 0: log times become epoch times (Foxglove shows the date)."""
+        self._batch.append((_ORIGIN, int(epoch_ns), bool(realtime)))
+
+    def metadata(self, name: str, data: dict[str, str]) -> None:
+        """A metadata record (e.g. an injected fault) in the log."""
+        self._batch.append((_META, name, {str(k): str(v) for k, v in data.items()}))
 
     def _hand_over(self) -> None:
         if self._batch and not self._closed:
@@ -121,6 +131,12 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
                 try:
                     if item[0] == _STEP:
                         recorder.step(item[1], item[2], item[3], item[4])
+                        continue
+                    if item[0] == _META:
+                        recorder.metadata(item[1], item[2])
+                        continue
+                    if item[0] == _ORIGIN:
+                        recorder.set_origin(item[1], "real" if item[2] else "virtual")
                         continue
                     t, arbitration_id, data, direction, valid, error = item
                     recorder.frame(t, arbitration_id, data, channel=channel, direction=direction, valid=valid,

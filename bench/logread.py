@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import IO, Any
 
 from mcap.exceptions import EndOfFile, McapError
-from mcap.records import Attachment, Channel, Footer, McapRecord, Message
+from mcap.records import Attachment, Channel, Footer, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from bench.errors import LogError
-from bench.recorder import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
+from bench.recorder import CLOCK_METADATA, DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
 
 MAGIC = b"\x89MCAP0\r\n"
 _EXACT_NS = 1 << 53   # log times below it convert to float exactly
@@ -63,6 +63,8 @@ class LogSummary:
     invalid_frames: int = 0
     attachments: list[str] = field(default_factory=list)
     complete: bool = False
+    origin: float | None = None     # epoch s of bench time 0 (bench runs log epoch times); None: not said
+    metadata: list[tuple[str, dict[str, str]]] = field(default_factory=list)   # e.g. bench.fault records
 
 
 class _WholeReads:
@@ -111,6 +113,7 @@ class _Scan:
                 raise LogError(f"{self.path}: cannot read run log: {exc.strerror}") from None
         self.complete = False
         self.topics: dict[int, str] = {}  # channel id -> topic
+        self.origin_ns = 0                # log time of bench time 0 (metadata bench.clock), read on the way
         if not isinstance(head, bytes):
             raise LogError(f"{self.path}: a run log is read from a binary file, not {type(source).__name__}")
         if not MAGIC.startswith(head):  # a log cut inside its magic is an empty log, not a foreign file
@@ -129,6 +132,9 @@ class _Scan:
                 for record in StreamReader(_WholeReads(file)).records:
                     if isinstance(record, Channel):
                         self.topics[record.id] = record.topic
+                    elif isinstance(record, Metadata) and record.name == CLOCK_METADATA:
+                        with contextlib.suppress(KeyError, ValueError):
+                            self.origin_ns = int(record.metadata["origin_ns"])
                     elif isinstance(record, Footer):
                         footer = True
                     yield record
@@ -188,13 +194,15 @@ def _json(path: str | Path, record: Message) -> Any:
 
 
 def read_decoded(path: str | Path, message: str | None = None) -> Iterator[tuple[float, str, dict[str, Any]]]:
-    """(t, message name, signals) of the decoded messages, all or only `message`'s."""
+    """(t, message name, signals) of the decoded messages, all or only `message`'s; t is bench time
+    (the log time less the log's origin: a bench run logs epoch times)."""
     if message is None:
         wanted: Any = lambda topic: topic.startswith(DECODED_PREFIX)  # noqa: E731
     else:
         wanted = (DECODED_PREFIX + message).__eq__
-    for topic, record in _messages(_Scan(path), wanted):
-        yield record.log_time / 1e9, topic[len(DECODED_PREFIX):], _json(path, record)
+    scan = _Scan(path)
+    for topic, record in _messages(scan, wanted):
+        yield (record.log_time - scan.origin_ns) / 1e9, topic[len(DECODED_PREFIX):], _json(path, record)
 
 
 def read_steps(path: str | Path) -> Iterator[dict[str, Any]]:
@@ -222,9 +230,12 @@ def summarise(path: str | Path) -> LogSummary:
             summary.channels.setdefault(record.topic, 0)
         elif isinstance(record, Attachment):
             summary.attachments.append(record.name)
+        elif isinstance(record, Metadata):
+            summary.metadata.append((record.name, dict(record.metadata)))
     summary.start = None if start is None else start / 1e9
     summary.end = None if end is None else end / 1e9
     summary.complete = scan.complete
+    summary.origin = scan.origin_ns / 1e9 if scan.origin_ns else None
     return summary
 
 

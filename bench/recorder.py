@@ -38,6 +38,7 @@ from mcap.writer import CompressionType, Writer
 from bench.errors import LogError
 
 FRAMES_TOPIC = "/can/frames"
+CLOCK_METADATA = "bench.clock"   # origin_ns: the log time of bench time 0
 STEPS_TOPIC = "/bench/steps"
 DECODED_PREFIX = "/can/decoded/"
 FRAME_SCHEMA_NAME = "bench.CanFrame"
@@ -230,6 +231,7 @@ class Recorder:
         stream = path if hasattr(path, "write") else None   # a binary file object, as python-can's writers take
         self.path = Path(str(getattr(stream, "name", "<stream>"))) if stream is not None else Path(path)  # type: ignore[arg-type]
         self._interval = float(flush_interval)
+        self._origin_ns = 0   # log time of bench time 0 (set_origin); 0: log times are bench times
         self._chunk_bytes = int(chunk_size)
         # Everything that can fail on bad input happens before the file exists.
         self._decoded: dict[str, _Decoded] = {}
@@ -280,7 +282,7 @@ class Recorder:
         `data` as given); `channel_number`, the channel when the bus named it by a number (python-can's
         int channels), so a reader gets it back."""
         try:
-            ns = _ns(t)
+            ns = _ns(t) + self._origin_ns
             quoted = self._quoted.get(channel)
             if quoted is None:
                 if not isinstance(channel, str):
@@ -319,7 +321,7 @@ class Recorder:
         if entry is None:
             raise LogError(f"run log {self.path}: unknown message {message!r}: it is in none of the recorder's databases")
         try:
-            ns = _ns(t)
+            ns = _ns(t) + self._origin_ns
             if not signals.keys() <= entry.names:
                 raise ValueError(f"no signal(s) {', '.join(sorted(signals.keys() - entry.names))} in the message")
         except (TypeError, ValueError, AttributeError) as exc:
@@ -335,7 +337,7 @@ class Recorder:
     def step(self, t: float, level: int, name: str, message: str, file: str = "", line: int = 0) -> None:
         """Log a test step or verdict on `/bench/steps` (level 1 DEBUG .. 5 FATAL, as foxglove.Log)."""
         try:
-            ns = _ns(t)
+            ns = _ns(t) + self._origin_ns
             if level not in range(6) or not isinstance(line, int) or line < 0:
                 raise ValueError(f"level {level!r} not in 0..5 or line {line!r} not an int >= 0")
             payload = json.dumps({
@@ -345,6 +347,22 @@ class Recorder:
         except (TypeError, ValueError) as exc:
             raise LogError(f"run log {self.path}: bad step {name!r}: {exc}") from None
         self._write(self._steps_id, ns, payload.encode())
+
+    def set_origin(self, epoch_ns: int, time_mode: str = "") -> None:
+        """From now on log time = `epoch_ns` + bench time, so viewers show the date of the run; a metadata
+        record `bench.clock` (`origin_ns`) lets readers give bench time back (bench.logread)."""
+        if not isinstance(epoch_ns, int) or not 0 <= epoch_ns < 2**63 - int(_MAX_T * 1e9):
+            raise LogError(f"run log {self.path}: bad time origin {epoch_ns!r} ns")
+        self.metadata(CLOCK_METADATA, {"origin_ns": str(epoch_ns), "time_mode": str(time_mode),
+                                       "origin": datetime.fromtimestamp(epoch_ns / 1e9, timezone.utc).isoformat()})
+        self._origin_ns = epoch_ns
+
+    def metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """A metadata record (name and string pairs), written at once outside the chunks."""
+        with self._lock:
+            if self._closed or self._broken:
+                return
+            self._writer.add_metadata(str(name), {str(k): str(v) for k, v in data.items()})
 
     def flush(self) -> None:
         """Finalise the open chunk now (e.g. after a verdict) rather than at the next interval."""

@@ -32,6 +32,21 @@ class Series:
     name: str
     x: list[float]
     y: list[float]
+    gap: float | None = None     # x step beyond which the line breaks (2.5 cycles of the message); None: never
+
+
+@dataclass
+class FaultRecord:
+    """An injected fault as the reports show it: what, from where, when (bench time) and how much it did."""
+
+    spec: str                    # KIND:TARGET[:PARAM]@[case+]START[-END], as the command line takes it
+    source: str                  # "command line", or the node id of the case that injected it
+    kind: str
+    target: str
+    start: float                 # s: bench time (relative "case": from each case's start)
+    end: float | None            # s; None: to the end of the run (or of the case)
+    frames: int = 0              # frames it acted on (dropped, delayed, duplicated, corrupted, babbled)
+    relative: str = "run"        # "run" or "case"
 
 
 @dataclass
@@ -43,6 +58,7 @@ class Plot:
     ylabel: str
     series: list[Series]
     kind: Literal["time", "xy"] = "time"
+    x0: float | None = None      # bench time at x = 0 of a time plot (to shade fault windows); None: unknown
 
 
 @dataclass
@@ -69,6 +85,9 @@ class CaseResult:
     message: str = ""            # failure or skip text
     duts: list[str] = field(default_factory=list)   # the nodes the case judges (@pytest.mark.dut)
     reqs: list[str] = field(default_factory=list)   # the requirement ids it checks (@pytest.mark.req)
+    faults: list[FaultRecord] = field(default_factory=list)   # faults active during the case (windows clipped)
+    invalid_frames: int = 0      # frames the monitor rejected during the case
+    invalid: list[list[str]] = field(default_factory=list)    # [message, reason, count] of those frames
 
     @property
     def failed_steps(self) -> list[Step]:
@@ -113,6 +132,7 @@ class RunResult:
     tables: list[Table] = field(default_factory=list)
     requirements: list[RequirementInfo] = field(default_factory=list)   # the contract's catalogue
     deselected: list[CaseRef] = field(default_factory=list)
+    faults: list[FaultRecord] = field(default_factory=list)   # every fault injected in the run
 
     @property
     def counts(self) -> dict[str, int]:

@@ -8,7 +8,7 @@ from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
 
-from bench.results import CaseRef, CaseResult, Plot, RequirementInfo, RunResult, Series, Step, Table
+from bench.results import CaseRef, CaseResult, FaultRecord, Plot, RequirementInfo, RunResult, Series, Step, Table
 
 
 def dump(run: RunResult, path: Path) -> None:
@@ -25,15 +25,17 @@ def load(path: Path) -> RunResult:
     # parts written before the contract existed have neither key
     requirements = [RequirementInfo(**_known(RequirementInfo, r)) for r in data.pop("requirements", [])]
     deselected = [CaseRef(**_known(CaseRef, c)) for c in data.pop("deselected", [])]
+    faults = [FaultRecord(**_known(FaultRecord, f)) for f in data.pop("faults", [])]
     return RunResult(**_known(RunResult, data), cases=cases, tables=tables, requirements=requirements,
-                     deselected=deselected)
+                     deselected=deselected, faults=faults)
 
 
 def _case(data: dict[str, Any]) -> CaseResult:
     steps = [Step(**s) for s in data.pop("steps")]
     plots = [Plot(**{**p, "series": [Series(**s) for s in p["series"]]}) for p in data.pop("plots")]
     tables = [Table(**t) for t in data.pop("tables")]
-    return CaseResult(**_known(CaseResult, data), steps=steps, plots=plots, tables=tables)
+    faults = [FaultRecord(**_known(FaultRecord, f)) for f in data.pop("faults", [])]
+    return CaseResult(**_known(CaseResult, data), steps=steps, plots=plots, tables=tables, faults=faults)
 
 
 def _known(cls: type, data: dict[str, Any]) -> dict[str, Any]:
@@ -51,6 +53,12 @@ def merge(parts: list[tuple[str, RunResult]], wall_time: float) -> RunResult:
     logs = []
     for worker, part in sorted(parts):
         merged.cases.extend(part.cases)
+        for fault in part.faults:   # a command-line fault acts in every worker: one record, frames summed
+            same = next((f for f in merged.faults if (f.spec, f.source) == (fault.spec, fault.source)), None)
+            if same is None:
+                merged.faults.append(FaultRecord(**asdict(fault)))
+            else:
+                same.frames += fault.frames
         merged.sim_time += part.sim_time
         merged.frames += part.frames
         merged.invalid_frames += part.invalid_frames

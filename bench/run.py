@@ -14,6 +14,7 @@ from bench.checks import LOG_ERROR, LOG_INFO, StepLog
 from bench import results_io
 from bench.codec import Codebook, MessageCodec
 from bench.errors import BenchError
+from bench.faults import Fault
 from bench.logproc import LogProcess
 from bench.monitor import DuplicateSender, Monitor
 from bench.config import ProjectConfig, RunSettings
@@ -66,6 +67,9 @@ class BenchRun:
         start-up still finds the run and writes an aborted report)."""
         self.session = BenchSession(self._project, self.settings, sink=self._sink)
         self.session.start()
+        if self.recorder is not None:   # MCAP log time = the clock's epoch at bench time 0 + bench time
+            self.recorder.origin(self.session.clock.epoch_ns, self.session.clock.realtime)
+            self.session.faults.listener = self._log_fault
 
     # -- cases ---------------------------------------------------------------------------------------
     def begin_case(self, nodeid: str, name: str) -> Case:
@@ -79,6 +83,15 @@ class BenchRun:
         steps = StepLog(self.session.now, self._step_listener)
         result.steps = steps.steps
         return Case(self.session, result, steps)
+
+    def _log_fault(self, fault: Fault) -> None:
+        """Every injected fault into the MCAP log's metadata, as it is added (a killed run still has it)."""
+        if self.recorder is not None:
+            record = fault.record()
+            self.recorder.metadata("bench.fault", {
+                "spec": record.spec, "source": record.source, "kind": record.kind, "target": record.target,
+                "window": "case" if record.relative == "case" else "run",
+                "start_s": f"{record.start:g}", "end_s": "" if record.end is None else f"{record.end:g}"})
 
     def _step_listener(self, step: Step) -> None:
         level = LOG_INFO if step.verdict == "pass" else LOG_ERROR
@@ -130,7 +143,8 @@ class BenchRun:
             aborted=aborted, wall_time=time.monotonic() - self._wall0,
             sim_time=session.now() if session else 0.0,
             frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0,
-            requirements=list(self.requirements), deselected=list(self.deselected))
+            requirements=list(self.requirements), deselected=list(self.deselected),
+            faults=session.faults.records() if session else [])
         if session is not None:   # the report's timing section (bench.timing); never raises
             run.tables.extend(self.timing.tables(session.codebook))
             run.tables.append(database_table(session.codebook))
@@ -143,6 +157,9 @@ class BenchRun:
         finally:
             if self.recorder is not None:
                 try:
+                    if run.faults:   # what each fault did, for tools that read the log without the report
+                        self.recorder.metadata("bench.faults", {
+                            f"{i}": f"{f.spec} from {f.source}: {f.frames} frames" for i, f in enumerate(run.faults)})
                     self.recorder.close()
                 except BenchError as exc:   # the report must still be written, and say what happened
                     run.tables.insert(0, Table("Run log problem", ["problem"], [[str(exc)]]))

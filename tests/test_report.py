@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import base64
+import hashlib
+
 import dataclasses
 import re
 import xml.etree.ElementTree as ET
@@ -12,6 +15,7 @@ import numpy as np
 import pytest
 
 from bench.report import write_html, write_junit
+import bench.report.html as report_html
 from bench.report.html import fmt
 from bench.report.junit import split_nodeid, xml_safe
 from bench.report.plots import MAX_POINTS, Plotter, decimate
@@ -108,10 +112,16 @@ def report(tmp_path: Path) -> tuple[str, Path]:
 def test_html_is_self_contained(report: tuple[str, Path]) -> None:
     html, _ = report
     low = html.lower()
-    assert "<script" not in low and "<link" not in low and "<iframe" not in low
+    assert "<link" not in low and "<iframe" not in low
     assert 'src="http' not in low and "@import" not in low and "url(http" not in low
+    # one script: the page's own filter script, inline, allowed by its hash and nothing else
+    assert low.count("<script") == 1 and f"<script>{report_html.SCRIPT}</script>" in html
+    digest = base64.b64encode(hashlib.sha256(report_html.SCRIPT.encode()).digest()).decode()
+    csp = re.search(r'http-equiv="Content-Security-Policy" content="([^"]*)"', html).group(1)  # type: ignore[union-attr]
+    assert f"script-src 'sha256-{digest}'" in csp and "unsafe-inline'; script" in csp and "default-src 'none'" in csp
+    assert "fetch(" not in report_html.SCRIPT and "XMLHttpRequest" not in report_html.SCRIPT
     for tag, attrs in _parse(html).tags:
-        assert tag not in ("script", "img", "link", "iframe", "object", "embed"), tag
+        assert tag not in ("img", "link", "iframe", "object", "embed"), tag
         assert "src" not in attrs, (tag, attrs)
         href = attrs.get("href") or attrs.get("xlink:href") or ""
         assert not re.match(r"[a-z][a-z0-9+.-]*:", href, re.I), href  # no scheme: local only
@@ -159,11 +169,11 @@ def test_html_contents(report: tuple[str, Path], tmp_path: Path) -> None:
 def test_plot_kinds_and_decimation() -> None:
     plotter = Plotter()
     xy = plotter.render(make_run().cases[0].plots[1], "a")
-    assert xy.kind == "xy" and plotter._figs["xy"].axes[0].get_aspect() == 1.0
-    # the figure is reused: an empty plot must not freeze the limits of the next one
+    assert xy.kind == "xy" and 'viewBox="0 0 420 380"' in xy.svg
+    # one plotter draws many plots: an empty plot must not freeze the limits of the next one
     assert "no data" in plotter.render(Plot("e", "t", "v", []), "b").svg
-    plotter.render(Plot("t", "t", "v", [Series("s", [0.0, 100.0], [0.0, 50.0])]), "c")
-    assert plotter._figs["time"].axes[0].get_xlim()[1] >= 100
+    wide = plotter.render(Plot("t", "t", "v", [Series("s", [0.0, 100.0], [0.0, 50.0])]), "c").svg
+    assert ">100<" in wide and ">40<" in wide   # tick labels reach the data's range
     n = 200_000
     x = np.arange(n, dtype=float)
     y = np.sin(x / 5000)
@@ -243,7 +253,7 @@ def test_bad_data_does_not_cost_the_report(tmp_path: Path, monkeypatch: pytest.M
     run = RunResult("2025-01-01T00:00:00", "virtual", "vcan0", "virtual", cases=[case])
     assert write_html(run, tmp_path / "a.html").read_text(encoding="utf-8").count("<svg") == 1
 
-    def boom(self: Plotter, plot: Plot, prefix: str = "p") -> None:
+    def boom(self: Plotter, plot: Plot, prefix: str = "p", spans: object = None) -> None:
         raise ValueError(SCRIPT)
 
     monkeypatch.setattr(Plotter, "render", boom)

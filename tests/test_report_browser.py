@@ -94,8 +94,12 @@ def problems(dom: str, stderr: str) -> list[str]:
     found = [line for line in stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
     if "PWNED" in parsed.title or "PWNED" in dom:
         found.append(f"title changed by a script: {parsed.title!r}")
+    own = dom.count("<script>" + report_html.SCRIPT[:40])   # the report's own filter script (CSP hash)
+    scripts = sum(1 for tag, _ in parsed.tags if tag == "script")
+    if scripts > min(own, 1):
+        found.append("injected element <script>")
     for tag, attrs in parsed.tags:
-        if tag in ("script", "img", "pwned", "iframe"):
+        if tag in ("img", "pwned", "iframe"):
             found.append(f"injected element <{tag}>")
         found += [f"event attribute {k} on <{tag}>" for k in attrs if k.startswith("on")]
     return found

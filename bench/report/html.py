@@ -1,16 +1,24 @@
 """The HTML report: one self-contained file that opens offline and survives hostile strings.
 
 Everything a DBC, a test or the ECU under test can influence (names, notes, messages,
-values) goes through jinja2 autoescaping; the plots are matplotlib SVG whose text
-matplotlib escapes. A strict Content-Security-Policy (no scripts, no fetches) is a
-second line of defence should an escaping bug ever slip through.
+values) goes through jinja2 autoescaping; the plots are SVG whose text bench.report.plots
+escapes. A strict Content-Security-Policy (no fetches; the one script allowed is the page's
+own filter script, by its SHA-256 hash) is a second line of defence should an escaping bug
+ever slip through: an injected script has another hash and does not run.
+
+For an engineer in a hurry: the cases that did not pass come first, with their failed steps;
+a search box and outcome filters narrow the summary and the cases; every case is collapsed
+(<details>) until opened or linked to.
 """
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import math
 import os
 import re
+from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 from urllib.parse import quote
@@ -20,7 +28,38 @@ from markupsafe import Markup, escape
 
 from bench.report.conformance import build_conformance
 from bench.report.plots import Plotter, RenderedPlot
-from bench.results import Plot, RunResult
+from bench.results import CaseResult, Plot, RunResult, Step
+
+FAILED = ("failed", "error", "aborted")
+FAILED_STEPS_SHOWN = 3
+
+#: The page's only script: search and outcome filters, and opening a collapsed case that a link
+#: points to. Plain ES5 with no inline handlers, allowed by the CSP through its hash.
+SCRIPT = """(function () {
+  var q = document.getElementById('q'), shown = document.getElementById('shown');
+  var boxes = document.querySelectorAll('#filters input[type=checkbox]');
+  var items = document.querySelectorAll('[data-outcome]');
+  function apply() {
+    var text = q ? q.value.toLowerCase().trim() : '', on = {}, rows = 0, total = 0, i;
+    for (i = 0; i < boxes.length; i++) { on[boxes[i].value] = boxes[i].checked; }
+    for (i = 0; i < items.length; i++) {
+      var el = items[i], ok = on[el.getAttribute('data-outcome')] !== false &&
+        (!text || el.getAttribute('data-name').indexOf(text) >= 0);
+      el.hidden = !ok;
+      if (el.tagName === 'TR') { total++; if (ok) { rows++; } }
+    }
+    if (shown) { shown.textContent = (text || rows < total) ? rows + ' of ' + total + ' cases shown' : ''; }
+  }
+  function openTarget() {
+    var id = decodeURIComponent(location.hash.slice(1)), el = id ? document.getElementById(id) : null;
+    if (el && el.tagName === 'DETAILS') { el.hidden = false; el.open = true; el.scrollIntoView(); }
+  }
+  if (q) { q.addEventListener('input', apply); }
+  for (var i = 0; i < boxes.length; i++) { boxes[i].addEventListener('change', apply); }
+  window.addEventListener('hashchange', openTarget);
+  openTarget();
+}());"""
+SCRIPT_HASH = "sha256-" + base64.b64encode(hashlib.sha256(SCRIPT.encode()).digest()).decode()
 
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]")
 
@@ -86,19 +125,86 @@ def _mcap_href(mcap_path: str, report_dir: Path) -> str:
     return quote(Path(rel).as_posix())  # ":" is encoded, so "javascript:x" stays a file name
 
 
-def _render_plot(plotter: Plotter, plot: Plot, prefix: str) -> RenderedPlot:
+def _spans(case: CaseResult, plot: Plot) -> list[tuple[float, float, str]]:
+    """The case's fault windows in the plot's x (time plots that know their bench time at x = 0)."""
+    if plot.kind != "time" or plot.x0 is None:
+        return []
+    end = case.sim_start + case.sim_time
+    return [(f.start - plot.x0, (end if f.end is None else f.end) - plot.x0, f"{f.spec} ({f.frames} frames)")
+            for f in case.faults]
+
+
+def _render_plot(plotter: Plotter, plot: Plot, prefix: str, case: CaseResult | None = None) -> RenderedPlot:
     """A plot, or a visible note where it failed: a bad series must not cost the whole report."""
     try:
-        return plotter.render(plot, prefix)
+        return plotter.render(plot, prefix, _spans(case, plot) if case is not None else None)
     except Exception as exc:  # noqa: BLE001 - the report of a long run matters more
         note = escape(f"plot could not be drawn: {type(exc).__name__}: {exc}")
         return RenderedPlot(str(plot.title), plot.kind, f'<p class="plot-error">{note}</p>', [])
 
 
+@dataclass
+class Failure:
+    """A case that did not pass, as the list at the top of the report shows it."""
+
+    index: int                   # 1-based: the case's anchor is case-<index>
+    case: CaseResult
+    steps: list[Step]
+    more: int
+    line: str                    # first line of the failure message (an exception, a timeout)
+
+
+def failures(run: RunResult) -> list[Failure]:
+    out = []
+    for i, case in enumerate(run.cases, 1):
+        if case.outcome in FAILED:
+            failed = case.failed_steps
+            line = ""
+            if case.message and not case.message.startswith("failed steps:"):
+                line = next((ln for ln in reversed(case.message.splitlines()) if ln.strip()), "")[:300]
+            out.append(Failure(i, case, failed[:FAILED_STEPS_SHOWN], max(0, len(failed) - FAILED_STEPS_SHOWN), line))
+    return out
+
+
+@dataclass
+class _InvalidRow:
+    message: str
+    reason: str
+    frames: int = 0
+    cases: list[dict[str, object]] = field(default_factory=list)
+
+
+@dataclass
+class InvalidSources:
+    rows: list[_InvalidRow]
+    outside: int                 # invalid frames of the run that no case's record itemises
+
+
+def invalid_sources(run: RunResult) -> InvalidSources:
+    """Where the run's invalid frames come from: per message and reason, with the cases they arrived in."""
+    rows: dict[tuple[str, str], _InvalidRow] = {}
+    itemised = 0
+    for i, case in enumerate(run.cases, 1):
+        for message, reason, count in case.invalid:
+            n = int(count)
+            itemised += n
+            row = rows.setdefault((message, reason), _InvalidRow(message, reason))
+            row.frames += n
+            row.cases.append({"index": i, "name": case.name, "frames": n, "fault": bool(case.faults)})
+    for row in rows.values():
+        row.cases.sort(key=lambda c: -int(c["frames"]))   # type: ignore[call-overload]
+    ordered = sorted(rows.values(), key=lambda r: -r.frames)
+    return InvalidSources(ordered, max(0, run.invalid_frames - itemised))
+
+
+def _search_key(case: CaseResult) -> str:
+    return " ".join([case.name, case.nodeid, *case.reqs, *case.duts, *(f.spec for f in case.faults)]).lower()
+
+
 def render_html(run: RunResult, report_dir: Path = Path(".")) -> str:
     """The report as a string; ``report_dir`` is where it will live (for relative links)."""
     plotter = Plotter()
-    plots = [[_render_plot(plotter, plot, f"c{i}p{j}") for j, plot in enumerate(case.plots)]
+    plots = [[_render_plot(plotter, plot, f"c{i}p{j}", case) for j, plot in enumerate(case.plots)]
              for i, case in enumerate(run.cases)]
     return _env().get_template("report.html.j2").render(
         run=run,
@@ -106,6 +212,11 @@ def render_html(run: RunResult, report_dir: Path = Path(".")) -> str:
         plots=plots,
         conformance=build_conformance(run),
         mcap_href=_mcap_href(run.mcap_path, report_dir),
+        failures=failures(run),
+        invalid=invalid_sources(run),
+        keys=[_search_key(c) for c in run.cases],
+        script=Markup(SCRIPT),
+        script_hash=SCRIPT_HASH,
     )
 
 

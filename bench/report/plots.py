@@ -1,46 +1,42 @@
-"""Plots of a case as inline SVG, drawn with matplotlib's object API (no pyplot, no GUI).
+"""Plots of a case as small inline SVG, drawn directly (no matplotlib).
 
-Speed: a run has ~60 cases with ~3 plots; building a matplotlib figure and its axes costs
-more than drawing the data, so a :class:`Plotter` keeps one figure per plot kind and
-only swaps lines and labels. Layout is fixed (constrained/tight layout measure every
-tick label several times); title and legend are HTML. Series are cut to at most
-:data:`MAX_POINTS` points.
+Size: a campaign has ~400 plots and the whole report must stay within a few MB
+(tests/test_report_size.py), so every series is reduced to what the page can show: at most
+:data:`MAX_POINTS` points (min and max per bucket, so spikes survive), then simplified in
+pixel space (a point goes when the line moves by less than :data:`SIMPLIFY_PX` without it),
+and written as a relative path with 0.1 px resolution. Strokes, fonts and colours of the axes
+are CSS classes of the page, not attributes repeated in every element.
 
-Safety: text stays SVG text (``svg.fonttype = "none"``): the files stay small, labels
-stay selectable, and matplotlib XML-escapes every string it writes (tests check that
-hostile signal names cannot become markup). Mathtext is off for all user strings so a
-``$`` in a DBC signal name neither changes nor breaks the plot.
+Honesty: a line breaks where a series has a gap (NaN, or consecutive samples more than
+``Series.gap`` apart: the frames stopped), so a silent sender is not drawn as a ramp; a
+series without points stays in the legend marked "(no frames)"; fault windows are shaded.
+
+Safety: every string is XML-escaped and stripped of control characters; ids carry the plot's
+``prefix`` so that many inline SVGs can share one page.
 """
 
 from __future__ import annotations
 
-import io
+import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-import matplotlib
 import numpy as np
-from matplotlib.backends.backend_svg import FigureCanvasSVG
-from matplotlib.figure import Figure
-from matplotlib.axes import Axes
-from matplotlib.ticker import MaxNLocator
+from markupsafe import escape
 
 from bench.results import Plot, Series
 
 MAX_POINTS = 1000
-"""Points per series at most: about two per horizontal pixel of the axes as the page shows them."""
+"""Points per series at most before the pixel-space simplification: about two per pixel column."""
+SIMPLIFY_PX = 0.4
+"""A point is dropped when the polyline without it stays within this many pixels of it."""
 
-_RC = {"svg.fonttype": "none", "svg.hashsalt": "bench", "path.simplify": True}
-_FIG_IN = {"time": (7.5, 2.8), "xy": (5.0, 4.4)}     # figure width, height in inches
-_LEFT, _RIGHT, _BOTTOM, _TOP = 0.8, 0.2, 0.5, 0.15    # margins in inches
+_SIZE = {"time": (640, 210), "xy": (420, 380)}        # viewBox width, height (CSS px at natural size)
+_LEFT, _RIGHT, _TOP, _BOTTOM = 56, 10, 8, 34         # axes margins, px
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd",
            "#8c564b", "#e377c2", "#17becf", "#7f7f7f", "#bcbd22")
-_PROLOGUE = re.compile(r"\A.*?(?=<svg\b)", re.S)
-_METADATA = re.compile(r"<metadata>.*?</metadata>\s*", re.S)
-_GLOBAL_STYLE = re.compile(r'<style type="text/css">\*\{[^}]*\}</style>\s*')
-_TAG = re.compile(r"<[^<>]+>")
-_REF = re.compile(r'(\sid=["\']|href=["\']#|url\(#)')
-_STEPS = [1, 2, 2.5, 5, 10]                           # "nice" tick steps, as AutoLocator
+NO_FRAMES = " (no frames)"
+_STEPS = (1.0, 2.0, 2.5, 5.0, 10.0)                  # "nice" tick steps
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]")
 
 
@@ -75,13 +71,37 @@ def _first_per_bucket(mask: np.ndarray, edges: np.ndarray) -> np.ndarray:
     return hits[np.searchsorted(hits, edges[:-1])]
 
 
+def simplify(px: np.ndarray, py: np.ndarray, eps: float = SIMPLIFY_PX) -> np.ndarray:
+    """Indices of the points to keep (Ramer-Douglas-Peucker in pixel space, tolerance ``eps`` px)."""
+    n = len(px)
+    keep = np.zeros(n, dtype=bool)
+    if n == 0:
+        return np.flatnonzero(keep)
+    keep[0] = keep[-1] = True
+    stack = [(0, n - 1)]
+    while stack:
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        dx, dy = px[b] - px[a], py[b] - py[a]
+        xs, ys = px[a + 1:b] - px[a], py[a + 1:b] - py[a]
+        norm = math.hypot(dx, dy)
+        d = np.abs(dy * xs - dx * ys) / norm if norm > 1e-9 else np.hypot(xs, ys)
+        i = int(np.argmax(d))
+        if d[i] > eps:
+            keep[a + 1 + i] = True
+            stack.append((a, a + 1 + i))
+            stack.append((a + 1 + i, b))
+    return np.flatnonzero(keep)
+
+
 def clean(text: object) -> str:
     """Text without control characters, which are illegal in the XML that SVG is."""
     return _CONTROL.sub("", str(text))
 
 
 def _cut(text: str, limit: int) -> str:
-    """An axis label that fits its axis; the SVG would silently clip a longer one."""
+    """An axis label that fits its axis."""
     text = clean(text)
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
@@ -91,93 +111,181 @@ def _arrays(series: Series) -> tuple[np.ndarray, np.ndarray]:
     n = min(len(series.x), len(series.y))
     x = np.asarray(series.x[:n], dtype=float)
     y = np.asarray(series.y[:n], dtype=float)
-    x[np.isinf(x)] = np.nan  # an infinite value would make autoscaling raise: show a gap
+    x[np.isinf(x)] = np.nan
     y[np.isinf(y)] = np.nan
     return x, y
 
 
-def _unique_ids(svg: str, prefix: str) -> str:
-    """Prefix every id and id reference so that many inline SVGs can share one HTML page.
+def nice_ticks(lo: float, hi: float, bins: int) -> tuple[list[float], int]:
+    """Tick values within [lo, hi] at a "nice" step (1, 2, 2.5, 5 × 10^k), and the decimals they need."""
+    span = hi - lo
+    raw = span / max(bins, 1)
+    mag = 10.0 ** math.floor(math.log10(raw))
+    step = next(s * mag for s in _STEPS if s * mag >= raw * (1 - 1e-9))
+    first = math.ceil(lo / step - 1e-9)
+    ticks = [k * step for k in range(first, math.floor(hi / step + 1e-9) + 1)]
+    decimals = max(0, -math.floor(math.log10(step) + 1e-9))
+    if round(step / 10.0 ** -decimals, 6) % 1:   # 2.5 × 10^k needs one more
+        decimals += 1
+    return ticks, decimals
 
-    Only tags are touched: user text is escaped (no raw "<" or ">"), so it never matches.
-    """
-    return _TAG.sub(lambda tag: _REF.sub(lambda m: m.group(1) + prefix, tag.group(0)), svg)
+
+def _limits(values: list[np.ndarray]) -> tuple[float, float]:
+    finite = [v[np.isfinite(v)] for v in values]
+    finite = [v for v in finite if len(v)]
+    if not finite:
+        return 0.0, 1.0
+    lo = float(min(v.min() for v in finite))
+    hi = float(max(v.max() for v in finite))
+    if hi - lo < 1e-12 * max(1.0, abs(hi)):
+        pad = max(abs(hi) * 0.05, 0.5)
+        return lo - pad, hi + pad
+    pad = (hi - lo) * 0.03
+    return lo - pad, hi + pad
+
+
+def _num(tenths: int) -> str:
+    """An int count of 0.1 px as short SVG number text: 12, 1.5, .5, -.5."""
+    if tenths % 10 == 0:
+        return str(tenths // 10)
+    text = f"{tenths / 10:.1f}"
+    return text.replace("0.", ".", 1) if text.startswith(("0.", "-0.")) else text
+
+
+def _path(px: np.ndarray, py: np.ndarray) -> str:
+    """Path data of one unbroken polyline: absolute start, then relative steps of 0.1 px."""
+    xs = np.rint(px * 10).astype(np.int64)
+    ys = np.rint(py * 10).astype(np.int64)
+    parts = [f"M{_num(int(xs[0]))} {_num(int(ys[0]))}"]
+    if len(xs) == 1:
+        return parts[0] + "h.1"   # a lone sample still shows (round cap)
+    dx, dy = np.diff(xs), np.diff(ys)
+    moved = (dx != 0) | (dy != 0)
+    steps = []
+    for a, b in zip(dx[moved].tolist(), dy[moved].tolist()):
+        sb = _num(b)
+        steps.append(_num(a) + (sb if sb[0] == "-" else " " + sb))
+    return parts[0] + "l" + " ".join(steps) if steps else parts[0] + "h.1"
+
+
+def _runs(x: np.ndarray, y: np.ndarray, gap: float | None) -> list[np.ndarray]:
+    """Index arrays of the unbroken stretches of a series: split at NaN and where x jumps by more than `gap`."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    new = np.ones(len(x), dtype=bool)
+    new[1:] = ~ok[:-1]
+    if gap is not None and len(x) > 1:
+        with np.errstate(invalid="ignore"):
+            new[1:] |= np.diff(x) > gap
+    idx = np.flatnonzero(ok)
+    if not len(idx):
+        return []
+    run_of = np.cumsum(new)[idx]
+    bounds = (np.flatnonzero(np.diff(run_of)) + 1).tolist()
+    return [idx[a:b] for a, b in zip([0, *bounds], [*bounds, len(idx)])]
 
 
 @dataclass
 class RenderedPlot:
-    """A plot ready for the page: the SVG, and the legend as (name, colour) for HTML."""
+    """A plot ready for the page: the SVG, the legend as (name, colour) for HTML, the shaded windows."""
 
     title: str
     kind: str
     svg: str
     legend: list[tuple[str, str]]
+    spans: list[str] = field(default_factory=list)
 
 
 class Plotter:
-    """Renders :class:`Plot` records to inline SVG, reusing one figure per kind.
+    """Renders :class:`Plot` records to compact inline SVG. Title and legend are left to the HTML page."""
 
-    Title and legend are left to the HTML page: text measurement is most of matplotlib's
-    cost per plot, and HTML wraps long DBC signal names instead of clipping them.
-    Not thread-safe; make one per report.
-    """
-
-    def __init__(self) -> None:
-        self._figs: dict[str, Figure] = {}
-
-    def _axes(self, kind: str) -> tuple[Figure, Axes]:
-        if kind not in self._figs:
-            w, h = _FIG_IN[kind]
-            fig = Figure(figsize=(w, h))
-            fig.subplots_adjust(left=_LEFT / w, right=1 - _RIGHT / w, bottom=_BOTTOM / h,
-                                top=1 - _TOP / h)
-            ax = fig.add_subplot()
-            ax.grid(True, alpha=0.3)
-            ax.tick_params(labelsize=8)
-            # fewer ticks than matplotlib's "auto": each tick is several artists to draw
-            ax.xaxis.set_major_locator(MaxNLocator(nbins=7 if kind == "time" else 6, steps=_STEPS))
-            ax.yaxis.set_major_locator(MaxNLocator(nbins=5 if kind == "time" else 6, steps=_STEPS))
-            self._figs[kind] = fig
-        fig = self._figs[kind]
-        ax = fig.axes[0]
-        for artist in [*ax.lines, *ax.texts]:
-            artist.remove()
-        ax.set_autoscale_on(True)  # an empty plot before fixed the limits
-        return fig, ax
-
-    def render(self, plot: Plot, prefix: str = "p") -> RenderedPlot:
-        """Draw ``plot``; ``prefix`` (unique in the page) namespaces the SVG's ids."""
+    def render(self, plot: Plot, prefix: str = "p",
+               spans: list[tuple[float, float, str]] | None = None) -> RenderedPlot:
+        """Draw ``plot``; ``prefix`` (unique in the page) namespaces the SVG's ids; ``spans`` are
+        (x_start, x_end, label) windows to shade (faults), in the plot's x units."""
         kind = "xy" if plot.kind == "xy" else "time"
+        w, h = _SIZE[kind]
+        ax_w, ax_h = w - _LEFT - _RIGHT, h - _TOP - _BOTTOM
+        data = [(s, *_arrays(s)) for s in plot.series]
+        reduced = []
+        for s, x, y in data:
+            if len(x) and kind == "time" and np.isfinite(x).all() and np.all(np.diff(x) >= 0):
+                gaps = np.zeros(len(x), dtype=bool)
+                if s.gap is not None and len(x) > 1:
+                    gaps[1:] = np.diff(x) > s.gap
+                if not gaps.any():
+                    x, y = decimate(x, y)
+            elif len(x) > 20 * MAX_POINTS:
+                x, y = decimate(x, y, max_points=20 * MAX_POINTS, keep_extremes=False)
+            reduced.append((s, x, y))
+        xlo, xhi = _limits([x for _, x, _ in reduced])
+        ylo, yhi = _limits([y for _, _, y in reduced])
+        if kind == "xy":   # equal scales: widen the range that is short for its side
+            scale = max((xhi - xlo) / ax_w, (yhi - ylo) / ax_h)
+            cx, cy = (xlo + xhi) / 2, (ylo + yhi) / 2
+            xlo, xhi = cx - scale * ax_w / 2, cx + scale * ax_w / 2
+            ylo, yhi = cy - scale * ax_h / 2, cy + scale * ax_h / 2
+        sx, sy = ax_w / (xhi - xlo), ax_h / (yhi - ylo)
+
+        def X(v: np.ndarray | float) -> np.ndarray | float:
+            return _LEFT + (v - xlo) * sx
+
+        def Y(v: np.ndarray | float) -> np.ndarray | float:
+            return _TOP + ax_h - (v - ylo) * sy
+
+        out = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {w} {h}" class="chart">',
+               f'<defs><clipPath id="{prefix}-c"><rect x="{_LEFT}" y="{_TOP}" width="{ax_w}" height="{ax_h}"/>'
+               f'</clipPath></defs>']
+        shaded: list[str] = []
+        for start, end, label in spans or []:
+            a, b = max(start, xlo), min(end, xhi)
+            if b <= a:
+                continue
+            x0, x1 = float(X(a)), float(X(b))
+            text = escape(clean(label))
+            out.append(f'<rect class="fault" x="{x0:.1f}" y="{_TOP}" width="{max(x1 - x0, 0.5):.1f}" '
+                       f'height="{ax_h}"><title>{text}</title></rect>')
+            shaded.append(clean(label))
+        grid, labels = [], []
+        xt, xd = nice_ticks(xlo, xhi, 7 if kind == "time" else 6)
+        for v in xt:
+            p = float(X(v))
+            grid.append(f"M{p:.1f} {_TOP}v{ax_h}")
+            labels.append(f'<text x="{p:.1f}" y="{_TOP + ax_h + 13}" class="xt">{v:.{xd}f}</text>')
+        yt, yd = nice_ticks(ylo, yhi, 5 if kind == "time" else 6)
+        for v in yt:
+            p = float(Y(v))
+            grid.append(f"M{_LEFT} {p:.1f}h{ax_w}")
+            labels.append(f'<text x="{_LEFT - 4}" y="{p + 3:.1f}" class="yt">{v:.{yd}f}</text>')
+        out.append(f'<path class="grid" d="{"".join(grid)}"/>')
+        out.append(f'<rect class="frame" x="{_LEFT}" y="{_TOP}" width="{ax_w}" height="{ax_h}"/>')
+        out.extend(labels)
         legend: list[tuple[str, str]] = []
-        with matplotlib.rc_context(_RC):
-            fig, ax = self._axes(kind)
-            for i, series in enumerate(plot.series):
-                x, y = _arrays(series)
-                if len(x):
-                    x, y = decimate(x, y, keep_extremes=kind == "time")
-                    colour = PALETTE[i % len(PALETTE)]
-                    ax.plot(x, y, linewidth=1.0, color=colour, marker="." if len(x) == 1 else "")
-                    legend.append((clean(series.name), colour))
-            if legend:
-                ax.relim()
-                ax.autoscale_view()
-            else:
-                ax.set(xlim=(0, 1), ylim=(0, 1))
-                ax.text(0.5, 0.5, "no data", transform=ax.transAxes, ha="center",
-                        va="center", color="0.5")
-            ax.set_aspect("equal" if kind == "xy" else "auto", adjustable="datalim")
-            ax.set_xlabel(_cut(plot.xlabel, 110), parse_math=False, fontsize=9)
-            ax.set_ylabel(_cut(plot.ylabel, 45 if kind == "time" else 70), parse_math=False,
-                          fontsize=9)
-            buf = io.StringIO()
-            FigureCanvasSVG(fig).print_svg(buf, metadata={"Date": None})
-        svg = _PROLOGUE.sub("", buf.getvalue(), count=1)
-        svg = _METADATA.sub("", svg, count=1)
-        # matplotlib's "*{...}" rule would style the whole HTML page; the page CSS scopes it
-        svg = _GLOBAL_STYLE.sub("", svg, count=1)
-        return RenderedPlot(clean(plot.title), kind, _unique_ids(svg, prefix + "-"), legend)
+        lines = [f'<g clip-path="url(#{prefix}-c)">']
+        for i, (s, x, y) in enumerate(reduced):
+            colour = PALETTE[i % len(PALETTE)]
+            name = clean(s.name)
+            if not np.isfinite(x).any():
+                legend.append((name + NO_FRAMES, ""))
+                continue
+            legend.append((name, colour))
+            d = []
+            for run in _runs(x, y, s.gap if kind == "time" else None):
+                px, py = np.asarray(X(x[run]), dtype=float), np.asarray(Y(y[run]), dtype=float)
+                keep = simplify(px, py)
+                d.append(_path(px[keep], py[keep]))
+            lines.append(f'<path class="s" stroke="{colour}" d="{"".join(d)}"/>')
+        lines.append("</g>")
+        out.extend(lines)
+        if not any(colour for _, colour in legend):
+            out.append(f'<text x="{_LEFT + ax_w / 2:.0f}" y="{_TOP + ax_h / 2:.0f}" class="nodata">no data</text>')
+        xlabel = escape(_cut(plot.xlabel, 110))
+        ylabel = escape(_cut(plot.ylabel, 40 if kind == "time" else 60))
+        out.append(f'<text x="{_LEFT + ax_w / 2:.0f}" y="{h - 6}" class="xl">{xlabel}</text>')
+        out.append(f'<text transform="translate(12 {_TOP + ax_h / 2:.0f}) rotate(-90)" class="yl">{ylabel}</text>')
+        out.append("</svg>")
+        return RenderedPlot(clean(plot.title), kind, "".join(out), legend, shaded)
 
 
 def render_svg(plot: Plot, prefix: str = "p") -> str:
-    """One plot as an inline ``<svg>`` (a fresh :class:`Plotter`; reuse one for many plots)."""
+    """One plot as an inline ``<svg>``."""
     return Plotter().render(plot, prefix).svg
