@@ -121,6 +121,12 @@ def test_every_problem_is_its_own_line(tmp_path: Path, capsys: pytest.CaptureFix
         assert sum(needle in line for line in lines) == 1, (needle, lines)
 
 
+def test_missing_test_path(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", str(tmp_path / "nowhere.py"), "--out", str(tmp_path / "out")]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert line == f"bench run: error: {tmp_path / 'nowhere.py'}: no such test file or folder"
+
+
 def test_data_bitrate_without_fd(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     [line] = errors(capsys, ["--interface", "udp_multicast", "--data-bitrate", "2000000",
                              "--out", str(tmp_path / "out")])

@@ -17,10 +17,10 @@ from bench.bus import check_channel, is_virtual, probe_bus
 from bench.busopts import BusOptions
 from bench.cli.common import (InputProblems, add_bus_options, add_node_options, check_out_dir,
                               given_bus_options)
-from bench.codec import Codebook, load_codebook
+from bench.codec import load_codebook
 from bench.config import ProjectConfig, load_config
 from bench.errors import BenchError
-from bench.faults import FaultPlan, parse_fault
+from bench.faults import validate as validate_faults
 from bench.marks import split_names
 from bench.run import default_out_dir
 from bench.session import resolve_bus_options, resolve_external
@@ -113,6 +113,9 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
             return None
 
     codebook = load_codebook(project.databases)   # a database that does not load makes every other check moot
+    for path in args.paths:
+        if not Path(path.partition("::")[0]).exists():
+            problems.append(f"{path}: no such test file or folder")
     check(resolve_external, codebook, project.stimulus, args.external)
     unknown = [n for n in split_names(args.dut) if n not in codebook.nodes]
     if unknown:
@@ -126,24 +129,13 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
         problems.append("-n: parallel workers each need their own in-process virtual bus; "
                         f"--interface {args.interface} is one shared bus")
     options = check(resolve_bus_options, project, given_bus_options(args), codebook)
-    for spec in args.fault:
-        problems.extend(_fault_problems(spec, codebook))
+    problems.extend(validate_faults(args.fault, codebook))
     check(check_out_dir, out_dir, args.force)
     if not problems and interface_known:
         assert isinstance(options, BusOptions)
         check(probe_bus, args.interface, args.channel, options)
     if problems:
         raise InputProblems(problems)
-
-
-def _fault_problems(spec: str, codebook: Codebook) -> list[str]:
-    """A --fault spec that parses and names a message, node or identifier of the databases."""
-    try:
-        FaultPlan(codebook).add(parse_fault(spec))
-    except BenchError as exc:
-        text = str(exc)
-        return [text if spec in text else f"--fault {spec!r}: {text}"]
-    return []
 
 
 def _rootdir(project: ProjectConfig, paths: list[str]) -> Path:
