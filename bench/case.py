@@ -51,7 +51,16 @@ def _shown(value: float) -> float | str:
 
 
 class Case:
-    """One test case on a bench session."""
+    """The `bench` fixture: one test case on a bench session.
+
+    A case drives the stimulus messages (`set`, `start_scenario`), lets bench time pass (`run`,
+    `wait_until`), reads what the monitor accepted (`value`, `history`, `detections`) and checks it
+    (`expect`, `expect_between`, `eventually`, `always`, `check_cycle_times`). Every check records one
+    *step* in the report: name, measured, expected, tolerance, verdict and the bench time of the check.
+    Checks never raise: the case runs to its end and fails when any step failed. Times are bench time in
+    seconds (virtual on the embedded default, wall-clock on a real bus); signal values are physical values
+    in the DBC's units.
+    """
 
     def __init__(self, session: BenchSession, result: CaseResult, steps: StepLog) -> None:
         self.session = session
@@ -79,28 +88,32 @@ class Case:
     # -- time --------------------------------------------------------------------------------------
     @property
     def now(self) -> float:
-        """Bench time, s."""
+        """Bench time now, s (0 at the start of the run). Records no step."""
         return self.session.now()
 
     @property
     def elapsed(self) -> float:
-        """Bench time since the case (or its scenario) started, s."""
+        """Bench time since the case (or its latest `start_scenario`) started, s. Records no step."""
         return self.now - self.start
 
     def run(self, seconds: float) -> None:
-        """Let the bus and the plant run for `seconds` of bench time."""
+        """Let the bus, the plant and the simulated ECUs run for `seconds` s of bench time (every frame is
+        sent, received and checked meanwhile). Records no step."""
         self.session.run_until(self.now + seconds)
 
     def wait_until(self, predicate: Callable[[], bool], timeout: float) -> bool:
-        """Run until predicate() is true (checked every tick) or timeout s pass; returns predicate()."""
+        """Run until `predicate()` is true (checked every 1 ms tick) or `timeout` s of bench time pass.
+        Returns `predicate()` at the end: True as soon as it held. Records no step (`eventually` is the
+        check that does)."""
         if predicate():
             return True
         return self.session.run_until(self.now + timeout, predicate)
 
     def every(self, period: float, callback: Callable[[float], None]) -> Callable[[], None]:
-        """Call callback(now) every `period` s of bench time while the bench runs (a test node's timer,
-        e.g. a closed-loop driver model that sets the stimulus from what it reads). Returns a cancel
-        function; every timer ends with its scenario (start_scenario) or with the case."""
+        """Call `callback(now)` every `period` s of bench time while the bench runs (a test node's timer,
+        e.g. a closed-loop driver model that sets the stimulus from what it reads); `now` is bench time, s.
+        Returns a cancel function; every timer ends with its scenario (`start_scenario`) or with the case.
+        Records no step."""
         if not period > 0:
             raise BenchError(f"timer period must be > 0 s, not {period!r}")
         timer = _Timer(self.now + period, period, callback)
@@ -114,8 +127,9 @@ class Case:
         return cancel
 
     def close(self) -> None:
-        """End of the case: its timers stop, its case+ fault windows close, and the faults that were
-        active and the invalid frames seen during it go on its record."""
+        """End of the case (the pytest plugin calls it; a case need not): its timers stop, its case+ fault
+        windows close, and the faults that were active and the invalid frames seen during it go on its
+        record in the report. Records no step."""
         for timer in self._timers:
             if timer in self._runner.behaviours:
                 self._runner.behaviours.remove(timer)
@@ -129,7 +143,7 @@ class Case:
         t0 = self.result.sim_start
         records: list[FaultRecord] = []
         for fault in plan.history + _instances(plan):
-            if fault.relative != "run" or not (fault.start <= now and fault.end >= t0):
+            if fault.relative != "run" or not (fault.start < now and fault.end > t0):
                 continue
             record = fault.record()
             record.frames = fault.frames - self._fault_frames0.get(id(fault), 0)
@@ -143,22 +157,28 @@ class Case:
 
     # -- stimulus ----------------------------------------------------------------------------------
     def set(self, message: str, **signals: float | int | str) -> None:
-        """Set signals of a stimulus message; sent from its next cycle on."""
+        """Set signals of a stimulus message (physical values in the DBC's units, or a value table's
+        name such as `DriveMode="PIVOT"`); the message carries them from its next cycle on. Raises on an
+        unknown message or signal or a value outside the DBC's range. Records no step."""
         self._runner.restbus.set(message, **signals)
 
     def stop_sending(self, message: str) -> None:
-        """Stop sending a stimulus message (receivers will time it out) until resume_sending."""
+        """Stop sending a stimulus message until `resume_sending` (its receivers time it out after
+        3 × its cycle time); its AliveCounter carries on where it stopped. Records no step."""
         self._runner.restbus.enable(message, False)
 
     def resume_sending(self, message: str) -> None:
+        """Send a stimulus message again after `stop_sending`, from its next cycle on. Records no step."""
         self._runner.restbus.enable(message, True)
 
     def start_scenario(self, *, stimulus: Iterable[str] | None = None, **control: float | int | str) -> None:
-        """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`),
-        reset every stimulus message to its start values, end the timers of the last scenario, and wait
-        for the plant's acknowledgement. `stimulus`: the stimulus messages this scenario sends (besides
-        the scenario message itself); the others stay off the bus until the next scenario (a vehicle whose
-        network reads none of them need not carry them). Default: every stimulus message."""
+        """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`, e.g.
+        `Vehicle="EV4WIS"`), reset every stimulus message to its start values, end the timers of the last
+        scenario, and wait (up to 2 s of bench time) for the plant's acknowledgement (PLANT_Status.ScenarioIdAck);
+        `elapsed`, `history` and `invalid_frames` count from then on. `stimulus`: the stimulus messages this
+        scenario sends (besides the scenario message itself); the others stay off the bus until the next
+        scenario (a vehicle whose network reads none of them need not carry them). Default: every stimulus
+        message. Raises BenchError when the plant does not acknowledge. Records no step."""
         self.close()                  # timers belong to a scenario: a driver of the last one must not steer this one
         restbus = self._runner.restbus
         restbus.reset_all()
@@ -187,8 +207,11 @@ class Case:
     def inject(self, kind: str, target: str, *, after: float = 0.0, duration: float = math.inf,
                param: float = 0.0) -> Fault:
         """Inject a fault (bench.faults: drop, delay, duplicate, bitflip, counter_freeze, counter_jump,
-        checksum_value/freeze/random/offset, silence, bus_off, flood, error_frame) starting `after` s
-        from now and lasting `duration` s. Returns it; its window is in bench time."""
+        checksum_value/freeze/random/offset, silence, bus_off, flood, error_frame) on `target` (a message,
+        a node for silence/bus_off, an identifier such as "0x000" for flood), starting `after` s from now
+        and lasting `duration` s (default: to the end of the run). `param`: the kind's parameter (delay s,
+        bit index, counter jump, checksum value or offset, flood frames per ms). Returns the Fault; its
+        window is in bench time. Records no step; the fault goes on the case's record in the report."""
         start = self.now + after
         fault = Fault(kind, target, start, start + duration, param, source=self.result.nodeid)
         if kind not in KINDS:
@@ -196,9 +219,10 @@ class Case:
         return self.session.faults.add(fault)
 
     def detections(self, message: str, since: float | None = None) -> list[tuple[float, str]]:
-        """When the bench's monitor flagged a message since `since` (default: case start): every
-        invalid frame (reason) and every timeout ("timeout"), in time order. `message` may also be
-        "error frame" or an unknown identifier as "0x7FF"."""
+        """When the bench's monitor flagged a message since `since` (bench time, s; default: case start):
+        a list of (bench time s, reason) for every invalid frame (e.g. "counter 3 repeated", "checksum")
+        and every timeout ("timeout"), in time order. `message` may also be "error frame" or an unknown
+        identifier as "0x7FF". Records no step."""
         since = self.start if since is None else since
         self._monitor.check_timeouts(self.now)
         found = [(f.t, f.reason) for f in self._monitor.invalid_log if f.message == message and f.t >= since]
@@ -209,8 +233,9 @@ class Case:
 
     # -- observation -------------------------------------------------------------------------------
     def value(self, message: str, signal: str) -> float:
-        """Latest valid value of a signal. With no valid frame now, a NaN (:class:`NoFrames`) that a check
-        records as "no frames of MESSAGE" (none came) or "MESSAGE timed out" (none lately)."""
+        """Latest valid value of a signal (physical, in the DBC's unit) from the frames the monitor
+        accepted. With no valid frame now, a NaN (`NoFrames`) that a check records as "no frames of
+        MESSAGE" (none came) or "MESSAGE timed out" (none lately). Records no step."""
         latest = self._monitor.latest(message, self.now)
         if latest is None:
             if signal not in self.session.codebook[message].signal_names:
@@ -224,22 +249,29 @@ class Case:
         return latest[signal]
 
     def history(self, message: str, signal: str, since: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(times, values) of every valid frame of a signal since `since` (default: case start)."""
+        """(times, values) of every valid frame of a signal since `since` (bench time, s; default: case
+        start) as two numpy arrays: bench time in s and physical values in the DBC's unit. Records no step."""
         t, v = self._monitor.history(message, signal, self.start if since is None else since)
         return np.asarray(t, dtype=float), np.asarray(v, dtype=float)
 
     def timed_out(self, message: str) -> bool:
+        """True when no valid frame of `message` came for more than 3 × its cycle time, or none ever came
+        (a message without a cycle time times out only so). Records no step."""
         return self._monitor.timed_out(message, self.now)
 
     def invalid_frames(self) -> list[InvalidFrame]:
-        """Every invalid frame (checksum, counter, length, range) since the case (or scenario) started."""
+        """Every invalid frame (checksum, counter, length, range) since the case (or its latest scenario)
+        started, each with its bench time (s), identifier, message and reason. Records no step."""
         monitor = self._monitor
         return monitor.invalid_log[max(0, self._invalid_mark - monitor.invalid_dropped):]
 
     # -- checks ------------------------------------------------------------------------------------
     def expect(self, name: str, measured: float, expected: float, *, abs_tol: float = 0.0,
                rel_tol: float = 0.0, unit: str = "", detail: str = "") -> bool:
-        """measured within max(abs_tol, rel_tol·|expected|) of expected."""
+        """Check that `measured` is within max(`abs_tol`, `rel_tol`·|`expected`|) of `expected` (`unit`:
+        the unit of all three, shown in the report). Records one step: measured, expected, the tolerance,
+        pass/fail; a NaN on either side fails (a `value()` without frames is recorded as "no frames of
+        MESSAGE"). Returns the verdict."""
         if abs_tol < 0 or rel_tol < 0:
             raise BenchError(f"check {name!r}: tolerances must not be negative")
         ok = within(float(measured), float(expected), abs_tol, rel_tol)
@@ -248,15 +280,21 @@ class Case:
 
     def expect_true(self, name: str, condition: bool, *, measured: float | str | None = None,
                     expected: float | str | None = None, detail: str = "") -> bool:
+        """Check a condition the case computed itself. Records one step, pass when `condition` is true,
+        with the `measured` and `expected` it is given (for the reader of the report). Returns the verdict."""
         return self._steps.record(name, bool(condition), measured, expected, "", "", detail)
 
     def expect_between(self, name: str, measured: float, low: float, high: float, *, unit: str = "",
                        detail: str = "") -> bool:
+        """Check that `low` ≤ `measured` ≤ `high` (bounds included, all in `unit`). Records one step with
+        expected "[low, high]" and tolerance "range"; a NaN fails. Returns the verdict."""
         ok = math.isfinite(float(measured)) and low <= float(measured) <= high
         return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail)
 
     def eventually(self, name: str, predicate: Callable[[], bool], within_s: float) -> bool:
-        """Passes when predicate() becomes true within `within_s`; measured = the time it took."""
+        """Run until `predicate()` is true, at most `within_s` s of bench time. Records one step: pass
+        when it became true in time, measured = the time it took (s), or "not within N s". Returns the
+        verdict."""
         t0 = self.now
         ok = self.wait_until(predicate, within_s)
         took = self.now - t0
@@ -264,7 +302,9 @@ class Case:
                                   f"≤ {within_s:g} s", "eventually", "s")
 
     def always(self, name: str, predicate: Callable[[], bool], during: float) -> bool:
-        """Passes when predicate() holds at every tick for `during` s; stops at the first violation."""
+        """Run for `during` s of bench time and check `predicate()` at every 1 ms tick; stops at the first
+        tick where it is false. Records one step: "held N s", or "violated at +t s" (since the call).
+        Returns the verdict."""
         t0 = self.now
         violated = self.session.run_until(t0 + during, lambda: not predicate())
         measured = f"violated at +{self.now - t0:.3f} s" if violated else f"held {during:g} s"
@@ -273,8 +313,10 @@ class Case:
     def check_cycle_times(self, messages: Iterable[str] | None = None, *, p50_band: float = 0.05,
                           p99_max: float = 1.5, max_max: float = 3.0, min_frames: int = 10) -> bool:
         """Measured cycle time per message since the case started: p50 within ±p50_band of the DBC
-        cycle, p99 ≤ p99_max × cycle and max < max_max × cycle (the timeout bound), as fractions.
-        Without `messages`: every periodic message seen on the bus since the case started."""
+        cycle (GenMsgCycleTime), p99 ≤ p99_max × cycle and max < max_max × cycle (the timeout bound), as
+        fractions. Without `messages`: every periodic message seen on the bus since the case started.
+        Records one step per message (measured p50 / p99 / max in ms); fewer than `min_frames` intervals
+        fail. Returns True when every message passed."""
         ok_all = True
         names = list(messages) if messages is not None else [
             n for n, s in self._monitor.by_name.items()
@@ -299,7 +341,9 @@ class Case:
     # -- report ------------------------------------------------------------------------------------
     def plot(self, title: str, signals: Sequence[tuple[str, str] | tuple[str, str, str]], *,
              ylabel: str = "", since: float | None = None) -> None:
-        """A time plot of signals (message, signal[, label]) since `since` (default case start)."""
+        """A time plot in the report of signals given as (message, signal[, label]), from the valid frames
+        since `since` (bench time, s; default: case start); x is the time since the case start (s), `ylabel`
+        names the y unit. Records no step."""
         series = []
         for item in signals:
             message, signal = item[0], item[1]
@@ -312,14 +356,18 @@ class Case:
 
     def plot_series(self, title: str, series: Sequence[Series], *, xlabel: str, ylabel: str,
                     kind: str = "time", x0: float | None = None) -> None:
-        """A plot of series the case computed; `x0`: the bench time at x = 0 of a time plot whose x is
-        seconds (the report then shades fault windows on it)."""
+        """A plot in the report of series the case computed (`kind` "time", or "xy" for a top view with
+        equal axes); `x0`: the bench time at x = 0 of a time plot whose x is seconds (the report then shades
+        fault windows on it). Records no step."""
         self.result.plots.append(Plot(title, xlabel, ylabel, list(series), kind, x0))  # type: ignore[arg-type]
 
     def table(self, title: str, columns: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
+        """A table in the case's part of the report (e.g. measured figures next to a paper's); floats are
+        shown with 4 significant digits. Records no step."""
         self.result.tables.append(Table(title, list(columns), [[_cell(c) for c in row] for row in rows]))
 
     def note(self, text: str) -> None:
+        """A line of text in the case's part of the report. Records no step."""
         self.result.notes.append(text)
 
 

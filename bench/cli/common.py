@@ -55,8 +55,10 @@ def add_node_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--external", nargs="+", action="extend", default=[], metavar="NODE",
                         help="nodes that are real, not simulated ('all' = every node but the stimulus)")
     parser.add_argument("--fault", action="append", default=[], metavar="SPEC",
-                        help="inject a fault: KIND:TARGET[:PARAM]@START[-END], e.g. drop:VCU_WheelCmd_FL@2-3 "
-                             "(kinds: see bench/faults.py)")
+                        help="inject a fault: KIND:TARGET[:PARAM]@[case+]START[-END] in s from the run's start, "
+                             "or with case+ from each case's start (an open END lasts to the end of the run or "
+                             "case); e.g. drop:VCU_WheelCmd_FL@2-3, drop:VCU_WheelCmd_FL@case+1-2, silence:WHL_FR@case+0.5- "
+                             "(kinds: see bench/faults.py and docs/reliability.md)")
 
 
 def given_bus_options(args: argparse.Namespace) -> BusOptions:

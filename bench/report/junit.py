@@ -12,7 +12,7 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from bench.results import CaseResult, RunResult, Step
+from bench.results import CaseResult, FaultRecord, RunResult, Step
 
 _ILLEGAL_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
 
@@ -53,13 +53,20 @@ def step_line(step: Step) -> str:
     return line + (f" – {step.detail}" if step.detail else "")
 
 
+def fault_text(fault: FaultRecord) -> str:
+    """One fault as a property value: spec, where it came from, what it did (window in bench time)."""
+    end = "end" if fault.end is None else f"{fault.end:.3f}"
+    window = f"{fault.start:.3f}-{end} s" if fault.relative == "run" else "each case"
+    return f"{fault.spec} from {fault.source}, {window}: {fault.frames} frames"
+
+
 def _testcase(parent: ET.Element, case: CaseResult) -> None:
     classname, name = split_nodeid(case.nodeid, case.name)
     tc = ET.SubElement(parent, "testcase", classname=xml_safe(classname), name=xml_safe(name),
                        time=f"{case.wall_time:.3f}")
-    if case.duts or case.reqs:   # what the case judges and checks, for CI tools that filter on properties
+    if case.duts or case.reqs or case.faults:   # what the case judges, checks and suffered, for CI tools
         props = ET.SubElement(tc, "properties")
-        for key, values in (("dut", case.duts), ("req", case.reqs)):
+        for key, values in (("dut", case.duts), ("req", case.reqs), ("fault", [fault_text(f) for f in case.faults])):
             for value in values:
                 ET.SubElement(props, "property", name=key, value=xml_safe(value))
     failed = case.failed_steps
@@ -105,6 +112,8 @@ def build_junit(run: RunResult) -> ET.ElementTree:
                        ("frames", str(run.frames)), ("invalid_frames", str(run.invalid_frames)),
                        ("aborted", str(run.aborted).lower())):
         ET.SubElement(props, "property", name=key, value=xml_safe(value))
+    for fault in run.faults:
+        ET.SubElement(props, "property", name="fault", value=xml_safe(fault_text(fault)))
     for case in run.cases:
         _testcase(suite, case)
     if run.aborted:
