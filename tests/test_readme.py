@@ -102,3 +102,31 @@ def test_command_exists_with_its_options(command: str, capsys: pytest.CaptureFix
     options = [t.split("=", 1)[0] for t in tokens if re.fullmatch(r"--?[a-zA-Z][\w-]*(=.*)?", t)]
     missing = [o for o in options if not re.search(rf"(^|[\s,\[]){re.escape(o)}($|[\s,=\]])", text, re.M)]
     assert not missing, f"{command}: `bench {' '.join(words)} --help` lists no {', '.join(missing)}"
+
+
+# -- the fixture reference (docs/reference/fixture.md, mkdocs + mkdocstrings) ------------------------------------
+def test_every_public_method_of_the_fixture_says_what_it_records() -> None:
+    """The reference is generated from the docstrings: every public method and property of Case has one, and
+    it says whether the call records a step in the report."""
+    import inspect
+
+    from bench.case import Case
+
+    assert "::: bench.case.Case" in (ROOT / "docs" / "reference" / "fixture.md").read_text(encoding="utf-8")
+    members = [name for name, _ in inspect.getmembers(Case) if not name.startswith("_")]
+    assert {"start_scenario", "set", "run", "wait_until", "eventually", "always", "inject", "expect",
+            "expect_between", "history", "value", "plot", "table", "check_cycle_times"} <= set(members)
+    for name in members:
+        doc = inspect.getdoc(getattr(Case, name)) or ""
+        assert re.search(r"[Rr]ecords? (no|one) step", doc), f"Case.{name}: its docstring says no step"
+
+
+def test_the_reference_builds_strictly(tmp_path: Path) -> None:
+    """`mkdocs build --strict` (CI runs it too, after installing the docs extras)."""
+    pytest.importorskip("mkdocstrings_handlers.python", reason="pip install -e '.[docs]'")
+    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    page = (tmp_path / "site" / "fixture" / "index.html").read_text(encoding="utf-8")
+    for method in ("eventually", "always", "inject", "expect_between", "history"):
+        assert f'id="bench.case.Case.{method}"' in page, method
