@@ -63,7 +63,8 @@ class MessageState:
     history_v: list[tuple[float, ...]] = field(default_factory=list)
     intervals_dropped: int = 0
     history_dropped: int = 0
-    last_data: bytes = b""                   # the previous frame's payload (a re-sent frame is no second sender)
+    last_data: bytes = b""                   # E2E messages: the previous frame's payload (a re-sent frame is no
+                                             # second sender; its counter starts the first counter stream)
     last_tx: float | None = None             # bench time this station last sent the message itself
     senders: e2e.SenderTracker | None = None  # counter streams, followed after a sequence error
     calm: int = 0                            # accepted frames in a row while they are followed
@@ -133,17 +134,16 @@ class Monitor:
         if state.last_valid is not None and not state.timed_out_flag and cycle is not None \
                 and t - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
             self._time_out(state)   # the consumer went 3 cycles without a valid frame: record the timeout
-        prev_seen, prev_data = state.last_seen, state.last_data
+        prev_seen = state.last_seen
         if prev_seen is not None:
             if cycle is not None and t - prev_seen > e2e.RESYNC_GAP_CYCLES * cycle + TIME_EPS:
                 state.rx.resync()   # a real reception gap (no frame at all): the sender may have restarted
                 state.senders = None
             if self.keep_intervals:
-                state.intervals.append(t - state.last_seen)
+                state.intervals.append(t - prev_seen)
                 if len(state.intervals) > 2 * INTERVALS_CAP:
                     state.intervals_dropped += _trim(state.intervals, INTERVALS_CAP)
         state.last_seen = t
-        state.last_data = data
         state.frames += 1
         if direction == "tx":
             state.last_tx = t
@@ -154,10 +154,10 @@ class Monitor:
         values = None
         length_ok = len(data) == codec.length
         if codec.e2e:
-            reference = state.rx.reference
             kind, reason = _e2e_verdict(state.rx, arbitration_id, data, length_ok)
             if (kind or state.senders is not None) and length_ok and kind not in ("checksum", "length"):
-                self._follow_counters(state, t, arbitration_id, data, kind, reference, prev_seen, prev_data)
+                self._follow_counters(state, t, arbitration_id, data, kind, prev_seen)
+            state.last_data = data
         if not length_ok:
             kind, reason = "length", f"length {len(data)}, DBC says {codec.length}"
         elif not kind:
@@ -192,12 +192,13 @@ class Monitor:
         return True
 
     def _follow_counters(self, state: MessageState, t: float, frame_id: int, data: bytes, kind: str,
-                         reference: int | None, prev_seen: float | None, prev_data: bytes) -> None:
+                         prev_seen: float | None) -> None:
         """An intact frame while the message's counters are out of sequence (or were lately): follow them as
         streams (bench.e2e.SenderTracker) until SENDERS_CALM frames in a row are accepted."""
         tracker = state.senders
         if tracker is None:
-            previous = None if reference is None or prev_seen is None else (reference, prev_seen)
+            prev = state.last_data   # the previous frame of the message: its counter starts the first stream
+            previous = None if prev_seen is None or len(prev) != len(data) else (e2e.counter_of(prev), prev_seen)
             tracker = state.senders = e2e.SenderTracker(state.codec.cycle_time, previous)
             state.calm = 0
         if kind:
@@ -208,7 +209,7 @@ class Monitor:
                 state.senders = None
                 return
         cycle = state.codec.cycle_time
-        if data == prev_data and prev_seen is not None and cycle and t - prev_seen < cycle / 4:
+        if data == state.last_data and prev_seen is not None and cycle and t - prev_seen < cycle / 4:
             return     # the same frame again at once (a re-sent frame, the `duplicate` fault): one sender
         streams = tracker.feed(data[e2e.COUNTER_BYTE] & 0x0F, t)
         if streams is not None:
