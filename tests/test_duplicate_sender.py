@@ -284,3 +284,32 @@ def test_the_run_report_names_the_second_sender(tmp_path) -> None:
     assert "Findings: two senders of one identifier" in html, done.stdout[-2000:] + done.stderr[-2000:]
     assert html.count("two senders of 0x110 (VCU_WheelCmd_FL)") == 1
     assert html.index("Findings: two senders") < html.index("Databases: the messages")
+
+
+def test_bench_monitor_and_plant_status_say_it_once(codebook: Codebook) -> None:
+    """`bench monitor`'s screen names the finding above the last invalid frames; `bench plant`'s status lines
+    say it once and no longer list that message's counter errors one by one."""
+    from rich.console import Console
+
+    from bench.cli.monitor import LiveMonitor, render
+    from bench.cli.plant import _report_duplicates, _report_invalid
+
+    monitor = Monitor(codebook)
+    a = [(i * CYCLE, i % 16, 5.0) for i in range(10)]
+    both = [f for i in range(40) for f in (((10 + i) * CYCLE - CYCLE / 2, (13 + i) % 16, -3.0),
+                                            ((10 + i) * CYCLE, (10 + i) % 16, 5.0))]
+    _feed(monitor, codebook, a + both)
+    frame_id = codebook[MESSAGE].frame_id
+    console = Console(record=True, width=240)
+    console.print(render(LiveMonitor(monitor, 2.0), 0.5, "test", 0.5))
+    screen = console.export_text()
+    assert f"two senders of 0x{frame_id:03X} ({MESSAGE}): counters" in screen
+    assert screen.index("two senders") < screen.index("last invalid")
+    shown: set[int] = set()
+    _report_duplicates(console, monitor, shown)
+    _report_duplicates(console, monitor, shown)
+    _report_invalid(console, monitor, 0)
+    status = console.export_text()
+    assert status.count(f"two senders of 0x{frame_id:03X}") == 1
+    assert "counter" not in status.replace("counters", "")      # no "counter 3, expected 7" lines
+    assert f"and {monitor.invalid_frames} of messages with two senders" in status
