@@ -130,10 +130,7 @@ class Case:
         """End of the case (the pytest plugin calls it; a case need not): its timers stop, its case+ fault
         windows close, and the faults that were active and the invalid frames seen during it go on its
         record in the report. Records no step."""
-        for timer in self._timers:
-            if timer in self._runner.behaviours:
-                self._runner.behaviours.remove(timer)
-        self._timers.clear()
+        self._stop_timers()
         if self._closed:
             return
         self._closed = True
@@ -154,6 +151,12 @@ class Case:
         seen = monitor.invalid_log[max(0, self._case_invalid_mark - monitor.invalid_dropped):]
         counts = Counter((f.message, _NUMBER.sub("N", f.reason)) for f in seen)
         self.result.invalid = [[m, r, str(n)] for (m, r), n in sorted(counts.items(), key=lambda x: -x[1])]
+
+    def _stop_timers(self) -> None:
+        for timer in self._timers:
+            if timer in self._runner.behaviours:
+                self._runner.behaviours.remove(timer)
+        self._timers.clear()
 
     # -- stimulus ----------------------------------------------------------------------------------
     def set(self, message: str, **signals: float | int | str) -> None:
@@ -179,7 +182,7 @@ class Case:
         scenario sends (besides the scenario message itself); the others stay off the bus until the next
         scenario (a vehicle whose network reads none of them need not carry them). Default: every stimulus
         message. Raises BenchError when the plant does not acknowledge. Records no step."""
-        self.close()                  # timers belong to a scenario: a driver of the last one must not steer this one
+        self._stop_timers()           # timers belong to a scenario: a driver of the last one must not steer this one
         restbus = self._runner.restbus
         restbus.reset_all()
         wanted = None if stimulus is None else {SCENARIO_MESSAGE, *stimulus}

@@ -106,7 +106,8 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
         case.result.outcome = "failed"
         case.result.sim_time = run.session.now() - case.result.sim_start
         other = run.begin_case("t.py::test_b", "test_b")
-        other.run(0.4)
+        other.start_scenario(Vehicle="EV4WIS")   # a new scenario must not end the case's record
+        other.run(0.3)
         other.close()
         other.result.outcome = "passed"
         other.result.sim_time = run.session.now() - other.result.sim_start
