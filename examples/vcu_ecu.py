@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import queue
 import signal
 import socket
 import threading
@@ -438,7 +437,8 @@ class SpeedEstimator:
     _agree_since: float | None = None
 
     def update(self, now: float, dt: float, wheels: tuple[float, float, float] | None,
-               imu: dict[str, float] | None, sources_restarted: bool) -> float | None:
+               imu: dict[str, float] | None) -> float | None:
+        """One task: the new estimate (None until the four wheels have been received)."""
         if wheels is None:  # wheels timed out: keep predicting from the IMU, or hold
             if self.u is not None and imu is not None:
                 self.u += imu["LongAccel"] * dt
@@ -446,7 +446,7 @@ class SpeedEstimator:
             return self.u
         v_x, u_wheels, _ = wheels
         self._track_wheel_accel(u_wheels, dt)
-        if self.u is None or imu is None or sources_restarted:
+        if self.u is None or imu is None:
             self.u = u_wheels
             self._agree_since = None
             return self.u
@@ -502,7 +502,6 @@ class Vcu:
         self.out = Outputs()
         self.speed = SpeedEstimator()
         self._last_eval: float | None = None
-        self._resyncs_seen = 0
 
     def receive(self, msg: can.Message, t: float) -> None:
         receiver = self.by_id.get(msg.arbitration_id)
@@ -514,7 +513,7 @@ class Vcu:
         dt = TASK_S if self._last_eval is None else now - self._last_eval
         self._last_eval = now
         wheels = self._wheel_fit(now)
-        u = self.speed.update(now, dt, wheels, self._valid("IMU_Motion", now), self._sources_restarted())
+        u = self.speed.update(now, dt, wheels, self._valid("IMU_Motion", now))
         fault, command = self._decide(now, u)
         if fault == OK:  # VCU-FLT-10: no latching, executed at once
             self.last_executed = command
@@ -593,12 +592,6 @@ class Vcu:
         rx = self.rx[name]
         return None if rx.timed_out(now) else rx.values
 
-    def _sources_restarted(self) -> bool:
-        """The wheels and the IMU resynchronised after a reception gap: the vehicle's sensors restarted."""
-        total = sum(self.rx[n].resyncs for n in ["IMU_Motion"] + [f"WHL_Status_{w}" for w in WHEELS])
-        restarted, self._resyncs_seen = total != self._resyncs_seen, total
-        return restarted
-
 
 # ==============================================================================================================
 # Frames out (VCU-GEN-01, VCU-OUT-*)
@@ -633,15 +626,21 @@ class Transmitter:
 # ==============================================================================================================
 # Running on a bus
 # ==============================================================================================================
-def receive_loop(bus: can.BusABC, inbox: queue.SimpleQueue, stop: threading.Event) -> None:
-    """Timestamp every frame on arrival; the control task judges them in order of arrival."""
-    while not stop.is_set():
+def drain(bus: can.BusABC, vcu: Vcu) -> None:
+    """Judge every frame that arrived since the last task, in order, each at its reception time.
+
+    The task reads the bus itself (no receive thread): after the process was descheduled it first takes in
+    everything that arrived meanwhile, stamped by the kernel (python-can's timestamp, the wall clock of
+    time.time()), so a late task never mistakes its own stall for a silent sender (COM-RX-02)."""
+    while True:
         try:
-            msg = bus.recv(timeout=0.1)
+            msg = bus.recv(timeout=0.0)
         except can.CanError:
-            continue
-        if msg is not None:
-            inbox.put((time.monotonic(), msg))
+            return
+        if msg is None:
+            return
+        now = time.time()
+        vcu.receive(msg, msg.timestamp if 0.0 <= now - msg.timestamp < 1.0 else now)
 
 
 @dataclass
@@ -661,7 +660,7 @@ class TaskStats:
         return line
 
 
-def control_loop(vcu: Vcu, tx: Transmitter, inbox: queue.SimpleQueue, stop: threading.Event,
+def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Event,
                  send: Callable[[can.Message], None], stats_every: float = 0.0) -> None:
     """The 5 ms task on an absolute grid: drain, evaluate, send wheels every 10 ms and state every 20 ms."""
     tick, next_t = 0, time.monotonic()
@@ -672,13 +671,8 @@ def control_loop(vcu: Vcu, tx: Transmitter, inbox: queue.SimpleQueue, stop: thre
             time.sleep(next_t - now)
             now = time.monotonic()
         stats.max_late_ms = max(stats.max_late_ms, (now - next_t) * 1000.0)
-        while True:  # frames received up to now (VCU-GEN-02)
-            try:
-                t, msg = inbox.get_nowait()
-            except queue.Empty:
-                break
-            vcu.receive(msg, t)
-        out = vcu.evaluate(now)
+        drain(bus, vcu)  # frames received up to now (VCU-GEN-02)
+        out = vcu.evaluate(time.time())
         stats.faults[out.fault] += 1
         if tick % 2 == 0:  # COM-CYC-01: 10 ms
             for frame in tx.wheel_frames(out):
@@ -752,18 +746,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     db = cantools.database.load_file(str(args.dbc))
     bus = open_bus(args)
-    stop, inbox = threading.Event(), queue.SimpleQueue()
-    vcu, tx = Vcu(db, time.monotonic()), Transmitter(db)
-    receiver = threading.Thread(target=receive_loop, args=(bus, inbox, stop), daemon=True)
-    receiver.start()
+    stop = threading.Event()
+    vcu, tx = Vcu(db, time.time()), Transmitter(db)
     for signum in (signal.SIGINT, signal.SIGTERM):  # also when started in the background (SIGINT ignored there)
         signal.signal(signum, lambda *_: stop.set())
     print(f"VCU running on {args.interface} {args.channel or ''}".rstrip(), flush=True)
     try:
-        control_loop(vcu, tx, inbox, stop, make_sender(bus), args.stats)
+        control_loop(bus, vcu, tx, stop, make_sender(bus), args.stats)
     finally:
-        stop.set()
-        receiver.join(timeout=1.0)
         bus.shutdown()
         print("VCU stopped", flush=True)
     return 0
