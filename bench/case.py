@@ -25,7 +25,7 @@ SCENARIO_MESSAGE, SCENARIO_SIGNAL = "BENCH_Control", "ScenarioId"
 SCENARIO_ACK_MESSAGE, SCENARIO_ACK_SIGNAL = "PLANT_Status", "ScenarioIdAck"
 SCENARIO_ACK_TIMEOUT = 2.0   # s a plant has to acknowledge a new scenario
 GAP_CYCLES = 2.5             # a plotted signal's line breaks where frames are this many cycles apart
-_NUMBER = re.compile(r"\d+(?:\.\d+)?")
+_NUMBER = re.compile(r"(?<![A-Za-z0-9])\d+(?:\.\d+)?(?![A-Za-z])")   # 7, 0.5; not the 2 of "E2E"
 
 
 class NoFrames(float):

@@ -92,7 +92,7 @@ def problems(dom: str, stderr: str) -> list[str]:
     parsed = _Dom()
     parsed.feed(dom)
     found = [line for line in stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
-    if "PWNED" in parsed.title or "PWNED" in dom:
+    if "PWNED" in parsed.title.upper() or "PWNED" in dom.upper():   # the search keys are lower case
         found.append(f"title changed by a script: {parsed.title!r}")
     own = dom.count("<script>" + report_html.SCRIPT[:40])   # the report's own filter script (CSP hash)
     scripts = sum(1 for tag, _ in parsed.tags if tag == "script")
@@ -167,3 +167,14 @@ def test_checks_detect_an_escaping_failure(tmp_path: Path, monkeypatch: pytest.M
                              page.read_text(encoding="utf-8")), encoding="utf-8")
     dom, err = dump(tmp_path, no_csp)
     assert any("title changed" in p for p in problems(dom, err))
+
+
+def test_filter_script_runs_under_the_csp(tmp_path: Path) -> None:
+    """The page's script is allowed by its hash: a link to a collapsed case opens it (an injected
+    script, with another hash, would be blocked: see test_report_in_browser)."""
+    page = write_html(hostile_run(), tmp_path / "report.html")
+    closed, _ = dump(tmp_path, page)
+    opened, err = run_browser(tmp_path, "--enable-logging=stderr", "--v=0", "--dump-dom", page.as_uri() + "#case-2")
+    assert re.search(r'<details class="case passed" id="case-2"[^>]*>', closed).group(0).count("open") == 0  # type: ignore[union-attr]
+    assert " open" in re.search(r'<details class="case passed" id="case-2"[^>]*>', opened).group(0)  # type: ignore[union-attr]
+    assert problems(opened, err) == [] and "Refused to execute" not in err

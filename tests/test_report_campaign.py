@@ -1,0 +1,83 @@
+"""The whole campaign's report for an engineer in a hurry (issue 16, finding 6 and acceptance 2): with one
+failing case among ~150, headless Chromium shows that failure on the first screen, the page logs no
+console error, and the one self-contained file stays within its size budget (3 MB; 10.8 MB before).
+
+Why the real campaign and not a stored RunResult: the budget is about what the real cases plot (their
+signals, noise and lengths), and a stored result of the campaign is 16 MB of JSON that would go stale as
+cases change. The campaign runs once for this module (about 60-75 s on the virtual bus). The failure is
+one extra case file written here, run after the whole campaign (so the failing case is the last of the
+summary, the worst place for it): deterministic, unlike a --fault whose window would have to hit one
+case of a campaign whose timing changes with every case added.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.test_report_browser import problems, run_browser
+
+ROOT = Path(__file__).resolve().parent.parent
+BUDGET = 3_000_000               # bytes: the whole campaign's report.html
+FAIL_RGB = (0xCF, 0x22, 0x2E)    # var(--fail): the border of the failures box
+SCREEN = (1280, 900)             # the first screen of a laptop browser window
+INJECTED = '''"""Fails on purpose: the campaign report must show it first."""
+
+
+def test_injected_failure(bench) -> None:
+    bench.run(0.2)
+    bench.expect("injected failure", bench.value("VCU_WheelCmd_FL", "SteerAngleCmd"), 45.0, abs_tol=0.1, unit="deg")
+'''
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("campaign")
+    extra = folder / "cases" / "test_injected_failure.py"
+    extra.parent.mkdir()
+    extra.write_text(INJECTED)
+    out = folder / "out"
+    result = subprocess.run([sys.executable, "-m", "bench", "run", "testcases", str(extra), "--out", str(out)],
+                            cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert result.returncode == 1, result.stdout[-3000:] + result.stderr[-3000:]   # one failure: exit 1
+    return out / "report.html"
+
+
+def test_campaign_report_within_budget(campaign: Path) -> None:
+    html = campaign.read_text(encoding="utf-8")
+    size = campaign.stat().st_size
+    cases = html.count('<details class="case ')
+    assert cases > 100, "the whole campaign ran"
+    assert size <= BUDGET, f"report.html is {size / 1e6:.2f} MB for {cases} cases, over the {BUDGET / 1e6:g} MB budget"
+    # one self-contained file: nothing is loaded from anywhere
+    assert not re.search(r'\s(?:src|href)="(?:https?:|//)', html) and "url(http" not in html and "@import" not in html
+
+
+def test_failure_on_the_first_screen(campaign: Path, tmp_path: Path) -> None:
+    dom, stderr = run_browser(tmp_path, "--enable-logging=stderr", "--v=0", "--dump-dom", campaign.as_uri())
+    assert problems(dom, stderr) == []                        # no console error, no foreign script
+    failures = dom.index('id="failures"')
+    assert failures < dom.index('id="summary"')               # before the summary and every case
+    box = dom[failures:dom.index("</section>", failures)]
+    assert "test_injected_failure" in box and "injected failure: measured" in box
+    assert re.search(r'<a href="#case-(\d+)">test_injected_failure</a>', box)
+    summary = dom[dom.index('id="summary"'):]
+    rows = re.findall(r'<tr class="[^"]*" data-outcome="(\w+)"', summary[:summary.index("</table>")])
+    assert rows[-1] == "failed" and rows.count("failed") == 1   # the failing case is the last row of >100
+
+    shot = tmp_path / "first-screen.png"
+    run_browser(tmp_path, f"--screenshot={shot}", f"--window-size={SCREEN[0]},{SCREEN[1]}", campaign.as_uri())
+    import matplotlib.image
+
+    pixels = (matplotlib.image.imread(shot)[..., :3] * 255).round().astype(int)
+    assert pixels.shape[:2] == (SCREEN[1], SCREEN[0])
+    red = np.all(np.abs(pixels - FAIL_RGB) < 16, axis=-1)
+    borders = np.flatnonzero(red.sum(axis=1) > 0.75 * SCREEN[0])   # rows that are the failures box's border
+    assert len(borders) >= 2, "no failures box on the first screen"
+    top, bottom = borders.min(), borders.max()
+    assert top < SCREEN[1] / 3 and bottom - top > 40, (top, bottom)   # the whole box, near the top
