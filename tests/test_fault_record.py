@@ -209,3 +209,18 @@ def test_invalid_frames_are_explained(recorded: Recorded) -> None:
     section = section[:section.index("</section>")]
     assert f'<td class="mono">{CORRUPTED}</td>' in section and '<a href="#case-1">test_a</a><span class="tag">fault</span>' in section
     assert '<a href="#invalid">where they come from</a>' in html
+
+
+def test_faults_survive_the_workers_hand_over(recorded: Recorded, tmp_path: Path) -> None:
+    """-n N: each worker's part goes through JSON; a command-line fault acts in every worker and is one
+    record of the merged run, its frames summed."""
+    from bench import results_io
+
+    results_io.dump(recorded.run, tmp_path / "gw0.json")
+    part = results_io.load(tmp_path / "gw0.json")
+    assert part.faults == recorded.run.faults and part.cases[0].faults == recorded.run.cases[0].faults
+    assert part.cases[0].invalid == recorded.run.cases[0].invalid
+    merged = results_io.merge([("gw0", part), ("gw1", results_io.load(tmp_path / "gw0.json"))], 1.0)
+    frames = {f.spec: f.frames for f in merged.faults}
+    assert list(frames) == [f.spec for f in recorded.run.faults]
+    assert frames[DROP_SPEC] == 2 * next(f.frames for f in recorded.run.faults if f.spec == DROP_SPEC)
