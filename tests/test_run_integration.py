@@ -29,12 +29,15 @@ def bench_run(out: Path, *extra: str, timeout: float = 300) -> subprocess.Comple
 
 
 def frames_of(path: Path) -> list[tuple[int, int, bytes, str]]:
-    """(log_time ns, id, data, direction) of every raw frame, read with the mcap reader itself."""
+    """(bench time ns, id, data, direction) of every raw frame, read with the mcap reader itself. Log times are
+    epoch times (the run's wall-clock start + bench time); metadata `bench.clock` gives the start."""
     out = []
     with open(path, "rb") as f:
+        origin = next((int(m.metadata["origin_ns"]) for m in make_reader(f).iter_metadata() if m.name == "bench.clock"))
+        f.seek(0)
         for schema, channel, message in make_reader(f).iter_messages(topics=["/can/frames"]):
             body = json.loads(message.data)
-            out.append((message.log_time, body["id"], bytes(body["data"][: body["dlc"]]), body["direction"]))
+            out.append((message.log_time - origin, body["id"], bytes(body["data"][: body["dlc"]]), body["direction"]))
     return out
 
 
