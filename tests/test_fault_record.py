@@ -224,3 +224,17 @@ def test_faults_survive_the_workers_hand_over(recorded: Recorded, tmp_path: Path
     frames = {f.spec: f.frames for f in merged.faults}
     assert list(frames) == [f.spec for f in recorded.run.faults]
     assert frames[DROP_SPEC] == 2 * next(f.frames for f in recorded.run.faults if f.spec == DROP_SPEC)
+
+
+def test_real_time_log_times_are_the_receive_stamps() -> None:
+    """In real time the log's origin is the wall clock's own start: origin + bench time of a frame is the
+    epoch time the kernel stamped it with (within the stamp's rounding)."""
+    from bench.clock import WallClock
+
+    clock = WallClock()
+    clock.start()
+    assert abs(clock.epoch_ns - time.time_ns()) < 50_000_000
+    time.sleep(0.05)
+    stamp = time.time()
+    t = clock.stamp(stamp, clock.now())
+    assert abs((clock.epoch_ns + round(t * 1e9)) - stamp * 1e9) < 2_000   # ns
