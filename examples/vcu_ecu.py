@@ -54,7 +54,7 @@ RANGE_END = 5242.87  # m, VCU-OUT-07
 NORMAL, LATERAL, ADAPTIVE, PIVOT = 0, 1, 2, 3
 OK, CENTRE_AT_ORIGIN, CENTRE_ON_WHEEL, ANGLE_OVER_90, REQUEST_INVALID, REQUEST_TIMEOUT, WHEEL_FAULT = range(7)
 
-TASK_S = 0.005  # VCU-GEN-02: inputs evaluated at least every 10 ms; we use 5 ms
+TASK_S = 0.010  # VCU-GEN-02: inputs evaluated at least every 10 ms, right before each send
 
 
 # ==============================================================================================================
@@ -419,61 +419,39 @@ def signed_vehicle_speed(v_x: float, v_y: float, forward: tuple[float, float]) -
 
 @dataclass
 class SpeedEstimator:
-    """VCU-4WS-01: the vehicle's forward speed from the wheels while they roll, LongAccel while they slip.
+    """VCU-4WS-01: the vehicle's forward speed from the wheels while they roll, LongAccel while they slide.
 
-    Every task it predicts u + u_dot dt (u_dot = LongAccel + omega v_x, the body-frame term removed) and takes the
-    wheels' forward speed when it lies within 0.3 m/s of the prediction (the rule vcu-4ws.md gives as the
-    reference's). A prediction can lose its reference (the bench restarts the vehicle at another speed): when
-    the wheels' own acceleration has agreed with the IMU's for `RESYNC_S` while the two speeds disagree, the
-    wheels roll without slip and their speed is taken.
+    Every task it predicts u + u_dot dt (u_dot = LongAccel + omega v_x: the body-frame term of IMU-OUT-01
+    removed) and takes the wheels' forward speed when it lies within 0.3 m/s of the prediction (the rule
+    vcu-4ws.md gives as the reference's). Otherwise it keeps the prediction only while the wheels slide the way
+    the IMU says the car is pushed (PLANT-DYN-03): braked wheels slower than the car while it decelerates, driven
+    wheels faster while it accelerates. Any other disagreement means the prediction lost its reference (the car
+    was restarted at another speed, a scenario start): the wheels are taken.
     """
 
-    WINDOW = 0.3  # m/s
-    RESYNC_S = 0.3  # s
-    ACCEL_AGREE = 1.5  # m/s^2
-    u: float | None = None
-    _last_wheel_u: float | None = None
-    _wheel_accel: float = 0.0
-    _agree_since: float | None = None
+    WINDOW = 0.3  # m/s, VCU-4WS-01 (informative)
+    SLIDE_ACCEL = 1.5  # m/s^2: a longitudinal acceleration that can make the wheels slide
 
-    def update(self, now: float, dt: float, wheels: tuple[float, float, float] | None,
+    u: float | None = None
+
+    def update(self, dt: float, wheels: tuple[float, float, float] | None,
                imu: dict[str, float] | None) -> float | None:
         """One task: the new estimate (None until the four wheels have been received)."""
         if wheels is None:  # wheels timed out: keep predicting from the IMU, or hold
             if self.u is not None and imu is not None:
                 self.u += imu["LongAccel"] * dt
-            self._last_wheel_u = None
             return self.u
         v_x, u_wheels, _ = wheels
-        self._track_wheel_accel(u_wheels, dt)
-        if self.u is None or imu is None:
+        if self.u is None or imu is None:  # no prediction: the wheels (IMU-OUT-02: speed estimate falls back)
             self.u = u_wheels
-            self._agree_since = None
             return self.u
         u_dot = imu["LongAccel"] + math.radians(imu["YawRate"]) * v_x
         predicted = self.u + u_dot * dt
-        if abs(u_wheels - predicted) <= self.WINDOW:
-            self.u, self._agree_since = u_wheels, None
-        elif self._wheels_roll_freely(now, u_dot):
-            self.u, self._agree_since = u_wheels, None
-        else:
-            self.u = predicted
+        braking_slide = u_dot <= -self.SLIDE_ACCEL and u_wheels < predicted
+        driving_slide = u_dot >= self.SLIDE_ACCEL and u_wheels > predicted
+        sliding = abs(u_wheels - predicted) > self.WINDOW and (braking_slide or driving_slide)
+        self.u = predicted if sliding else u_wheels
         return self.u
-
-    def _track_wheel_accel(self, u_wheels: float, dt: float) -> None:
-        if self._last_wheel_u is not None and dt > 0:
-            raw = (u_wheels - self._last_wheel_u) / dt
-            alpha = min(1.0, dt / 0.05)  # 50 ms low-pass
-            self._wheel_accel += alpha * (raw - self._wheel_accel)
-        self._last_wheel_u = u_wheels
-
-    def _wheels_roll_freely(self, now: float, u_dot: float) -> bool:
-        if abs(self._wheel_accel - u_dot) > self.ACCEL_AGREE:
-            self._agree_since = None
-            return False
-        if self._agree_since is None:
-            self._agree_since = now
-        return now - self._agree_since >= self.RESYNC_S
 
 
 # ==============================================================================================================
@@ -513,7 +491,7 @@ class Vcu:
         dt = TASK_S if self._last_eval is None else now - self._last_eval
         self._last_eval = now
         wheels = self._wheel_fit(now)
-        u = self.speed.update(now, dt, wheels, self._valid("IMU_Motion", now))
+        u = self.speed.update(dt, wheels, self._valid("IMU_Motion", now))
         fault, command = self._decide(now, u)
         if fault == OK:  # VCU-FLT-10: no latching, executed at once
             self.last_executed = command
@@ -662,31 +640,39 @@ class TaskStats:
 
 def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Event,
                  send: Callable[[can.Message], None], stats_every: float = 0.0) -> None:
-    """The 5 ms task on an absolute grid: drain, evaluate, send wheels every 10 ms and state every 20 ms."""
+    """The 10 ms task on an absolute grid: send the frames of the last evaluation at once (COM-CYC-01: the
+    wheels every task, the state every 2nd), then read the bus and evaluate for the next task.
+
+    Sending first keeps the frames on the grid whatever the evaluation costs; a request received after one
+    task's evaluation is in the frames of the task after next, at most 20 ms later, which VCU-GEN-02 allows
+    (the next frame sent at least 10 ms after the request) and so does VCU-FLT-09 for a fault."""
     tick, next_t = 0, time.monotonic()
     stats, next_stats = TaskStats(), time.monotonic() + stats_every
+    pending = frames_of_task(tx, vcu.out, tick)
     while not stop.is_set():
         now = time.monotonic()
         if next_t > now:
             time.sleep(next_t - now)
             now = time.monotonic()
         stats.max_late_ms = max(stats.max_late_ms, (now - next_t) * 1000.0)
+        for frame in pending:
+            send(frame)
         drain(bus, vcu)  # frames received up to now (VCU-GEN-02)
         out = vcu.evaluate(time.time())
         stats.faults[out.fault] += 1
-        if tick % 2 == 0:  # COM-CYC-01: 10 ms
-            for frame in tx.wheel_frames(out):
-                send(frame)
-        if tick % 4 == 0:  # COM-CYC-01: 20 ms
-            for frame in tx.state_frames(out):
-                send(frame)
         missed = max(0, int((time.monotonic() - next_t) / TASK_S) - 1)
         stats.skipped_slots += missed
         tick += 1 + missed  # a late task skips the slots it missed instead of sending a burst
         next_t += TASK_S * (1 + missed)
+        pending = frames_of_task(tx, out, tick)  # VCU-GEN-02: all outputs of one evaluation together
         if stats_every and now >= next_stats:
             print(stats.report(vcu), flush=True)
             next_stats = now + stats_every
+
+
+def frames_of_task(tx: Transmitter, out: Outputs, tick: int) -> list[can.Message]:
+    """The wheel commands every 10 ms task, the state and centre every 2nd (COM-CYC-01)."""
+    return tx.wheel_frames(out) + (tx.state_frames(out) if tick % 2 == 0 else [])
 
 
 def make_sender(bus: can.BusABC) -> Callable[[can.Message], None]:
