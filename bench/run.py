@@ -172,7 +172,7 @@ class BenchRun:
 
 
 def write_reports(run: RunResult, out_dir: Path) -> None:
-    from bench.report import write_html, write_junit   # matplotlib only when a report is written
+    from bench.report import write_html, write_junit   # jinja2 only when a report is written
 
     write_html(run, out_dir / HTML_NAME)
     write_junit(run, out_dir / JUNIT_NAME)
