@@ -24,9 +24,9 @@ import signal
 import socket
 import threading
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections import Counter
 from typing import Callable
 
 import can
@@ -37,7 +37,7 @@ import numpy as np
 K = 0.555  # half track, m
 L = 1.38  # half wheelbase, m (formulas.md §2's L)
 WHEEL_RADIUS = 0.281  # m
-RPM_PER_MPS = 30.0 / (math.pi * WHEEL_RADIUS)  # 33.986
+RPM_PER_MPS = 30.0 / (math.pi * WHEEL_RADIUS)  # 33.983 (vcu.md symbols)
 HANDWHEEL_RATIO = 15.0
 WHEELS: dict[str, tuple[float, float]] = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
 MASS, A_CG, B_CG, C_F, C_R = 900.0, 1.38, 1.38, 45000.0, 55000.0  # vcu-4ws.md symbols
@@ -54,19 +54,31 @@ RANGE_END = 5242.87  # m, VCU-OUT-07
 NORMAL, LATERAL, ADAPTIVE, PIVOT = 0, 1, 2, 3
 OK, CENTRE_AT_ORIGIN, CENTRE_ON_WHEEL, ANGLE_OVER_90, REQUEST_INVALID, REQUEST_TIMEOUT, WHEEL_FAULT = range(7)
 
-TASK_S = 0.010  # VCU-GEN-02: inputs evaluated at least every 10 ms, right before each send
+TASK_S = 0.010  # VCU-GEN-02: inputs evaluated at least every 10 ms (each task, after its frames are sent)
 
 
 # ==============================================================================================================
 # E2E protection (COM-E2E-01/02, docs/spec/e2e.md)
 # ==============================================================================================================
+def _crc8_table(poly: int = 0x1D) -> list[int]:
+    """The byte-wise table of the CRC-8 polynomial 0x1D, MSB first (no reflection)."""
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ poly) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table.append(crc)
+    return table
+
+
+CRC8_TABLE = _crc8_table()
+
+
 def crc8_sae_j1850(data: bytes) -> int:
     """CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, final XOR 0xFF (COM-E2E-02)."""
     crc = 0xFF
     for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        crc = CRC8_TABLE[crc ^ byte]
     return crc ^ 0xFF
 
 
@@ -144,13 +156,13 @@ class E2EReceiver:
     def _apply_if_in_range(self, data: bytes, t: float) -> bool:
         """COM-VAL-01 / COM-RX-01: a frame with a signal outside its DBC range is rejected, no E2E error."""
         values = self.message.decode(bytes(data), decode_choices=False)
-        for signal in self.message.signals:
-            value = values[signal.name]
+        for sig in self.message.signals:
+            value = values[sig.name]
             if not math.isfinite(value):
                 return False
-            if signal.minimum is not None and value < signal.minimum - 1e-9:
+            if sig.minimum is not None and value < sig.minimum - 1e-9:
                 return False
-            if signal.maximum is not None and value > signal.maximum + 1e-9:
+            if sig.maximum is not None and value > sig.maximum + 1e-9:
                 return False
         self.values = values
         self.last_accepted_t = t
