@@ -35,7 +35,7 @@ import numpy as np
 
 # --- Vehicle A (docs/spec/vehicles.md A, vcu.md symbols, vcu-4ws.md symbols) ---------------------------------
 K = 0.555  # half track, m
-L = 1.38  # half wheelbase, m (formulas.md §2's L)
+L = 1.38  # half wheelbase, m (docs/spec/formulas.md §2's L)
 WHEEL_RADIUS = 0.281  # m
 RPM_PER_MPS = 30.0 / (math.pi * WHEEL_RADIUS)  # 33.983 (vcu.md symbols)
 HANDWHEEL_RATIO = 15.0
@@ -294,7 +294,7 @@ class Plan:
 
 
 def zero_sideslip_ratio(u: float) -> float:
-    """VCU-4WS-02: k(u) = (-b + m a u^2/(C_r L)) / (a + m b u^2/(C_f L)) (formulas.md §5.3)."""
+    """VCU-4WS-02: k(u) = (-b + m a u^2/(C_r L)) / (a + m b u^2/(C_f L)) (docs/spec/formulas.md §5.3)."""
     u2 = u * u
     return (-B_CG + MASS * A_CG * u2 / (C_R * WHEELBASE)) / (A_CG + MASS * B_CG * u2 / (C_F * WHEELBASE))
 
