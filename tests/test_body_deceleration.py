@@ -19,44 +19,17 @@ import math
 import pytest
 
 from plant.assemblies.ev4wis import build
+from tests.plant_io import RangeCheckedIO
 
 DT = 0.001
 G = 9.81
 MARGIN = 0.02          # relative to μ g (module docstring)
 
 
-class BusDict:
-    """The bus reduced to the latest values of each message (every node in one process, no latency)."""
-
-    def __init__(self) -> None:
-        self.values: dict[str, dict[str, float]] = {}
-
-    def now(self) -> float:
-        return 0.0
-
-    def send_values(self, message: str, **signals: float) -> None:
-        self.values.setdefault(message, {}).update(signals)
-
-    def reset_outputs(self) -> None:
-        pass
-
-    def sending(self, message: str, enabled: bool) -> None:
-        pass
-
-    def latest(self, message: str) -> dict[str, float] | None:
-        return self.values.get(message)
-
-    def timed_out(self, message: str) -> bool:
-        return message not in self.values
-
-    def invalid(self, message: str) -> bool:
-        return False
-
-
 def _drive(v0_kmh: float, v1_kmh: float, mu: float, hand_wheel: float, seconds: float = 6.0) -> dict[str, list[float]]:
     """The EV at v0 (ADAPTIVE, hand wheel in deg, ratio 15), TargetSpeed stepped to v1 after 1 s; per tick the body's
     forward speed u, its longitudinal acceleration (PLANT_Dynamics.LongAccel) and the wheels' mean speed."""
-    io = BusDict()
+    io = RangeCheckedIO()
     behaviours = build(())
     plant = next(b for b in behaviours if b.nodes == ("PLANT",))
     body = plant.body

@@ -21,39 +21,10 @@ from plant.ecus.vcu import Vcu, VcuFault
 from plant.factory import assemble
 from plant.single_track import SingleTrack
 from plant.vehicles import load_vehicle
+from tests.plant_io import RangeCheckedIO as FakeIO
 
 DT = 1e-3
 
-
-class FakeIO:
-    """The bus reduced to a dict of latest values; every value sent must be finite and inside its DBC range."""
-
-    def __init__(self) -> None:
-        self.t = 0.0
-        self.values: dict[str, dict[str, float]] = {}
-
-    @property
-    def now(self) -> float:
-        return self.t
-
-    def send_values(self, message: str, **signals: float) -> None:
-        for name, value in signals.items():
-            assert math.isfinite(value), f"{message}.{name} = {value!r}"
-            bounds = limits.BY_SIGNAL.get((message, name))
-            assert bounds is None or bounds[0] <= value <= bounds[1], f"{message}.{name} = {value}"
-        self.values.setdefault(message, {}).update(signals)
-
-    def latest(self, message: str) -> dict[str, float] | None:
-        return self.values.get(message)
-
-    def timed_out(self, message: str) -> bool:
-        return message not in self.values
-
-    def invalid(self, message: str) -> bool:
-        return False
-
-    def reset_outputs(self) -> None:
-        pass
 
 P = load_vehicle("EV4WIS")
 M, IZ, A, B, CF, CR = 900.0, 1100.0, 1.38, 1.38, 45000.0, 55000.0      # docs/spec/vehicles.md A
