@@ -537,8 +537,8 @@ class Vcu:
         command = execute(plan)
         if exceeds_limits(command):
             return REQUEST_INVALID, None  # step 5, VCU-LIM-01 / VCU-FLT-02.3
-        if self._wheel_fault(now) or (mode == ADAPTIVE and u is None):
-            return WHEEL_FAULT, None  # step 6, VCU-FLT-07 (VCU-4WS-01: no estimate without the wheels)
+        if self._wheel_fault(now):
+            return WHEEL_FAULT, None  # step 6, VCU-FLT-07 (after its grace no estimate means a silent wheel)
         return OK, command
 
     def _plan(self, mode: int, v: float, request: dict[str, float], u: float | None) -> Plan:
@@ -552,7 +552,8 @@ class Vcu:
         handwheel = float(steering["HandWheelAngle"])
         if mode == NORMAL:
             return plan_normal(handwheel, v)
-        return plan_adaptive(handwheel, v, 0.0 if u is None else u)
+        # VCU-4WS-01's one exception: within VCU-FLT-07's grace, an undefined estimate is u = |TargetSpeed|
+        return plan_adaptive(handwheel, v, abs(v) if u is None else u)
 
     def _wheel_fault(self, now: float) -> bool:
         """VCU-FLT-07: a wheel timed out or WheelFault != 0; silent or CMD_TIMEOUT ignored in the first 100 ms."""
