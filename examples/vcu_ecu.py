@@ -241,7 +241,7 @@ def rotation(centre: tuple[float, float], v_o: float) -> tuple[dict[str, float],
         # projection of the wheel's rigid-body velocity on its heading (VCU-MODE-01, erratum E1 corrected)
         rpm = RPM_PER_MPS * omega * ((yi - y) * math.sin(b) + (x - xi) * math.cos(b))
         if round(beta, 2) <= -90.0:  # COM-VAL-02 / VCU-MODE-01: -90 is not a bus angle: +90, rolling the other way
-            beta, rpm = beta + 180.0, -rpm
+            beta, rpm = 90.0, -rpm   # what the bus carries: within half its 0.01 deg step of beta + 180
         angles[name], speeds[name] = beta, rpm
     return angles, speeds, omega
 
