@@ -66,6 +66,7 @@ class MessageState:
     last_data: bytes = b""                   # E2E messages: the previous frame's payload (a re-sent frame is no
                                              # second sender; its counter starts the first counter stream)
     last_tx: float | None = None             # bench time this station last sent the message itself
+    last_tx_data: bytes = b""                # and that frame's payload: its own echo read back is no second sender
     senders: e2e.SenderTracker | None = None  # counter streams, followed after a sequence error
     calm: int = 0                            # accepted frames in a row while they are followed
 
@@ -147,8 +148,11 @@ class Monitor:
         state.frames += 1
         if direction == "tx":
             state.last_tx = t
-        elif state.last_tx is not None and \
+            state.last_tx_data = data
+        elif state.last_tx is not None and data != state.last_tx_data and \
                 t - state.last_tx <= (FOREIGN_CYCLES * cycle if cycle else FOREIGN_S) + TIME_EPS:
+            # (a copy of the station's own last frame is its echo, e.g. the kernel's broadcast manager handing a
+            # message back to the tick scheduler on socketcan: seen in the vcan lane at a scenario change)
             self._duplicate(state, t, arbitration_id, "frames received while this station sends it")
         kind = reason = ""
         values = None

@@ -154,6 +154,21 @@ def test_a_frame_of_an_identifier_this_station_sends(codebook: Codebook) -> None
     assert other.duplicates == {}
 
 
+def test_the_echo_of_the_stations_own_frame_is_no_second_sender(codebook: Codebook) -> None:
+    """On socketcan the kernel loops every frame back; when the broadcast manager hands a message back to the
+    tick scheduler, the echo of its last frame can reach the station's bus socket as a received frame (seen in the
+    vcan lane: 13 messages flagged at a scenario change). A copy of the station's own last frame is its echo; a
+    different payload within 3 cycles is still a second sender."""
+    monitor = Monitor(codebook)
+    frame_id = codebook[MESSAGE].frame_id
+    for i in range(5):
+        monitor.on_frame(i * CYCLE, frame_id, _frame(codebook, i), "tx")
+    monitor.on_frame(4.2 * CYCLE, frame_id, _frame(codebook, 4), "rx")      # the echo of the frame at 0.04 s
+    assert monitor.duplicates == {}
+    monitor.on_frame(4.6 * CYCLE, frame_id, _frame(codebook, 4, angle=-1.0), "rx")   # same counter, other data
+    assert "received while this station sends it" in monitor.duplicates[frame_id].describe()
+
+
 def test_two_senders_on_the_virtual_bus(codebook: Codebook) -> None:
     """In process: the bench's VCU and a second VCU on one virtual bus. The runner's monitor (which sends
     neither) shows it by the counters, the first VCU's station by a frame of its own identifier."""
