@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
@@ -38,6 +39,8 @@ INTERVALS_CAP = 5000     # frame intervals per message for cycle-time checks (50
 INVALID_CAP = 20000      # invalid-frame records
 # Two senders of one identifier (a finding of its own, not thousands of counter errors):
 SENDERS_CALM = 32        # accepted frames in a row after which the counter streams are no longer followed
+OWN_ECHO_FRAMES = 16     # a received copy of one of the station's last 16 frames of an identifier (one counter
+                         # cycle, as many as the kernel's broadcast manager holds) is its own echo, no second sender
 FOREIGN_CYCLES = 3       # a frame received within this many cycles of this station's own frame of the
 FOREIGN_S = 1.0          # identifier (FOREIGN_S without a cycle time) comes from another sender
 
@@ -66,7 +69,7 @@ class MessageState:
     last_data: bytes = b""                   # E2E messages: the previous frame's payload (a re-sent frame is no
                                              # second sender; its counter starts the first counter stream)
     last_tx: float | None = None             # bench time this station last sent the message itself
-    last_tx_data: bytes = b""                # and that frame's payload: its own echo read back is no second sender
+    recent_tx: deque[bytes] = field(default_factory=lambda: deque(maxlen=OWN_ECHO_FRAMES))   # its last payloads
     senders: e2e.SenderTracker | None = None  # counter streams, followed after a sequence error
     calm: int = 0                            # accepted frames in a row while they are followed
 
@@ -148,11 +151,11 @@ class Monitor:
         state.frames += 1
         if direction == "tx":
             state.last_tx = t
-            state.last_tx_data = data
-        elif state.last_tx is not None and data != state.last_tx_data and \
+            state.recent_tx.append(data)
+        elif state.last_tx is not None and data not in state.recent_tx and \
                 t - state.last_tx <= (FOREIGN_CYCLES * cycle if cycle else FOREIGN_S) + TIME_EPS:
-            # (a copy of the station's own last frame is its echo, e.g. the kernel's broadcast manager handing a
-            # message back to the tick scheduler on socketcan: seen in the vcan lane at a scenario change)
+            # (a copy of one of the station's own recent frames is its echo, e.g. the kernel's broadcast manager
+            # handing a message back to the tick scheduler on socketcan: seen in the vcan lane at scenario changes)
             self._duplicate(state, t, arbitration_id, "frames received while this station sends it")
         kind = reason = ""
         values = None

@@ -156,14 +156,15 @@ def test_a_frame_of_an_identifier_this_station_sends(codebook: Codebook) -> None
 
 def test_the_echo_of_the_stations_own_frame_is_no_second_sender(codebook: Codebook) -> None:
     """On socketcan the kernel loops every frame back; when the broadcast manager hands a message back to the
-    tick scheduler, the echo of its last frame can reach the station's bus socket as a received frame (seen in the
-    vcan lane: 13 messages flagged at a scenario change). A copy of the station's own last frame is its echo; a
-    different payload within 3 cycles is still a second sender."""
+    tick scheduler, echoes of its frames can reach the station's bus socket as received frames (seen in the vcan
+    lane: 13 messages flagged at a scenario change). A copy of one of the station's own last 16 frames is its
+    echo; a different payload within 3 cycles is still a second sender."""
     monitor = Monitor(codebook)
     frame_id = codebook[MESSAGE].frame_id
     for i in range(5):
         monitor.on_frame(i * CYCLE, frame_id, _frame(codebook, i), "tx")
     monitor.on_frame(4.2 * CYCLE, frame_id, _frame(codebook, 4), "rx")      # the echo of the frame at 0.04 s
+    monitor.on_frame(4.3 * CYCLE, frame_id, _frame(codebook, 2), "rx")      # a late echo of an older own frame
     assert monitor.duplicates == {}
     monitor.on_frame(4.6 * CYCLE, frame_id, _frame(codebook, 4, angle=-1.0), "rx")   # same counter, other data
     assert "received while this station sends it" in monitor.duplicates[frame_id].describe()
