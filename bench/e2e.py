@@ -58,6 +58,36 @@ def counter_of(data: bytes | bytearray) -> int:
     return data[COUNTER_BYTE] & 0x0F
 
 
+def checksum_of(data: bytes | bytearray) -> int:
+    """The Checksum a frame carries (byte 7), right or wrong."""
+    return data[CHECKSUM_BYTE]
+
+
+def set_checksum(data: bytearray, value: int) -> None:
+    """Write a Checksum byte (value mod 256) into an 8-byte payload, in place, whatever it should be."""
+    data[CHECKSUM_BYTE] = value & 0xFF
+
+
+def counter_if_intact(frame_id: int, data: bytes | bytearray) -> int | None:
+    """The AliveCounter of a frame whose Checksum is right; None when it is wrong (a damaged frame's counter
+    is not read). The receiver's hot path: one call per frame, the CRC of `checksum` written out here."""
+    crc = _INIT
+    table = _TABLE
+    crc = table[crc ^ (frame_id & 0xFF)]
+    crc = table[crc ^ ((frame_id >> 8) & 0xFF)]
+    for byte in data[:CHECKSUM_BYTE]:
+        crc = table[crc ^ byte]
+    if data[CHECKSUM_BYTE] != crc ^ _XOR_OUT:
+        return None
+    return data[COUNTER_BYTE] & 0x0F
+
+
+def payload(data: bytes) -> bytes:
+    """The frame without its E2E bytes (AliveCounter nibble cleared, Checksum byte left out): what stays the
+    same from one frame of a message to the next while its signals do."""
+    return data[:COUNTER_BYTE] + bytes((data[COUNTER_BYTE] & 0xF0,))
+
+
 def protect(frame_id: int, data: bytearray, counter: int) -> None:
     """Write the AliveCounter and then the Checksum into an 8-byte payload, in place."""
     data[COUNTER_BYTE] = (data[COUNTER_BYTE] & 0xF0) | (counter & 0x0F)

@@ -1,21 +1,16 @@
 """Fault injection: what a broken ECU or bus does to frames, scoped to a message or node and a window.
 
-Faults act on the frames a station sends, after the restbus built them (so they look like a real
-broken sender: a wrong counter carries a correct checksum unless the checksum is the fault).
+The kinds (what each does, its TARGET and PARAM) are the registry in bench/fault_kinds.py; this module
+parses and checks specs and applies the faults of a run, asking each fault's kind.
 Spec syntax (command line, `--fault`): `KIND:TARGET[:PARAM]@[case+]START[-END]`, times in seconds.
 Without `case+` the window counts from the start of the run (bench time) and an open END lasts to the
 end of the run; with `case+` it counts from the start of every case, and an open END lasts to the end
-of that case. E.g. `drop:VCU_WheelCmd_FL@2-3`, `silence:WHL_FR@1.5-`, `checksum_offset:IMU_Motion:1@2-4`,
-`flood:0x000:8@1-2`, `drop:VCU_WheelCmd_FL@case+1-2` (1 s to 2 s after each case's start).
+of that case. E.g. `drop:MESSAGE@2-3`, `silence:NODE@1.5-`, `checksum_offset:MESSAGE:1@2-4`,
+`flood:0x000:8@1-2`, `drop:MESSAGE@case+1-2` (1 s to 2 s after each case's start).
 
 Every fault is on the record: it counts the frames it acted on (dropped, delayed, duplicated,
 corrupted, silenced or babbled), and :meth:`FaultPlan.records` gives what the report, JUnit and the
 MCAP log show. :func:`validate` checks specs against the databases before a run starts.
-
-On the virtual-time bus there is no arbitration; `flood` therefore models it: a babbling node
-sending PARAM frames per millisecond at identifier TARGET takes the whole bus at or above
-FLOOD_SATURATION frames/ms (500 kbit/s carries about 4.3 eight-byte frames per ms), and every frame
-of a lower priority (higher identifier) sent meanwhile is lost, as on a real bus it would wait forever.
 """
 
 from __future__ import annotations
@@ -25,17 +20,16 @@ import random
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from bench import e2e
 from bench.codec import Codebook
 from bench.errors import ConfigError
+from bench.fault_kinds import FLOOD_SATURATION, KINDS, MESSAGE, NODE, Outgoing, kinds_with_target
 from bench.results import FaultRecord
 
-FRAME_KINDS = ("drop", "delay", "duplicate", "bitflip", "counter_freeze", "counter_jump", "checksum_value",
-               "checksum_freeze", "checksum_random", "checksum_offset")
-NODE_KINDS = ("silence", "bus_off")
-BUS_KINDS = ("flood", "error_frame")
-KINDS = FRAME_KINDS + NODE_KINDS + BUS_KINDS
-FLOOD_SATURATION = 4.0   # babbling frames per ms from which lower-priority frames never win arbitration
+__all__ = ["FLOOD_SATURATION", "KINDS", "FRAME_KINDS", "NODE_KINDS", "Fault", "FaultPlan", "parse_fault",
+           "check_fault", "validate"]
+
+FRAME_KINDS = kinds_with_target(MESSAGE)   # derived from the registry (bench/fault_kinds.py)
+NODE_KINDS = kinds_with_target(NODE)
 RANDOM_SEED = 0x5EED     # checksum_random is deterministic, so a campaign stays reproducible
 RUN, CASE = "run", "case"   # what a fault's window counts from
 CASE_PREFIX = "case+"
@@ -105,28 +99,14 @@ def parse_fault(spec: str) -> Fault:
 
 def check_fault(fault: Fault, codebook: Codebook) -> None:
     """ConfigError when the fault's target or PARAM does not fit its kind and the databases."""
-    if fault.kind not in KINDS:
+    kind = KINDS.get(fault.kind)
+    if kind is None:
         raise ConfigError(f"fault {fault.describe()}: unknown kind {fault.kind!r} (kinds: {', '.join(KINDS)})")
     if not (fault.start >= 0 and fault.end > fault.start):
         raise ConfigError(f"fault {fault.describe()}: need 0 <= START < END")
-    if fault.kind in FRAME_KINDS:
-        if fault.target not in codebook.by_name:
-            raise ConfigError(f"fault {fault.describe()}: unknown message {fault.target!r} (in none of the databases)")
-        if fault.kind == "bitflip" and not 0 <= fault.param < 64:
-            raise ConfigError(f"fault {fault.describe()}: bit index must be 0..63")
-        if fault.kind == "delay" and not fault.param > 0:
-            raise ConfigError(f"fault {fault.describe()}: a delay needs PARAM > 0 s")
-    elif fault.kind in NODE_KINDS:
-        if fault.target not in codebook.nodes:
-            raise ConfigError(f"fault {fault.describe()}: unknown node {fault.target!r} "
-                              f"(nodes: {', '.join(codebook.nodes)})")
-    elif fault.kind == "flood":
-        try:
-            int(fault.target, 0)
-        except ValueError:
-            raise ConfigError(f"fault {fault.describe()}: TARGET must be an identifier like 0x000") from None
-        if not fault.param > 0:
-            raise ConfigError(f"fault {fault.describe()}: PARAM must be frames per ms > 0")
+    problem = kind.check_target(fault.target, codebook) or kind.check_param(fault.param)
+    if problem:
+        raise ConfigError(f"fault {fault.describe()}: {problem}")
 
 
 def validate(specs: Iterable[str], codebook: Codebook) -> list[str]:
@@ -205,15 +185,11 @@ class FaultPlan:
         """Frames the babbling node and error-frame faults put on the bus this tick: (id, data, is_error)."""
         out: list[tuple[int, bytes, bool]] = []
         for fault in self.faults:
-            if not fault.active(t):
-                continue
-            if fault.kind == "flood":
-                count = max(1, round(fault.param * dt * 1000.0))
-                out.extend((int(fault.target, 0), bytes(8), False) for _ in range(count))
-                fault.hit(count)
-            elif fault.kind == "error_frame":
-                out.append((0, b"", True))
-                fault.hit()
+            if fault.active(t):
+                frames = KINDS[fault.kind].babble(fault, dt)
+                if frames:
+                    out.extend(frames)
+                    fault.hit(len(frames))
         return out
 
     def apply(self, t: float, frame_id: int, data: bytes) -> list[tuple[float, bytes]]:
@@ -221,58 +197,15 @@ class FaultPlan:
         codec = self.codebook.by_id.get(frame_id)
         if codec is None:
             return [(0.0, data)]
-        frames = [data]
-        delay = 0.0
+        out = Outgoing(frame_id, [data], self._rng)
         for fault in self.faults:
             if not fault.active(t):
                 continue
-            kind = fault.kind
-            if kind in NODE_KINDS:
-                if fault.target in codec.senders:
-                    fault.hit()
-                    return []
-                continue
-            if kind == "flood":
-                if fault.param >= FLOOD_SATURATION and frame_id > int(fault.target, 0):
-                    fault.hit()
-                    return []
-                continue
-            if kind not in FRAME_KINDS or fault.target != codec.name:
+            kind = KINDS[fault.kind]
+            if not kind.applies(fault, frame_id, codec):
                 continue
             fault.hit()
-            if kind == "drop":
+            kind.act(fault, out)
+            if out.dropped:
                 return []
-            if kind == "delay":
-                delay = fault.param
-                continue
-            if kind == "duplicate":
-                frames = frames + frames
-                continue
-            frames = [self._corrupt(fault, frame_id, bytearray(f)) for f in frames]
-        return [(delay, f) for f in frames]
-
-    def _corrupt(self, fault: Fault, frame_id: int, data: bytearray) -> bytes:
-        kind = fault.kind
-        if kind == "bitflip":
-            bit = int(fault.param)
-            data[bit // 8] ^= 1 << (bit % 8)
-        elif kind in ("counter_freeze", "counter_jump"):
-            counter = e2e.counter_of(data)
-            if kind == "counter_freeze":
-                if fault.frozen is None:
-                    fault.frozen = counter
-                counter = fault.frozen
-            else:
-                counter = (counter + int(fault.param)) % e2e.COUNTER_MODULO
-            e2e.protect(frame_id, data, counter)          # a correct checksum over the wrong counter
-        elif kind == "checksum_value":
-            data[e2e.CHECKSUM_BYTE] = int(fault.param) & 0xFF
-        elif kind == "checksum_freeze":
-            if fault.frozen is None:
-                fault.frozen = data[e2e.CHECKSUM_BYTE]
-            data[e2e.CHECKSUM_BYTE] = fault.frozen
-        elif kind == "checksum_random":
-            data[e2e.CHECKSUM_BYTE] = self._rng.randrange(256)
-        elif kind == "checksum_offset":
-            data[e2e.CHECKSUM_BYTE] = (data[e2e.CHECKSUM_BYTE] + int(fault.param)) & 0xFF
-        return bytes(data)
+        return [(out.delay, f) for f in out.frames]

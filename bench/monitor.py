@@ -24,6 +24,7 @@ from bisect import bisect_left
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from bench import e2e
 from bench.codec import Codebook, DecodeError, MessageCodec
@@ -218,7 +219,7 @@ class Monitor:
         cycle = state.codec.cycle_time
         if data == state.last_data and prev_seen is not None and cycle and t - prev_seen < cycle / 4:
             return     # the same frame again at once (a re-sent frame, the `duplicate` fault): one sender
-        streams = tracker.feed(data[e2e.COUNTER_BYTE] & 0x0F, t)
+        streams = tracker.feed(e2e.counter_of(data), t)
         if streams is not None:
             first, second = (",".join(str(c) for c in s) for s in streams)
             self._duplicate(state, t, frame_id, f"counters {first} and {second} interleaved")
@@ -310,8 +311,9 @@ class Monitor:
 
 def _e2e_verdict(rx: e2e.Receiver, frame_id: int, data: bytes, length_ok: bool) -> tuple[str, str]:
     """(kind, reason) of the frame's protection through the receiver's state machine; ("", "") = accepted."""
-    intact = length_ok and data[e2e.CHECKSUM_BYTE] == e2e.checksum(frame_id, data)
-    counter = data[e2e.COUNTER_BYTE] & 0x0F if length_ok else -1
+    found = e2e.counter_if_intact(frame_id, data) if length_ok else None
+    intact = found is not None
+    counter = -1 if found is None else found   # not read from a damaged frame (the receiver ignores it)
     reference = rx.reference
     check, accepted = rx.receive(intact, counter)
     if accepted:
@@ -327,7 +329,7 @@ def _e2e_verdict(rx: e2e.Receiver, frame_id: int, data: bytes, length_ok: bool) 
                             "consecutive frames after an E2E error")
 
 
-def _trim(items: list, keep: int) -> int:
+def _trim(items: list[Any], keep: int) -> int:
     """Drop all but the last `keep` items in place; returns how many were dropped."""
     dropped = len(items) - keep
     if dropped > 0:

@@ -68,9 +68,7 @@ def _raw_socket() -> socket.socket:
     return socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
 
 
-def _payload(data: bytes) -> bytes:
-    """The frame without its E2E bytes: AliveCounter (low nibble of byte 6) and Checksum (byte 7)."""
-    return data[:e2e.COUNTER_BYTE] + bytes((data[e2e.COUNTER_BYTE] & 0xF0,))
+_payload = e2e.payload   # the frame without its E2E bytes (AliveCounter nibble, Checksum)
 
 
 def counter_cycle(frame_id: int, data: bytes, first_counter: int) -> list[can.Message]:
@@ -317,5 +315,5 @@ class KernelPeriodic:
             data = data[:length]
             task = tasks.get(frame_id)
             if task is not None and length == FRAME_LENGTH and task.slot.codec.e2e:
-                task.last_counter = data[e2e.COUNTER_BYTE] & 0x0F
+                task.last_counter = e2e.counter_of(data)
             yield frame_id, data

@@ -1,18 +1,22 @@
-"""Fault injection: each kind changes the frames as specified, and the monitor notices it."""
+"""Fault injection: each kind changes the frames as specified, and the monitor notices it; the kinds are one
+registry (bench/fault_kinds.py) from which the checks, the --fault help and docs/reliability.md's table come."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
-from bench import e2e
+from bench import e2e, fault_kinds
 from bench.codec import Codebook
 from bench.errors import ConfigError
-from bench.faults import KINDS, Fault, FaultPlan, parse_fault
+from bench.fault_kinds import FaultKind, Outgoing
+from bench.faults import KINDS, Fault, FaultPlan, parse_fault, validate
 from bench.restbus import Restbus
 
 MSG = "VCU_WheelCmd_FL"
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _frame(codebook: Codebook, counter: int = 5) -> tuple[int, bytes]:
@@ -98,3 +102,57 @@ def test_unknown_targets_are_clear_errors(codebook: Codebook) -> None:
     with pytest.raises(ConfigError, match="unknown node"):
         plan.add(Fault("silence", "NOPE", 0, 1))
     assert set(KINDS) >= {"drop", "delay", "duplicate", "bitflip", "silence", "flood", "error_frame"}
+
+
+def test_docs_table_is_the_registry() -> None:
+    """docs/reliability.md's table of kinds is what the registry gives (`python -m bench.fault_kinds FILE`)."""
+    text = (ROOT / "docs" / "reliability.md").read_text(encoding="utf-8")
+    table = fault_kinds.documented_table(text)
+    assert table is not None, "docs/reliability.md lost its generated block"
+    assert table == fault_kinds.markdown_table(), "out of date: run python -m bench.fault_kinds docs/reliability.md"
+    for name in KINDS:
+        assert f"| `{name}` |" in table
+
+
+def test_help_names_every_kind_with_its_pattern() -> None:
+    text = fault_kinds.help_text()
+    for name, kind in KINDS.items():
+        assert f"{name}:{kind.target}" in text
+    assert "delay:MESSAGE:SECONDS" in text and "flood:IDENTIFIER:RATE" in text
+
+
+def test_each_kind_checks_its_own_target_and_param(codebook: Codebook) -> None:
+    """Every kind rejects a target of the wrong sort, named in one line with the spec (checked per kind, so
+    a new kind's check is exercised too)."""
+    wrong = {fault_kinds.MESSAGE: "NoSuchMessage", fault_kinds.NODE: "NOBODY", fault_kinds.IDENTIFIER: "VCU"}
+    expected = {fault_kinds.MESSAGE: "unknown message", fault_kinds.NODE: "unknown node",
+                fault_kinds.IDENTIFIER: "TARGET must be an identifier"}
+    for name, kind in KINDS.items():
+        if kind.target in wrong:
+            spec = f"{name}:{wrong[kind.target]}:1@1-2"
+            [line] = validate([spec], codebook)
+            assert line.startswith(f"--fault {spec!r}: ") and expected[kind.target] in line, line
+    assert "a delay needs PARAM > 0 s" in validate([f"delay:{MSG}:0@1-2"], codebook)[0]
+    assert "frames per ms > 0" in validate(["flood:0x000:0@1-2"], codebook)[0]
+    assert validate(["error_frame:bus@1-2"], codebook) == []
+
+
+class _Invert(FaultKind):
+    """A kind that exists only in this test: every payload byte inverted."""
+
+    name, summary = "invert", "every byte inverted"
+
+    def act(self, fault: Fault, out: Outgoing) -> None:
+        out.frames = [bytes(b ^ 0xFF for b in frame) for frame in out.frames]
+
+
+def test_a_new_kind_is_one_class_and_one_entry(codebook: Codebook, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Registering a kind is all it takes: parsing, checking, applying, help and docs follow."""
+    monkeypatch.setitem(fault_kinds.KINDS, "invert", _Invert())   # type: ignore[index]
+    fault = parse_fault(f"invert:{MSG}@0-9")
+    frame_id, data = _frame(codebook)
+    assert _apply(codebook, fault) == [(0.0, bytes(b ^ 0xFF for b in data))]
+    assert fault.frames == 1
+    assert validate(["invert:NoSuchMessage@0-1"], codebook)[0].endswith("unknown message 'NoSuchMessage' "
+                                                                         "(in none of the databases)")
+    assert "invert:MESSAGE" in fault_kinds.help_text() and "| `invert` |" in fault_kinds.markdown_table()

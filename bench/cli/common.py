@@ -11,6 +11,7 @@ import os
 import tempfile
 from pathlib import Path
 
+from bench import fault_kinds
 from bench.bus import is_virtual
 from bench.busopts import BusOptions
 from bench.codec import Codebook, load_codebook
@@ -57,8 +58,8 @@ def add_node_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fault", action="append", default=[], metavar="SPEC",
                         help="inject a fault: KIND:TARGET[:PARAM]@[case+]START[-END] in s from the run's start, "
                              "or with case+ from each case's start (an open END lasts to the end of the run or "
-                             "case); e.g. drop:VCU_WheelCmd_FL@2-3, drop:VCU_WheelCmd_FL@case+1-2, silence:WHL_FR@case+0.5- "
-                             "(kinds: see bench/faults.py and docs/reliability.md)")
+                             "case); e.g. drop:MESSAGE@2-3, drop:MESSAGE@case+1-2, silence:NODE@case+0.5-; "
+                             f"{fault_kinds.help_text()} (docs/reliability.md)")
 
 
 def given_bus_options(args: argparse.Namespace) -> BusOptions:
