@@ -15,15 +15,13 @@ from collections.abc import Callable, Iterable, Sequence
 import numpy as np
 
 from bench.checks import StepLog, percentile, tolerance_text, within
+from bench.codec import SignalCodec
 from bench.errors import BenchError
 from bench.faults import KINDS, Fault
 from bench.monitor import InvalidFrame
 from bench.results import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
 
-SCENARIO_MESSAGE, SCENARIO_SIGNAL = "BENCH_Control", "ScenarioId"
-SCENARIO_ACK_MESSAGE, SCENARIO_ACK_SIGNAL = "PLANT_Status", "ScenarioIdAck"
-SCENARIO_ACK_TIMEOUT = 2.0   # s a plant has to acknowledge a new scenario
 GAP_CYCLES = 2.5             # a plotted signal's line breaks where frames are this many cycles apart
 _NUMBER = re.compile(r"(?<![A-Za-z0-9])\d+(?:\.\d+)?(?![A-Za-z])")   # 7, 0.5; not the 2 of "E2E"
 
@@ -161,60 +159,68 @@ class Case:
     # -- stimulus ----------------------------------------------------------------------------------
     def set(self, message: str, **signals: float | int | str) -> None:
         """Set signals of a stimulus message (physical values in the DBC's units, or a value table's
-        name such as `DriveMode="PIVOT"`); the message carries them from its next cycle on. Raises on an
+        name such as `Mode="SPORT"`); the message carries them from its next cycle on. Raises on an
         unknown message or signal or a value outside the DBC's range. Records no step."""
         self._runner.restbus.set(message, **signals)
 
     def stop_sending(self, message: str) -> None:
         """Stop sending a stimulus message until `resume_sending` (its receivers time it out after
         3 × its cycle time); its AliveCounter carries on where it stopped. Records no step."""
-        self._runner.restbus.enable(message, False)
+        self._runner.restbus.stop_sending(message)
 
     def resume_sending(self, message: str) -> None:
         """Send a stimulus message again after `stop_sending`, from its next cycle on. Records no step."""
-        self._runner.restbus.enable(message, True)
+        self._runner.restbus.resume_sending(message)
 
     def start_scenario(self, *, stimulus: Iterable[str] | None = None, **control: float | int | str) -> None:
-        """Reset the plant to a fresh scenario (BENCH_Control with a new ScenarioId and `control`, e.g.
-        `Vehicle="EV4WIS"`), reset every stimulus message to its start values, end the timers of the last
-        scenario, and wait (up to 2 s of bench time) for the plant's acknowledgement (PLANT_Status.ScenarioIdAck);
-        `elapsed`, `history` and `invalid_frames` count from then on. `stimulus`: the stimulus messages this
-        scenario sends (besides the scenario message itself); the others stay off the bus until the next
-        scenario (a vehicle whose network reads none of them need not carry them). Default: every stimulus
-        message. Raises BenchError when the plant does not acknowledge. Records no step."""
+        """Reset the plant to a fresh scenario: a new scenario id in bench.toml's `[scenario] command` signal,
+        with `control` (other signals of that message, e.g. the vehicle) beside it; reset every stimulus message
+        to its start values, end the timers of the last scenario, and wait (up to `[scenario] timeout`, default
+        2 s of bench time) for the plant to echo the id in `[scenario] ack`; `elapsed`, `history` and
+        `invalid_log` count from then on. `stimulus`: the stimulus messages this scenario sends (besides the
+        scenario message itself); the others stay off the bus until the next scenario (a vehicle whose network
+        reads none of them need not carry them). Default: every stimulus message. Raises BenchError when the
+        plant does not acknowledge or the project has no [scenario]. Records no step."""
+        protocol = self.session.project.scenario
+        if protocol is None:
+            raise BenchError(f"start_scenario: {self.session.project.path} has no [scenario] table "
+                             f"(command = \"Message.Signal\", ack = \"Message.Signal\")")
+        (command, id_signal), (ack, ack_signal) = protocol.command, protocol.ack
         self._stop_timers()           # timers belong to a scenario: a driver of the last one must not steer this one
         restbus = self._runner.restbus
         restbus.reset_all()
-        wanted = None if stimulus is None else {SCENARIO_MESSAGE, *stimulus}
+        wanted = None if stimulus is None else {command, *stimulus}
         unknown = set() if wanted is None else wanted - set(restbus.periodic)
         if unknown:
             raise BenchError(f"start_scenario(stimulus=...): {', '.join(sorted(unknown))} is no periodic stimulus "
                              f"message (stimulus: {', '.join(sorted(restbus.periodic))})")
         for name in restbus.periodic:
-            restbus.enable(name, wanted is None or name in wanted)
-        state = self._monitor.state(SCENARIO_ACK_MESSAGE)
-        previous = int(state.latest[SCENARIO_ACK_SIGNAL]) if state.latest else 0
-        scenario = previous % 255 + 1
-        restbus.set(SCENARIO_MESSAGE, **{SCENARIO_SIGNAL: scenario}, **control)
+            if wanted is None or name in wanted:
+                restbus.resume_sending(name)
+            else:
+                restbus.stop_sending(name)
+        state = self._monitor.state(ack)
+        previous = int(state.latest[ack_signal]) if state.latest else 0
+        scenario = previous % _largest_id(self.session.codebook[command].by_name[id_signal]) + 1   # 0 = none yet
+        restbus.set(command, **{id_signal: scenario}, **control)
 
         def acknowledged() -> bool:
-            latest = self._monitor.latest(SCENARIO_ACK_MESSAGE, self.now)
-            return latest is not None and int(latest[SCENARIO_ACK_SIGNAL]) == scenario
+            latest = self._monitor.latest(ack, self.now)
+            return latest is not None and int(latest[ack_signal]) == scenario
 
-        if not self.wait_until(acknowledged, SCENARIO_ACK_TIMEOUT):
+        if not self.wait_until(acknowledged, protocol.timeout):
             raise BenchError(f"the plant did not acknowledge scenario {scenario} within "
-                             f"{SCENARIO_ACK_TIMEOUT:g} s ({SCENARIO_ACK_MESSAGE}.{SCENARIO_ACK_SIGNAL})")
+                             f"{protocol.timeout:g} s ({ack}.{ack_signal})")
         self.start = self.now
         self._mark_counts()
 
     def inject(self, kind: str, target: str, *, after: float = 0.0, duration: float = math.inf,
                param: float = 0.0) -> Fault:
-        """Inject a fault (bench.faults: drop, delay, duplicate, bitflip, counter_freeze, counter_jump,
-        checksum_value/freeze/random/offset, silence, bus_off, flood, error_frame) on `target` (a message,
-        a node for silence/bus_off, an identifier such as "0x000" for flood), starting `after` s from now
-        and lasting `duration` s (default: to the end of the run). `param`: the kind's parameter (delay s,
-        bit index, counter jump, checksum value or offset, flood frames per ms). Returns the Fault; its
-        window is in bench time. Records no step; the fault goes on the case's record in the report."""
+        """Inject a fault of `kind` (the registry bench.fault_kinds.KINDS; its table is in docs/reliability.md)
+        on `target` (a message, a node or an identifier such as "0x000", as the kind says), starting `after`
+        s from now and lasting `duration` s (default: to the end of the run). `param`: the kind's PARAM
+        (e.g. the delay in s, a bit index). Returns the Fault; its window is in bench time. Records no step;
+        the fault goes on the case's record in the report."""
         start = self.now + after
         fault = Fault(kind, target, start, start + duration, param, source=self.result.nodeid)
         if kind not in KINDS:
@@ -262,9 +268,10 @@ class Case:
         (a message without a cycle time times out only so). Records no step."""
         return self._monitor.timed_out(message, self.now)
 
-    def invalid_frames(self) -> list[InvalidFrame]:
+    def invalid_log(self) -> list[InvalidFrame]:
         """Every invalid frame (checksum, counter, length, range) since the case (or its latest scenario)
-        started, each with its bench time (s), identifier, message and reason. Records no step."""
+        started, each with its bench time (s), identifier, message and reason (the monitor's `invalid_log`
+        since then; `invalid_frames` is always a count, e.g. the case's in the report). Records no step."""
         monitor = self._monitor
         return monitor.invalid_log[max(0, self._invalid_mark - monitor.invalid_dropped):]
 
@@ -391,6 +398,12 @@ class _Timer:
         if t + 1e-9 >= self.next:
             self.next += self.period
             self.callback(t)
+
+
+def _largest_id(signal: SignalCodec) -> int:
+    """The largest scenario id the command signal carries: its DBC maximum, else what its bits hold."""
+    top = signal.mask if signal.maximum is None else int(signal.maximum)
+    return max(1, min(top, signal.mask))
 
 
 def _instances(plan: object) -> list[Fault]:

@@ -1,6 +1,7 @@
 """The project configuration (`bench.toml`) and the settings of one run.
 
-A user's own bench project has its own bench.toml; this repository's is the default.
+Every bench project has its own bench.toml, found in the working directory or above it (or given with
+--config); the package carries no project of its own, so it works the same from a wheel.
 Every problem is a ConfigError naming the file and the key.
 """
 
@@ -12,17 +13,21 @@ import tomllib
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bench.bus import VIRTUAL, is_virtual
 from bench.busopts import BusOptions, positive_int
 from bench.contract import Requirement, load_requirements
 from bench.errors import ConfigError
-from bench.paths import ROOT
+
+if TYPE_CHECKING:
+    from bench.codec import Codebook
 
 CONFIG_NAME = "bench.toml"
 #: s a status has to start following a command change before the change counts as not followed.
 DEFAULT_LATENCY_WINDOW = 1.0
+#: s a plant has to acknowledge a new scenario ([scenario] timeout).
+DEFAULT_SCENARIO_TIMEOUT = 2.0
 
 
 @dataclass(frozen=True)
@@ -38,6 +43,31 @@ class LatencyPair:
 
 
 @dataclass(frozen=True)
+class ScenarioProtocol:
+    """[scenario]: how `start_scenario` resets the plant. The bench sends a new id in `command` (a signal of a
+    stimulus message, with the scenario's other settings beside it) and waits up to `timeout` s for the plant
+    to echo it in `ack`. The names are the project's: the bench itself knows no message."""
+
+    command: tuple[str, str]            # (message, signal)
+    ack: tuple[str, str]
+    timeout: float = DEFAULT_SCENARIO_TIMEOUT
+
+    def check(self, where: Path, codebook: Codebook, stimulus: tuple[str, ...]) -> None:
+        """The named messages and signals exist, and the stimulus nodes send the command (else a ConfigError)."""
+        for key, (message, signal) in (("command", self.command), ("ack", self.ack)):
+            codec = codebook.by_name.get(message)
+            if codec is None:
+                raise ConfigError(f"{where}: [scenario] {key}: no message {message!r} in the databases")
+            if signal not in codec.signal_names:
+                raise ConfigError(f"{where}: [scenario] {key}: message {message} has no signal {signal!r} "
+                                  f"(signals: {', '.join(codec.signal_names)})")
+        senders = codebook[self.command[0]].senders
+        if not set(senders) & set(stimulus):
+            raise ConfigError(f"{where}: [scenario] command: {self.command[0]} is sent by "
+                              f"{', '.join(senders) or 'no node'}, not by a stimulus node ({', '.join(stimulus)})")
+
+
+@dataclass(frozen=True)
 class ProjectConfig:
     path: Path
     databases: tuple[Path, ...]
@@ -49,6 +79,7 @@ class ProjectConfig:
     contract: tuple[Path, ...] = ()              # the contract documents ([contract] documents, globs resolved)
     requirements: tuple[Requirement, ...] = ()   # every requirement of those documents, in document order
     bus: BusOptions = BusOptions()               # [bus]: python-can arguments (bitrate, fd, data_bitrate, ...)
+    scenario: ScenarioProtocol | None = None     # [scenario]; None: the project's plant takes no scenarios
 
     @cached_property
     def requirement_ids(self) -> frozenset[str]:
@@ -56,13 +87,14 @@ class ProjectConfig:
 
 
 def find_config(start: Path | None = None) -> Path:
-    """bench.toml in the working directory or above it, else the repository's own."""
+    """bench.toml in the working directory or the nearest folder above it."""
     here = (start or Path.cwd()).resolve()
     for folder in (here, *here.parents):
         candidate = folder / CONFIG_NAME
         if candidate.is_file():
             return candidate
-    return ROOT / CONFIG_NAME
+    raise ConfigError(f"no {CONFIG_NAME} in {here} or any folder above it: run from a bench project "
+                      f"or give --config PATH")
 
 
 def load_config(path: Path | None = None) -> ProjectConfig:
@@ -112,6 +144,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         reports=base / string("reports"),
         latency=_latency_pairs(path, data.get("timing", {})),
         bus=_bus_table(path, data.get("bus", {})),
+        scenario=_scenario(path, data.get("scenario")),
         **_contract(path, text, data.get("contract", {})),
     )
 
@@ -213,6 +246,23 @@ def _latency_pairs(path: Path, timing: Any) -> tuple[LatencyPair, ...]:
         window = _positive(where, "window", entry.get("window", DEFAULT_LATENCY_WINDOW))
         pairs.append(LatencyPair(name, command, status, threshold, window))
     return tuple(pairs)
+
+
+def _scenario(path: Path, table: Any) -> ScenarioProtocol | None:
+    """[scenario] command = "Message.Signal", ack = "Message.Signal", timeout = s (optional)."""
+    if table is None:
+        return None
+    where = f"{path}: [scenario]"
+    if not isinstance(table, dict):
+        raise ConfigError(f"{where} must be a table")
+    unknown = set(table) - {"command", "ack", "timeout"}
+    if unknown:
+        raise ConfigError(f"{where} unknown key(s) {', '.join(sorted(unknown))} (known: command, ack, timeout)")
+    for key in ("command", "ack"):
+        if key not in table:
+            raise ConfigError(f"{where} needs {key} = \"Message.Signal\"")
+    timeout = _positive(where, "timeout", table.get("timeout", DEFAULT_SCENARIO_TIMEOUT))
+    return ScenarioProtocol(_signal_ref(where, table, "command"), _signal_ref(where, table, "ack"), timeout)
 
 
 def _signal_ref(where: str, entry: dict[str, Any], key: str) -> tuple[str, str]:

@@ -62,9 +62,14 @@ class Restbus:
         for name in self.periodic:
             self.reset_values(name)
 
-    def enable(self, message: str, enabled: bool) -> None:
-        """Start or stop sending a message (its counter carries on where it stopped)."""
-        self._slot(message).enabled = enabled
+    def stop_sending(self, message: str) -> None:
+        """Stop sending a message until `resume_sending` (its counter carries on where it stopped). The one
+        verb pair for this everywhere: Restbus, NodeIO and the `bench` fixture."""
+        self._slot(message).enabled = False
+
+    def resume_sending(self, message: str) -> None:
+        """Send a message again after `stop_sending`, from its next due cycle on."""
+        self._slot(message).enabled = True
 
     def _slot(self, message: str) -> _Periodic:
         slot = self.periodic.get(message)

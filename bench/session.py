@@ -59,6 +59,8 @@ class BenchSession:
         for node in project.stimulus:
             if node not in self.codebook.nodes:
                 raise ConfigError(f"{project.path}: stimulus node {node!r} is in none of the databases")
+        if project.scenario is not None:
+            project.scenario.check(project.path, self.codebook, project.stimulus)
         self.external = resolve_external(self.codebook, project.stimulus, settings.external)
         self.clock: Clock = VirtualClock() if settings.virtual_time else WallClock()
         channel = settings.channel

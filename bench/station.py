@@ -50,7 +50,7 @@ class _StationIO:
     def sending(self, message: str, enabled: bool) -> None:
         restbus = self._station.restbus
         if message in restbus.periodic:      # a message of an external node is not this station's to switch
-            restbus.enable(message, enabled)
+            (restbus.resume_sending if enabled else restbus.stop_sending)(message)
 
     def latest(self, message: str) -> Mapping[str, float] | None:
         return self._station.monitor.latest(message, self._station.now())

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from bench.codec import Codebook, load_codebook
-from bench.paths import BENCH_DBC, CHASSIS_DBC
+from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 
 @pytest.fixture(scope="session")

@@ -13,13 +13,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from bench.paths import BENCH_DBC, CHASSIS_DBC
 from plant import braking_plant
 from plant.ecus import abs as abs_ecu
 from plant.ecus.abs import estimator_config
 from plant.ecus.abs_estimator import (DECREASE, INCREASE, TurnStateEstimator, front_wheel_angle, nth_largest,
                                       turn_direction, yaw_rate)
 from plant.vehicles import AbsParams, load_file, load_vehicle
+from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 CAR, PARAMS = load_vehicle("ACLASS"), load_vehicle("ACLASS_ABS")
 CONFIG = estimator_config(PARAMS, CAR)

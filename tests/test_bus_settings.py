@@ -22,7 +22,7 @@ from bench.busopts import BusOptions, contract_options
 from bench.codec import load_codebook
 from bench.config import load_config
 from bench.errors import ConfigError
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 CHASSIS_DBC, BENCH_DBC = ROOT / "dbc" / "chassis.dbc", ROOT / "dbc" / "bench.dbc"
 MINI = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"

@@ -24,8 +24,8 @@ from bench.bus import open_bus
 from bench.canio import MCAPReader, MCAPWriter
 from bench.errors import LogError
 from bench.logread import read_decoded, read_frames
-from bench.paths import BENCH_DBC, CHASSIS_DBC, ROOT
 from bench.recorder import Recorder
+from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
 

@@ -14,7 +14,7 @@ import pytest
 
 from bench.config import ProjectConfig, load_config
 from bench.marks import read_marks
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 
 @dataclass(eq=False)   # pytest keeps plugins in sets

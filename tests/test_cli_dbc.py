@@ -24,7 +24,7 @@ def test_lists_both_databases(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_one_file(capsys: pytest.CaptureFixture[str]) -> None:
-    from bench.paths import BENCH_DBC
+    from tests.repo import BENCH_DBC
 
     assert main(["dbc", str(BENCH_DBC)]) == 0
     out = capsys.readouterr().out
@@ -43,3 +43,56 @@ def test_malformed_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
 def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["dbc", str(tmp_path / "nowhere.dbc")]) == 2
     assert "nowhere.dbc" in capsys.readouterr().err.replace("\n", "")
+
+
+# -- without FILE: the project's databases (bench.toml), not a path inside the package -----------------------
+def _project(folder: Path, databases: list[str]) -> Path:
+    """A bench project of its own: a bench.toml naming copies of the repository's databases."""
+    import shutil
+
+    from tests.repo import BENCH_DBC, CHASSIS_DBC
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for source in (CHASSIS_DBC, BENCH_DBC):
+        shutil.copy(source, folder / source.name)
+    config = folder / "bench.toml"
+    config.write_text('[bench]\ndatabases = [' + ", ".join(f'"{d}"' for d in databases) + ']\n'
+                      'stimulus = ["TESTER"]\nplant = "chassis"\ntestcases = "t"\nreports = "r"\n', encoding="utf-8")
+    return config
+
+
+def test_default_is_the_configured_databases(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = _project(tmp_path / "p", ["bench.dbc"])            # only one of the two files the folder holds
+    assert main(["dbc", "--config", str(config)]) == 0
+    out = capsys.readouterr().out
+    assert "bench.dbc" in out and "BENCH_Control" in out
+    assert "chassis.dbc" not in out and "DRV_Steering" not in out
+
+
+def test_default_config_is_found_from_the_working_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    _project(tmp_path / "p", ["chassis.dbc"])
+    (tmp_path / "p" / "sub").mkdir()
+    monkeypatch.chdir(tmp_path / "p" / "sub")                   # bench.toml is one folder up
+    assert main(["dbc"]) == 0
+    out = capsys.readouterr().out
+    assert "chassis.dbc" in out and "DRV_Steering" in out and "BENCH_Control" not in out
+    assert main(["dbc", "check"]) == 0
+    assert "chassis.dbc" in capsys.readouterr().out
+
+
+def test_check_takes_config_after_the_word(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = _project(tmp_path / "p", ["bench.dbc"])
+    assert main(["dbc", "check", "--config", str(config)]) == 0
+    out = capsys.readouterr().out
+    assert "bench.dbc" in out and "chassis.dbc" not in out
+
+
+def test_no_project_is_a_one_line_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)                                 # no bench.toml here or above (tmp is outside the repo)
+    if any((folder / "bench.toml").is_file() for folder in (tmp_path, *tmp_path.parents)):
+        pytest.skip("a bench.toml above the temporary folder")
+    assert main(["dbc"]) == 2
+    err = capsys.readouterr().err
+    assert "bench.toml" in err and "--config" in err and "Traceback" not in err

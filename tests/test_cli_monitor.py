@@ -22,7 +22,7 @@ from bench.cli import main
 from bench.cli.monitor import TimeBase, window_stats
 from bench.codec import Codebook
 from bench.monitor import Monitor
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 WIDTH, HEIGHT = 200, 50
 SCREEN_TIMEOUT = 30.0   # s to wait for a screen with the expected row (plant and monitor start-up included)

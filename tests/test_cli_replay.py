@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bench.paths import ROOT
+from tests.repo import ROOT
 from tests.test_replay import group, make_log
 
 

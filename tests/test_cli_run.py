@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 LONG = "a_parameter_identifier_long_enough_that_the_whole_case_name_is_wider_than_eighty_columns"
 PARAMS = ["left", "dry", "drop:VCU_WheelCmd_FL", "bold red", LONG]

@@ -6,14 +6,13 @@ from __future__ import annotations
 import math
 
 import pytest
+from cantools.database import errors as cantools_errors
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cantools.database import errors as cantools_errors
-
 from bench.codec import Codebook, EncodeError, MessageCodec, load_codebook
 from bench.errors import SignalError
-from bench.paths import BENCH_DBC, CHASSIS_DBC
+from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 
 def _values(codec: MessageCodec) -> st.SearchStrategy[dict[str, float]]:

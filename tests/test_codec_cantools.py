@@ -38,7 +38,7 @@ from hypothesis import strategies as st
 
 from bench.codec import DecodeError, EncodeError, MessageCodec, load_dbc
 from bench.errors import DatabaseError
-from bench.paths import BENCH_DBC, CHASSIS_DBC, ROOT
+from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 CORPUS = ROOT.parent / "shared" / "corpus" / "dbc"
 CORPUS_FILES = sorted(p for p in CORPUS.iterdir() if p.is_file()) if CORPUS.is_dir() else []

@@ -18,9 +18,9 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from bench.cli import main
-from bench.config import ProjectConfig, load_config
+from bench.config import ProjectConfig, ScenarioProtocol, load_config
 from bench.errors import ConfigError
-from bench.paths import BENCH_DBC, CHASSIS_DBC, ROOT
+from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 BENCH = [sys.executable, "-m", "bench"]
 MINI_CASES = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"
@@ -159,6 +159,54 @@ def test_deep_nesting(tmp_path: Path) -> None:
         load_config(write(tmp_path, "[bench]\nplant = " + "[" * 5000 + "]" * 5000 + "\n"))
 
 
+# -- [scenario]: the scenario protocol's names come from the project, not from the bench ----------------------
+SCENARIO_GOOD = {"command": "BENCH_Control.ScenarioId", "ack": "PLANT_Status.ScenarioIdAck"}
+
+
+def test_scenario_table(tmp_path: Path) -> None:
+    project = load_config(write(tmp_path, toml({"bench": GOOD, "scenario": {**SCENARIO_GOOD, "timeout": 0.5}})))
+    assert project.scenario == ScenarioProtocol(("BENCH_Control", "ScenarioId"), ("PLANT_Status", "ScenarioIdAck"),
+                                                0.5)
+    assert load_config(write(tmp_path, toml({"bench": GOOD, "scenario": SCENARIO_GOOD}))).scenario.timeout == 2.0
+    assert load_config(write(tmp_path, toml({"bench": GOOD}))).scenario is None     # optional: no plant protocol
+
+
+def test_repository_config_names_its_scenario_protocol() -> None:
+    assert load_config(ROOT / "bench.toml").scenario is not None
+
+
+@pytest.mark.parametrize("scenario, words", [
+    ({"ack": "PLANT_Status.ScenarioIdAck"}, "needs command"),
+    ({"command": "BENCH_Control.ScenarioId"}, "needs ack"),
+    ({**SCENARIO_GOOD, "command": "BENCH_Control"}, 'command must be "Message.Signal"'),
+    ({**SCENARIO_GOOD, "ack": 3}, 'ack must be "Message.Signal"'),
+    ({**SCENARIO_GOOD, "timeout": -1}, "timeout must be a positive number"),
+    ({**SCENARIO_GOOD, "id": "x"}, "unknown key(s) id"),
+], ids=["no-command", "no-ack", "no-signal", "not-text", "negative-timeout", "unknown-key"])
+def test_scenario_table_errors(tmp_path: Path, scenario: dict[str, Any], words: str) -> None:
+    path = write(tmp_path, toml({"bench": GOOD, "scenario": scenario}))
+    with pytest.raises(ConfigError) as error:
+        load_config(path)
+    assert str(path) in str(error.value) and "[scenario]" in str(error.value) and words in str(error.value)
+
+
+@pytest.mark.parametrize("scenario, words", [
+    ({**SCENARIO_GOOD, "command": "NoSuch_Message.ScenarioId"}, "no message 'NoSuch_Message'"),
+    ({**SCENARIO_GOOD, "ack": "PLANT_Status.NoSuchSignal"}, "has no signal 'NoSuchSignal'"),
+    ({**SCENARIO_GOOD, "command": "PLANT_Status.ScenarioIdAck"}, "not by a stimulus node"),
+], ids=["unknown-message", "unknown-signal", "not-stimulus"])
+def test_scenario_names_are_checked_against_the_databases(tmp_path: Path, scenario: dict[str, Any],
+                                                          words: str) -> None:
+    """Checked when a session loads the databases: before any case starts, naming the file and the key."""
+    from bench.config import RunSettings
+    from bench.session import BenchSession
+
+    path = write(tmp_path, toml({"bench": GOOD, "scenario": scenario}))
+    with pytest.raises(ConfigError) as error:
+        BenchSession(load_config(path), RunSettings())
+    assert str(path) in str(error.value) and words in str(error.value)
+
+
 def test_config_is_a_folder_or_missing(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="cannot read"):
         load_config(tmp_path)
@@ -278,14 +326,22 @@ def test_fuzz_config_tomlish_text(fragments: list[str]) -> None:
     _load("".join(fragments))
 
 
+SCENARIO = st.dictionaries(st.sampled_from(["command", "ack", "timeout", "x"]),
+                           st.one_of(SCALARS, st.sampled_from(["A.b", "A.", ".b", "A.b.c"])), max_size=4)
+
+
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(bench=st.one_of(st.dictionaries(st.sampled_from(KEYS), VALUES, max_size=7),
                        # mostly good values, so that the success path and [timing] are reached too
                        st.fixed_dictionaries({k: st.one_of(st.just(v), st.just(v), st.just(v), VALUES)
                                               for k, v in GOOD.items()})),
-       timing=st.one_of(st.none(), st.none(), TIMING), table=st.sampled_from(["bench", "bench", "bench", "bnech"]))
-def test_fuzz_config_random_structures(bench: dict[str, Any], timing: dict[str, Any] | None, table: str) -> None:
+       timing=st.one_of(st.none(), st.none(), TIMING), table=st.sampled_from(["bench", "bench", "bench", "bnech"]),
+       scenario=st.one_of(st.none(), SCENARIO))
+def test_fuzz_config_random_structures(bench: dict[str, Any], timing: dict[str, Any] | None, table: str,
+                                       scenario: dict[str, Any] | None) -> None:
     tables = {table: bench}
     if timing is not None:
         tables["timing"] = timing
+    if scenario is not None:
+        tables["scenario"] = scenario
     _load(toml(tables))

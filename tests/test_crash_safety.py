@@ -13,7 +13,7 @@ from pathlib import Path
 
 from bench.bus import open_bus
 from bench.logread import read_frames, summarise
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 RUN_SECONDS = 8.0
 

@@ -13,7 +13,7 @@ import pytest
 
 from bench.cli import main
 from bench.dbccheck import ERROR, CheckResult, Finding, check_file, check_text
-from bench.paths import BENCH_DBC, CHASSIS_DBC, ROOT
+from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 CORPUS = ROOT.parent / "shared" / "corpus" / "dbc"
 

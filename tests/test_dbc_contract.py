@@ -15,7 +15,7 @@ from cantools.database.can import Database, Message, Signal
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench.paths import BENCH_DBC, CHASSIS_DBC
+from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 WHEELS = ("FL", "FR", "RL", "RR")
 MODES = {0: "NORMAL", 1: "LATERAL", 2: "ADAPTIVE", 3: "PIVOT"}

@@ -19,8 +19,8 @@ from bench import e2e
 from bench.codec import Codebook
 from bench.faults import FRAME_KINDS, Fault, FaultPlan
 from bench.monitor import Monitor
-from bench.paths import ROOT
 from bench.restbus import Restbus
+from tests.repo import ROOT
 
 MESSAGE = "VCU_WheelCmd_FL"
 CYCLE = 0.01   # s, VCU_WheelCmd_FL's GenMsgCycleTime (checked below)

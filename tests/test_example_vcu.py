@@ -25,7 +25,7 @@ from pathlib import Path
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 EXAMPLE = ROOT / "examples" / "vcu_ecu.py"
 BENCH = [sys.executable, "-m", "bench"]

@@ -11,7 +11,7 @@ import subprocess
 import sys
 import time
 
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 # docs/spec/vehicles.md A ([P0] §3): 2K = 1.11 m, 2L = 2.76 m, r = 0.281 m
 K, L, R = 1.11 / 2, 2.76 / 2, 0.281

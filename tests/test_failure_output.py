@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 
 def test_failed_steps_are_reported_without_a_traceback(tmp_path: Path) -> None:

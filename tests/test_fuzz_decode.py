@@ -27,9 +27,9 @@ from bench.dbccheck import check_text
 from bench.errors import BenchError
 from bench.logread import MAGIC, read_decoded, read_frames, read_steps, summarise
 from bench.monitor import Monitor
-from bench.paths import BENCH_DBC, CHASSIS_DBC
 from bench.recorder import Recorder
 from tests.reference import protected
+from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 _CODEBOOK = load_codebook([CHASSIS_DBC, BENCH_DBC])
 CODECS = sorted(_CODEBOOK.by_id.values(), key=lambda c: c.frame_id)

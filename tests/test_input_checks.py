@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from bench.cli import main
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 MINI = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"
 

@@ -19,8 +19,8 @@ import pytest
 
 from bench.cli import main
 from bench.logread import LoggedFrame, read_frames
-from bench.paths import ROOT
 from bench.recorder import Recorder
+from tests.repo import ROOT
 
 CASES = ROOT / "tests" / "fixtures" / "cases"
 NS = 1e-9

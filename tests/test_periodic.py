@@ -256,9 +256,9 @@ def test_stop_sending_and_faults_hand_back_to_the_scheduler(codebook: Codebook, 
 
     def stimulus(tick: int) -> None:
         if tick == 400:
-            station.restbus.enable("DRV_Pedals", False)
+            station.restbus.stop_sending("DRV_Pedals")
         if tick == 600:
-            station.restbus.enable("DRV_Pedals", True)
+            station.restbus.resume_sending("DRV_Pedals")
         if tick == 800:
             plan = FaultPlan(codebook)
             plan.add(parse_fault("bitflip:DRV_MotionRequest:0@2.0-2.5"))

@@ -26,8 +26,8 @@ from mcap.reader import make_reader
 
 from bench.errors import BenchError, LogError
 from bench.logread import LoggedFrame, read_decoded, read_frames, read_steps, summarise
-from bench.paths import BENCH_DBC, CHASSIS_DBC
 from bench.recorder import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC, Recorder
+from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 FALLBACK_DBC = """VERSION ""
 NS_ :

@@ -14,8 +14,8 @@ import pytest
 
 from bench.bus import open_bus
 from bench.cli import main
-from bench.paths import ROOT
 from bench.recorder import Recorder
+from tests.repo import ROOT
 
 SPACING = 0.010   # s between the logged tx frames
 

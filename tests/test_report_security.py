@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bench.paths import BENCH_DBC, CHASSIS_DBC, ROOT
+from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 from tests.test_report_browser import IMG, SCRIPT, dump, problems
 
 CASES = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"

@@ -16,8 +16,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
-from bench.paths import ROOT
 from tests.reference import crc8_j1850
+from tests.repo import ROOT
 
 CASES = ROOT / "tests" / "fixtures" / "cases"
 BENCH = [sys.executable, "-m", "bench"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
-from bench.paths import ROOT
+from tests.repo import ROOT
 
 
 def _soak_module():

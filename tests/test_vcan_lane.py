@@ -23,9 +23,9 @@ import pytest
 
 from bench.codec import load_codebook
 from bench.config import load_config
-from bench.paths import ROOT
 from plant.factory import ASSEMBLIES, messages_of
 from tests.reference import contract_checksum
+from tests.repo import ROOT
 from tests.vcan import CHANNEL, IN_LANE, has_vcan
 
 WARM_UP_S = 2.0     # s after the plant's first frame before judging (its BCM tasks start after 3 cycles)

@@ -1,5 +1,6 @@
 """`bench dbc [FILE ...]`: list what a DBC carries (ids, senders, cycle times, signals with units),
-so an engineer can check a database against docs/spec/k-matrix.md at a glance without opening an editor.
+so an engineer can check a database against the project's communication matrix at a glance without opening
+an editor. Without FILE: the databases of the project's bench.toml ([bench] databases).
 
 `bench dbc check [FILE ...]`: check databases against the bench's needs (`bench.dbccheck`) and print
 every finding with its file and line. Exit 0 when no file has an error (warnings allowed), 1 when one
@@ -18,13 +19,15 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from bench import dbccheck, paths
+from bench import dbccheck
 from bench.codec import load_dbc
+from bench.config import load_config
 from bench.errors import ConfigError, DatabaseError
 
 CHECK = "check"
-E2E_HELP = ("check only: the end-to-end layout (AliveCounter, Checksum) is an error (required), a warning "
-            "(optional), or required when the file declares either signal (auto, the default)")
+E2E_HELP = ("check only: the end-to-end layout (the bench's counter and checksum signals) is an error (required), "
+            "a warning (optional), or required when the file declares either signal (auto, the default)")
+CONFIG_HELP = "the project's bench.toml, whose [bench] databases are the default FILEs (default: found from here up)"
 
 
 def register(subparsers: Any) -> None:
@@ -36,12 +39,13 @@ def register(subparsers: Any) -> None:
         description="List id, name, senders, cycle time and signals of every message; "
         "'bench dbc check FILE...' checks them against the bench's needs instead (cycle and send types, "
         "layout, ranges, start values, end-to-end layout, value tables) and prints every finding with its line. "
-        "Without FILE: the contract (chassis.dbc) and the bench's own database (bench.dbc).",
+        "Without FILE: the databases of the project's bench.toml ([bench] databases).",
     )
     # REMAINDER, parsed again in `run`: so that options may follow the words (`check --e2e required FILE`)
     parser.add_argument("files", nargs=argparse.REMAINDER, metavar="[check] FILE",
                         help="DBC file(s); a first word 'check' checks them instead of listing them")
     parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
+    parser.add_argument("--config", default=None, help=CONFIG_HELP)
     parser.set_defaults(handler=run)
 
 
@@ -55,6 +59,7 @@ class _WordsParser(argparse.ArgumentParser):
 def _words(prog: str, words: list[str], with_e2e: bool) -> argparse.Namespace:
     parser = _WordsParser(prog=prog, add_help=prog.endswith("check"))
     parser.add_argument("files", nargs="*", metavar="FILE")
+    parser.add_argument("--config", default=None, help=CONFIG_HELP)
     if with_e2e:
         parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
     return parser.parse_intermixed_args(words)
@@ -65,16 +70,22 @@ def run(args: argparse.Namespace) -> int:
     words: list[str] = list(args.files)
     if words and words[0] == CHECK:
         checked = _words("bench dbc check", words[1:], with_e2e=True)
-        return check([Path(f) for f in checked.files], checked.e2e or args.e2e or "auto")
+        files = [Path(f) for f in checked.files] or configured(checked.config or args.config)
+        return check(files, checked.e2e or args.e2e or "auto")
     if args.e2e is not None:
         raise ConfigError("--e2e: only for 'bench dbc check FILE...'")
     listed = _words("bench dbc", words, with_e2e=False)
-    files: list[Path] = [Path(f) for f in listed.files] or [paths.CHASSIS_DBC, paths.BENCH_DBC]
+    files = [Path(f) for f in listed.files] or configured(listed.config or args.config)
     databases = [(path, load_dbc(path)) for path in files]  # raises DatabaseError naming the file
     console = Console()
     for path, database in databases:
         console.print(message_table(path, database))
     return 0
+
+
+def configured(config: str | None) -> list[Path]:
+    """The project's databases: what `bench run` would load (ConfigError without a bench.toml)."""
+    return list(load_config(Path(config) if config else None).databases)
 
 
 def message_table(path: Path, database: Database) -> Table:
@@ -111,7 +122,6 @@ def _signals(message: Message) -> Text:
 
 def check(files: list[Path], e2e_mode: str) -> int:
     """Print every finding as FILE:LINE, then one summary line per file (compiler style, so editors jump to it)."""
-    files = files or [paths.CHASSIS_DBC, paths.BENCH_DBC]
     out = Console(soft_wrap=True, highlight=False)
     err = Console(stderr=True, soft_wrap=True, highlight=False)
     unreadable = rejected = 0

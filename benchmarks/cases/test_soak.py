@@ -11,4 +11,4 @@ def test_soak(bench):
     bench.run(seconds)
     # What a soak must not do is lose or corrupt frames (benchmarks/soak.py counts AliveCounter gaps in the
     # log) or grow; the cycle times under the host's scheduling are in the report's timing section.
-    bench.expect("invalid frames", len(bench.invalid_frames()), 0)
+    bench.expect("invalid frames", len(bench.invalid_log()), 0)

@@ -47,7 +47,7 @@ def test_wheel_command_steps(bench):
                          lambda: worst_error() <= ANGLE_TOL, SETTLE_S)
         bench.run(REST_S)
     bench.expect("worst wheel angle error after the last step", worst_error(), 0.0, abs_tol=ANGLE_TOL, unit="deg")
-    bench.expect("invalid frames", len(bench.invalid_frames()), 0)
+    bench.expect("invalid frames", len(bench.invalid_log()), 0)
     bench.check_cycle_times([f"VCU_WheelCmd_{w}" for w in WHEELS] + [f"WHL_Status_{w}" for w in WHEELS])
     bench.plot("FL steering: command and status", [("VCU_WheelCmd_FL", "SteerAngleCmd", "command"),
                                                     ("WHL_Status_FL", "SteerAngle", "status")], ylabel="deg")

@@ -1,4 +1,5 @@
-"""Where the bench finds its databases and writes its artefacts."""
+"""Where this repository keeps its project files, for the bench's own tests (the package itself knows no
+repository layout: it finds a project through its bench.toml)."""
 
 from __future__ import annotations
 
@@ -8,5 +9,3 @@ ROOT = Path(__file__).resolve().parent.parent
 DBC_DIR = ROOT / "dbc"
 CHASSIS_DBC = DBC_DIR / "chassis.dbc"
 BENCH_DBC = DBC_DIR / "bench.dbc"
-REPORTS_DIR = ROOT / "reports"
-TESTCASES_DIR = ROOT / "testcases"
