@@ -25,10 +25,14 @@ class NodeIO(Protocol):
     def reset_outputs(self) -> None:
         """Every message this station sends back to its DBC start values (a plant switching vehicle)."""
 
-    def sending(self, message: str, enabled: bool) -> None:
-        """Start or stop sending a message of this station (a plant whose vehicle has no such ECU or
-        signal stops it: the bus then carries what that vehicle's network carries). A message this
-        station does not send (its node is external) is left alone."""
+    def stop_sending(self, message: str) -> None:
+        """Stop sending a message of this station until `resume_sending` (a plant whose vehicle has no such
+        ECU or signal stops it: the bus then carries what that vehicle's network carries). A message this
+        station does not send (its node is external) is left alone. The same verb pair as the restbus's and
+        the `bench` fixture's."""
+
+    def resume_sending(self, message: str) -> None:
+        """Send a message of this station again after `stop_sending` (left alone when its node is external)."""
 
     def latest(self, message: str) -> Mapping[str, float] | None:
         """The latest valid values of a message (enumerations as numbers); None when never

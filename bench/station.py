@@ -47,10 +47,15 @@ class _StationIO:
     def reset_outputs(self) -> None:
         self._station.restbus.reset_all()
 
-    def sending(self, message: str, enabled: bool) -> None:
+    def stop_sending(self, message: str) -> None:
         restbus = self._station.restbus
         if message in restbus.periodic:      # a message of an external node is not this station's to switch
-            (restbus.resume_sending if enabled else restbus.stop_sending)(message)
+            restbus.stop_sending(message)
+
+    def resume_sending(self, message: str) -> None:
+        restbus = self._station.restbus
+        if message in restbus.periodic:
+            restbus.resume_sending(message)
 
     def latest(self, message: str) -> Mapping[str, float] | None:
         return self._station.monitor.latest(message, self._station.now())

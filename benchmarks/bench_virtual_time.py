@@ -48,7 +48,10 @@ class DictIO:
     def reset_outputs(self) -> None:
         pass
 
-    def sending(self, message: str, enabled: bool) -> None:
+    def stop_sending(self, message: str) -> None:
+        pass
+
+    def resume_sending(self, message: str) -> None:
         pass
 
     def latest(self, message: str) -> Mapping[str, float] | None:

@@ -78,9 +78,9 @@ class PlantHost:
         mine = messages_of(self.vehicle)
         others = frozenset().union(*(messages_of(vehicle) for vehicle in ASSEMBLIES)) - mine
         for message in others:
-            io.sending(message, False)
+            io.stop_sending(message)
         for message in mine:
-            io.sending(message, True)
+            io.resume_sending(message)
         self._network = self.vehicle
 
 

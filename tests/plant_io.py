@@ -1,6 +1,6 @@
 """One fake bus for stepping the EV's plant behaviours in a test: the latest values of each message.
 
-Every value sent must be finite and inside its DBC range (plant/limits.py), so a test that steps the plant also
+Every value sent must be finite and inside its DBC range (plant/signal_ranges.py), so a test that steps the plant also
 checks that no behaviour would put a NaN or an out-of-range value on the bus.
 """
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from plant import limits
+from plant import signal_ranges as ranges
 
 
 class RangeCheckedIO:
@@ -25,7 +25,7 @@ class RangeCheckedIO:
     def send_values(self, message: str, **signals: float) -> None:
         for name, value in signals.items():
             assert math.isfinite(value), f"{message}.{name} = {value!r}"
-            bounds = limits.BY_SIGNAL.get((message, name))
+            bounds = ranges.BY_SIGNAL.get((message, name))
             assert bounds is None or bounds[0] <= value <= bounds[1], f"{message}.{name} = {value}"
         self.values.setdefault(message, {}).update(signals)
 
@@ -41,5 +41,8 @@ class RangeCheckedIO:
     def reset_outputs(self) -> None:
         pass
 
-    def sending(self, message: str, enabled: bool) -> None:
+    def stop_sending(self, message: str) -> None:
+        pass
+
+    def resume_sending(self, message: str) -> None:
         pass
