@@ -13,7 +13,7 @@ CAN FD (also at 8 bytes or fewer), BRS, ESI, a remote frame's DLC, and the chann
 number or a name). docs/python-can-conformance.md lists what python-can's own tests check of them.
 
 Without a DBC the log has the raw-frame channel only. With `dbc` (a path, several separated by commas;
-on the logger's command line `--dbc=dbc/chassis.dbc`) every frame also goes through the bench's monitor:
+on the logger's command line `--dbc=FILE.dbc`) every frame also goes through the bench's monitor:
 it is checked (length, the contract's E2E checksum and counter, ranges) and its decoded signals are
 written to the decoded channels, as in a bench run.
 """

@@ -2,7 +2,7 @@
 
 The bench knows no vehicle; it learns which requirement ids exist from the documents that
 bench.toml names (`[contract] documents`). A requirement is a heading
-``### VCU-FLT-03 — Priority between faults``: the id, an em dash, a title. Headings inside
+``### ECU-FLT-03 — Priority between faults``: the id, an em dash, a title. Headings inside
 fenced code blocks are examples, not requirements. A level-3 heading that starts with an id but
 lacks the " — title" part is an error (a typo there would otherwise drop the requirement silently).
 """
@@ -89,11 +89,11 @@ def load_requirements(paths: Iterable[Path]) -> dict[str, Requirement]:
 
 
 def owner_prefix(requirement_id: str) -> str:
-    """The part of an id before its first dash: "VCU" for VCU-FLT-03, "WHL" for WHL-STS-01."""
+    """The part of an id before its first dash: "ECU" for ECU-FLT-03, "MOTOR" for MOTOR-STS-01."""
     return requirement_id.split("-", 1)[0]
 
 
 def node_prefix(node: str) -> str:
-    """The part of a node name before its first underscore: "WHL" for WHL_FL, "VCU" for VCU.
+    """The part of a node name before its first underscore: "MOTOR" for MOTOR_FL, "ECU" for ECU.
     A requirement belongs to the nodes whose prefix equals its own (bench.report.conformance)."""
     return node.split("_", 1)[0]

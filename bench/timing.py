@@ -3,7 +3,7 @@
 Why streamed: the runner's monitor keeps only the recent part of its histories and intervals (memory stays
 flat in long runs, bench/monitor.py), but the report speaks of the whole run. So `TimingCollector` sees
 every frame the runner's monitor checks (it is called from the monitor's sink, `bench.run.BenchRun`) and
-keeps what the section needs in constant memory per message. Vehicle-agnostic: which status follows which
+keeps what the section needs in constant memory per message. It knows no vehicle: which status follows which
 command comes from bench.toml (`[timing] latency`, `bench.config.LatencyPair`).
 
 Cycle time, per message: p50, p99 and max of all its frame intervals in the run (every frame, sent or

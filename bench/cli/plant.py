@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                         "until SIGINT/SIGTERM or --duration.")
     add_bus_options(parser, "udp_multicast")
     add_node_options(parser)
-    parser.add_argument("--vehicle", default=None, help="vehicle of the plant at start (BENCH_Control may change it)")
+    parser.add_argument("--vehicle", default=None, help="vehicle of the plant at start (a scenario may change it)")
     parser.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     parser.set_defaults(handler=run)
 

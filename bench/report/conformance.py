@@ -1,7 +1,7 @@
 """The report's conformance section: per node, requirement -> the cases that check it -> a verdict.
 
-A requirement belongs to the nodes whose name prefix equals its id prefix (WHL-STS-01 -> WHL_FL, WHL_FR,
-...; VCU-FLT-03 -> VCU; see bench.contract). A requirement that belongs to no node with a table of its
+A requirement belongs to the nodes whose name prefix equals its id prefix (MOTOR-STS-01 -> MOTOR_FL,
+MOTOR_FR, ...; ECU-FLT-03 -> ECU; see bench.contract). A requirement that belongs to no node with a table of its
 own (common rules such as COM-E2E-01) appears in the table of every node judged by a case that checks it,
 with those cases. Requirements in no table are listed at the end. Verdicts:
 

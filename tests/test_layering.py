@@ -1,0 +1,162 @@
+"""The layers and their import rule (docs/architecture.md "The layers and their import rule").
+
+bench/ is a generic bench: it knows no vehicle, so no message, signal or vehicle-specific node name of this
+project's databases appears in it (code, docstrings, help text, report templates), nor the repository's file
+layout; a project names what the bench needs in its bench.toml. The import direction holds: plant/ imports
+only the bench's behaviour API (bench.node), testcases/ never imports plant/, bench/ imports neither.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import cantools
+import pytest
+
+from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
+
+BENCH = ROOT / "bench"
+TEXT_SUFFIXES = {".py", ".j2", ".html", ".css", ".js", ".toml", ".md", ".txt", ".json"}
+
+#: Names the bench may use although a database of this project carries them, each with its reason.
+ALLOWED = {
+    # The bench's end-to-end profile (bench/e2e.py, docs/spec/e2e.md) is the bench's own, like its CRC
+    # polynomial: a database marks a protected message by these two signal names at their fixed places, the
+    # restbus fills them and the monitor judges them. Any project's database uses the same names.
+    "AliveCounter": "the bench's E2E profile",
+    "Checksum": "the bench's E2E profile",
+}
+#: Node names that are roles every bench project has (the stimulus and the plant), not parts of a vehicle.
+ROLE_NODES = {"DRIVER", "TESTER", "PLANT"}
+
+
+def _databases() -> list[cantools.database.can.Database]:
+    return [cantools.database.load_file(str(path), strict=False) for path in (CHASSIS_DBC, BENCH_DBC)]
+
+
+def project_names() -> dict[str, str]:
+    """name -> what it is, for every name this project's databases give."""
+    names: dict[str, str] = {}
+    for database in _databases():
+        for node in database.nodes:
+            if node.name not in ROLE_NODES:
+                names[node.name] = "node"
+        for message in database.messages:
+            names[message.name] = "message"
+            for signal in message.signals:
+                names.setdefault(signal.name, f"signal of {message.name}")
+                for value in (signal.choices or {}).values():
+                    text = str(value)
+                    # the vehicle codes and coined value names; plain words (OK, LEFT, NORMAL, ...) are English
+                    if signal.name == "Vehicle" or re.search(r"[_0-9]", text):
+                        names.setdefault(text, f"value of {message.name}.{signal.name}")
+    for path in (CHASSIS_DBC, BENCH_DBC):
+        names[path.name] = "a database file of this repository"
+    return names
+
+
+def bench_files() -> Iterator[Path]:
+    for path in sorted(BENCH.rglob("*")):
+        if path.is_file() and path.suffix in TEXT_SUFFIXES and "__pycache__" not in path.parts:
+            yield path
+
+
+def occurrences(names: dict[str, str], files: list[Path]) -> list[str]:
+    """'file:line: name (what) | text' for each whole-word occurrence (case-sensitive)."""
+    wanted = sorted(set(names) - set(ALLOWED), key=len, reverse=True)
+    pattern = re.compile(r"(?<![A-Za-z0-9_])(" + "|".join(re.escape(n) for n in wanted) + r")(?![A-Za-z0-9_])")
+    found = []
+    for path in files:
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            for match in pattern.finditer(line):
+                where = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+                found.append(f"{where}:{number}: {match.group(1)} ({names[match.group(1)]}) "
+                             f"| {line.strip()[:100]}")
+    return found
+
+
+def test_the_names_are_many() -> None:
+    """The check is only as good as its list: both databases were read."""
+    names = project_names()
+    kinds = {what.split(" ")[0] for what in names.values()}
+    assert {"node", "message", "signal", "value"} <= kinds
+    assert sum(what == "message" for what in names.values()) > 30
+
+
+def test_bench_names_no_message_signal_or_vehicle_of_this_project() -> None:
+    found = occurrences(project_names(), list(bench_files()))
+    assert not found, "bench/ names this project's databases (use a generic example or bench.toml):\n" + \
+        "\n".join(found)
+
+
+def test_the_grep_finds_a_planted_name(tmp_path: Path) -> None:
+    """The search itself works: a message name in a docstring, a signal in an f-string, a vehicle code."""
+    sample = tmp_path / "sample.py"
+    sample.write_text('"""Sends BENCH_Control."""\nx = f"{a}.ScenarioIdAck"\ny = "EV4WIS"\n'
+                      'z = "BENCH_ControlX"  # not a whole word\nw = "AliveCounter"  # allowed\n', encoding="utf-8")
+    found = occurrences(project_names(), [sample])
+    assert [line.split(": ")[1].split(" ")[0] for line in found] == ["BENCH_Control", "ScenarioIdAck", "EV4WIS"]
+
+
+def test_allow_list_is_still_needed() -> None:
+    """An allowed name that the bench no longer uses leaves the list."""
+    text = "\n".join(path.read_text(encoding="utf-8") for path in bench_files())
+    unused = [name for name in ALLOWED if not re.search(rf"(?<![A-Za-z0-9_]){name}(?![A-Za-z0-9_])", text)]
+    assert not unused
+
+
+# -- the import rule ------------------------------------------------------------------------------------------
+def imports(folder: Path) -> Iterator[tuple[str, int, str]]:
+    """(file, line, module) for every import in the Python files of a folder, relative ones made absolute."""
+    for path in sorted(folder.rglob("*.py")):
+        package = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                for alias in node.names:
+                    yield str(path.relative_to(ROOT)), node.lineno, alias.name
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")
+                    parts = parts[:len(parts) - node.level + 1]
+                    base = ".".join([*parts, base] if base else parts)
+                yield str(path.relative_to(ROOT)), node.lineno, base
+                for alias in node.names:        # `from bench import node`: the module bench.node
+                    yield str(path.relative_to(ROOT)), node.lineno, f"{base}.{alias.name}"
+
+
+def _top(module: str) -> str:
+    return module.split(".")[0]
+
+
+#: What plant/ may import of the bench: the behaviour API only (a plant is a plugin of the bench).
+PLANT_MAY_IMPORT = {"bench", "bench.node"}
+
+
+@pytest.mark.parametrize("folder, forbidden", [
+    ("bench", {"plant", "testcases", "tests", "examples", "benchmarks"}),
+    ("testcases", {"plant", "tests"}),
+    ("plant", {"testcases", "tests"}),
+], ids=["bench", "testcases", "plant"])
+def test_import_direction(folder: str, forbidden: set[str]) -> None:
+    wrong = [f"{file}:{line}: {module}" for file, line, module in imports(ROOT / folder) if _top(module) in forbidden]
+    assert not wrong, f"{folder}/ must not import {', '.join(sorted(forbidden))}:\n" + "\n".join(wrong)
+
+
+def test_plant_uses_only_the_behaviour_api() -> None:
+    wrong = [f"{file}:{line}: {module}" for file, line, module in imports(ROOT / "plant")
+             if _top(module) == "bench" and module not in PLANT_MAY_IMPORT
+             and not any(module.startswith(f"{allowed}.") for allowed in PLANT_MAY_IMPORT - {"bench"})]
+    assert not wrong, "plant/ imports of the bench beyond bench.node:\n" + "\n".join(wrong)
+
+
+def test_the_import_scan_sees_relative_and_from_imports() -> None:
+    """The scanner resolves `from . import x` and `from bench import node` (else the rule checks nothing)."""
+    folder = ROOT / "plant"
+    found = {module for _, _, module in imports(folder)}
+    assert "bench.node" in found
+    assert any(module.startswith("plant.") for module in found)
