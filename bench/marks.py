@@ -1,9 +1,10 @@
 """The conformance markers of a test case: which nodes it judges, which requirements it checks,
 and whether it only makes sense while a node is the bench's own simulation.
 
-    @pytest.mark.dut("VCU", ...)                       the node(s) the case judges
-    @pytest.mark.req("VCU-FLT-03", ...)                the requirement id(s) it checks
-    @pytest.mark.reference_only("VCU", reason="...")   skipped while VCU is external (a real ECU)
+    @pytest.mark.dut("ECU", ...)                       the node(s) the case judges
+    @pytest.mark.req("ECU-FLT-03", ...)                the requirement id(s) it checks
+    @pytest.mark.reference_only("ECU", reason="...")   skipped while ECU is external (a real ECU)
+    @pytest.mark.campaign(name="4WIS")                 the campaign it belongs to (-m "campaign(name='4WIS')")
 
 Reading and checking them is plain code on pytest's marks, so the plugin only wires hooks and the
 checks can be tested without running pytest.
@@ -16,12 +17,13 @@ from dataclasses import dataclass, field
 
 import pytest
 
-DUT, REQ, REFERENCE_ONLY = "dut", "req", "reference_only"
+DUT, REQ, REFERENCE_ONLY, CAMPAIGN = "dut", "req", "reference_only", "campaign"
 MARKER_HELP = {
     DUT: "dut(NODE, ...): the node(s) of the databases this case judges",
     REQ: "req(ID, ...): the requirement id(s) of the contract documents this case checks",
     REFERENCE_ONLY: "reference_only(NODE, ..., reason=TEXT): the case only makes sense while NODE is the "
                     "bench's own simulation; skipped with TEXT when NODE is external",
+    CAMPAIGN: "campaign(name=NAME): the campaign the case belongs to (select one with -m \"campaign(name='NAME')\")",
 }
 
 

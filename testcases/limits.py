@@ -1,5 +1,6 @@
-"""The limits file of the test cases (testcases/limits.toml): one table per paper, every limit a
-{ value, unit, source } so that a user can adapt them to a real ECU and the report cites them."""
+"""Acceptance limits of the campaigns: each campaign package keeps its own `limits.toml` (testcases/<campaign>/),
+one table, every limit a { value, unit, source } so that a user can adapt them to a real ECU and the report cites
+them. This loader is the one way every campaign reads them."""
 
 from __future__ import annotations
 
@@ -7,11 +8,17 @@ import math
 import tomllib
 from pathlib import Path
 
-LIMITS_FILE = Path(__file__).resolve().parent / "limits.toml"
+#: name -> (value, unit, source)
+LimitTable = dict[str, tuple[float, str, str]]
 
 
-def load_limits(section: str, path: Path = LIMITS_FILE) -> dict[str, tuple[float, str, str]]:
-    """name -> (value, unit, source) of one table of limits.toml; ValueError naming file and key."""
+def limits_file(package_file: str) -> Path:
+    """The limits.toml beside a campaign's module (pass its `__file__`)."""
+    return Path(package_file).resolve().with_name("limits.toml")
+
+
+def load_limits(path: Path, section: str) -> LimitTable:
+    """name -> (value, unit, source) of one table of a limits file; ValueError naming file and key."""
     try:
         data = tomllib.loads(path.read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
@@ -27,3 +34,10 @@ def load_limits(section: str, path: Path = LIMITS_FILE) -> dict[str, tuple[float
             raise ValueError(f"{path}: key '{section}.{name}' must be {{ value = <number>, unit, source }}")
         out[name] = (float(item["value"]), str(item["unit"]), str(item["source"]))
     return out
+
+
+def limit_value(limits: LimitTable, name: str, path: Path, section: str) -> float:
+    """The value of one limit; KeyError naming the file and the key when it is not there."""
+    if name not in limits:
+        raise KeyError(f"{path}: no limit '{section}.{name}'")
+    return limits[name][0]
