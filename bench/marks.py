@@ -4,7 +4,7 @@ and whether it only makes sense while a node is the bench's own simulation.
     @pytest.mark.dut("ECU", ...)                       the node(s) the case judges
     @pytest.mark.req("ECU-FLT-03", ...)                the requirement id(s) it checks
     @pytest.mark.reference_only("ECU", reason="...")   skipped while ECU is external (a real ECU)
-    @pytest.mark.campaign(name="4WIS")                 the campaign it belongs to (-m "campaign(name='4WIS')")
+    @pytest.mark.campaign(name="smoke")                the campaign it belongs to (-m "campaign(name='smoke')")
 
 Reading and checking them is plain code on pytest's marks, so the plugin only wires hooks and the
 checks can be tested without running pytest.
