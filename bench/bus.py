@@ -22,6 +22,7 @@ from typing import Any
 import can
 
 from bench.busopts import BusOptions
+from bench.capabilities import takes_hop_limit
 from bench.errors import ConfigError
 
 VIRTUAL = "virtual"   # the name users give on the command line for the embedded default
@@ -121,7 +122,7 @@ class VirtualTimeBus(can.BusABC):
         super().__init__(channel=channel, **kwargs)
         self.channel_info = f"bench virtual-time bus {channel!r}"
         self._channel_name = str(channel)
-        self._own = bool(receive_own_messages)
+        self.receive_own_messages = self._own = bool(receive_own_messages)   # bench/capabilities.py asks it
         self._inbox = _Inbox(channel)
         self.queue = self._inbox              # python-can's virtual bus name for it (qsize, empty)
         self._net = _join(self._channel_name, self._inbox)
@@ -212,7 +213,7 @@ def open_bus(interface: str, channel: str | None, options: BusOptions | None = N
         raise ConfigError(f"unknown python-can interface {interface!r} "
                           f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
     kwargs: dict[str, Any] = options.kwargs() if options is not None else {}
-    if interface == "udp_multicast":
+    if takes_hop_limit(interface):   # an IP multicast bus (udp_multicast): asked of its class's parameters
         kwargs["hop_limit"] = UDP_MULTICAST_HOP_LIMIT   # never a user's choice: the frames stay on this host
         channel = channel or UDP_MULTICAST_DEFAULT_GROUP
     if interface == "socketcan":
@@ -221,8 +222,7 @@ def open_bus(interface: str, channel: str | None, options: BusOptions | None = N
         raise ConfigError(f"interface {interface!r} needs a channel (--channel)")
     try:
         bus = can.Bus(interface=interface, channel=channel, **kwargs)
-        if interface == "udp_multicast":
-            _tune_udp_socket(bus)
+        _tune_udp_socket(bus)   # a bus without python-can's multicast socket is left alone
         return bus
     except Exception as exc:   # drivers raise anything (vendor DLL errors, TypeError on a bad [bus] key)
         message = f"cannot open interface {interface!r} channel {channel!r}: {type(exc).__name__}: {exc}"

@@ -20,7 +20,8 @@ from typing import Any
 
 import can
 
-SOCKETCAN_BUS_CLASSES = ("SocketcanBus",)
+from bench.capabilities import raw_can_socket
+
 ENV_SWITCH = "BENCH_FAST_RX"           # "0": every frame through python-can's recv
 CANFD_MTU = 72
 CAN_EFF_FLAG, CAN_RTR_FLAG, CAN_ERR_FLAG = 0x80000000, 0x40000000, 0x20000000
@@ -60,8 +61,7 @@ def plain_socketcan(bus: can.BusABC) -> bool:
     """A python-can socketcan bus (its raw socket reachable) without python-can filters of its own: one whose
     socket the bench may read (here) and filter in the kernel (bench/periodic.py) without changing what
     python-can's recv would have delivered."""
-    return (type(bus).__name__ in SOCKETCAN_BUS_CLASSES and not getattr(bus, "filters", None)
-            and hasattr(bus, "socket"))
+    return raw_can_socket(bus) is not None and not getattr(bus, "filters", None)
 
 
 class FastReceiver:

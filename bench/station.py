@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import can
 
+from bench.capabilities import delivers_own_frames
 from bench.faults import FaultPlan
 from bench.monitor import Monitor
 from bench.node import Behaviour
@@ -25,8 +26,6 @@ BABBLE_ECHO_WINDOW = 256   # a babbling node sends many identical frames per tic
 #: Frames one poll takes from the socket at most: a station slower than the bus still gets back to its
 #: tick (and the clock to its deadline) instead of draining for ever; the rest waits in the socket.
 POLL_BATCH = 64
-#: python-can buses that deliver a sender's own frames back to it, whatever receive_own_messages says.
-LOOPING_BUS_CLASSES = ("UdpMulticastBus",)
 
 
 class _StationIO:
@@ -84,7 +83,7 @@ class Station:
         # ticks when late (bench.clock.Scheduler).
         self.every_tick = every_tick
         self.behaviours = list(behaviours)
-        self.loops_back = type(bus).__name__ in LOOPING_BUS_CLASSES
+        self.loops_back = delivers_own_frames(bus)   # asked of the bus (bench/capabilities.py)
         self.io = _StationIO(self)
         self.sent = 0
         self.send_errors = 0

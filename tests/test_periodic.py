@@ -63,6 +63,8 @@ class FakeKernel:
 
 
 class FakeRawSocket:
+    family, type = socket.AF_CAN, socket.SOCK_RAW      # a raw SocketCAN socket (bench.capabilities asks)
+
     def __init__(self, kernel: FakeKernel) -> None:
         self.kernel = kernel
         self.filters: list[tuple[int, int]] | None = None    # None: accept every frame (no filter set)
@@ -133,7 +135,7 @@ class FakeTask:
 
 
 class SocketcanBus(can.BusABC):
-    """Named like python-can's, so that bench.periodic takes it for socketcan."""
+    """Like python-can's: a raw SocketCAN socket in `socket`, so that bench.periodic takes it for socketcan."""
 
     def __init__(self, kernel: FakeKernel) -> None:
         super().__init__(channel="vcan0")

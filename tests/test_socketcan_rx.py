@@ -74,8 +74,11 @@ def test_frames_stop_at_the_limit_and_when_the_socket_is_empty() -> None:
 
 
 def test_a_bus_with_python_can_filters_keeps_python_can_recv() -> None:
-    class SocketcanBus:              # named like python-can's; filters are python-can's to apply in recv
-        socket = object()
+    class RawSocket:                 # what bench.capabilities asks of a socket: a raw CAN one
+        family, type = socket.AF_CAN, socket.SOCK_RAW
+
+    class SocketcanBus:              # filters are python-can's to apply in recv
+        socket = RawSocket()
         filters = [{"can_id": 0x100, "can_mask": 0x7FF}]
 
     assert FastReceiver.attach(SocketcanBus()) is None

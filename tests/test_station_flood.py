@@ -21,8 +21,10 @@ from bench.station import Station
 
 
 class UdpMulticastBus(can.BusABC):
-    """Named like python-can's UDP multicast bus (the station detects a looping bus by its class name): every
-    frame sent comes back to the sender's own socket."""
+    """Like python-can's UDP multicast bus: every frame sent comes back to the sender's own socket (it says so
+    with `receive_own_messages`, which bench.capabilities asks of a bus without a socket)."""
+
+    receive_own_messages = True
 
     def __init__(self) -> None:
         self.queue: deque[can.Message] = deque()
