@@ -43,7 +43,8 @@ def test_python_block_runs(index: int, tmp_path: Path) -> None:
         case.parent.mkdir()
         case.write_text(code, encoding="utf-8")
         out = tmp_path / "report"
-        done = subprocess.run([sys.executable, "-m", "bench", "run", case.name, "--out", str(out)],
+        done = subprocess.run([sys.executable, "-m", "bench", "run", case.name, "--out", str(out),
+                               "--config", str(ROOT / "bench.toml")],
                               cwd=case.parent, capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
         cases = ET.parse(out / "junit.xml").getroot().iter("testcase")
