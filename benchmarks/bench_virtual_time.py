@@ -27,7 +27,7 @@ from pathlib import Path
 import common
 
 TARGET = 50.0
-QUICK_PATHS = ["testcases/test_4wis_uturn.py", "testcases/test_sbw_step.py", "testcases/test_4wis_ackermann.py"]
+QUICK_PATHS = ["testcases/ev4wis/test_uturn.py", "testcases/sbw/test_step.py", "testcases/ev4wis/test_ackermann.py"]
 PIVOT = {"DriveMode": "PIVOT", "PivotX": 5.0, "PivotY": 2.0, "TargetSpeed": 1.0}
 
 

@@ -1,14 +1,40 @@
 """The stimulus messages each vehicle's network reads (besides BENCH_Control, which every scenario sends).
 
-A scenario sends only these (`bench.start_scenario(stimulus=...)`): a 4WIS EV's bus carries no steering-robot
-or ABS stimulus, as the plant sends only the vehicle's own ECUs (plant/assemblies MESSAGES). Taken from what
-the plant's models and reference ECUs read (io.latest in plant/): the 4WIS VCU reads DRV_MotionRequest,
-DRV_Steering and BENCH_VcuConfig; the A-class SBW car the steering robot, the SBW configuration and its
-sensor faults; the braking A-class the ABS stimulus, the pedals and the hand wheel.
+A scenario sends only these (`bench.start_scenario(stimulus=STIMULUS[vehicle])`): a 4WIS EV's bus carries no
+steering-robot or ABS stimulus. Derived, not kept by hand: the plant of this project (bench.toml [bench] plant)
+declares what each vehicle's behaviours read, and the bench's public `bench.plugins.plant_stimulus` passes it
+on, so test cases never import the plant.
 """
 
-STIMULUS: dict[str, tuple[str, ...]] = {
-    "EV4WIS": ("DRV_MotionRequest", "DRV_Steering", "BENCH_VcuConfig"),
-    "ACLASS": ("BENCH_SteeringRobot", "BENCH_SbwConfig", "BENCH_SbwSensorFault"),
-    "ACLASS_ABS": ("BENCH_AbsStimulus", "DRV_Pedals", "DRV_Steering"),
-}
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from functools import cache
+from pathlib import Path
+
+from bench.config import find_config, load_config
+from bench.plugins import plant_stimulus, plant_vehicles
+
+
+@cache
+def _plant() -> str:
+    """The plant of the project these cases belong to (the bench.toml above this folder)."""
+    return load_config(find_config(Path(__file__).resolve().parent)).plant
+
+
+class _Stimulus(Mapping[str, tuple[str, ...]]):
+    """vehicle name -> its stimulus messages, asked of the plant when first needed."""
+
+    def __getitem__(self, vehicle: str) -> tuple[str, ...]:
+        if vehicle not in plant_vehicles(_plant()):
+            raise KeyError(vehicle)
+        return plant_stimulus(_plant(), vehicle)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(plant_vehicles(_plant()))
+
+    def __len__(self) -> int:
+        return len(plant_vehicles(_plant()))
+
+
+STIMULUS: Mapping[str, tuple[str, ...]] = _Stimulus()

@@ -3,8 +3,8 @@
 Physics, independent of the plant's code: four driven and braked wheels on a road of friction μ give at most
 Σ|F_x| ≤ μ Σ F_z = μ m g, so |u̇| ≤ μ g whatever the hub motors ask for (docs/contract/plant.md PLANT-DYN-03).
 Stimulus: the reference VCU in ADAPTIVE (docs/contract/vcu-4ws.md), a TargetSpeed step as in
-testcases/test_4ws_speed_step.py (100 → 30 km/h on a dry road) and harder ones (100 → 20 km/h and 30 → 100 km/h
-on μ = 0.3), with front steer so the rear-steer law acts (3° dry; 0.67° on μ = 0.3, where 3° at 100 km/h
+testcases/rear_steer_4ws/test_speed_step.py (100 → 30 km/h on a dry road) and harder ones (100 → 20 km/h and
+30 → 100 km/h on μ = 0.3), with front steer so the rear-steer law acts (3° dry; 0.67° on μ = 0.3, where 3° at 100 km/h
 would ask more lateral grip than the road has).
 
 Margin: 2 % of μ g. The limit is exact for this tyre (its peak is μ F_z; a Magic-Formula tyre's peak D = μ,

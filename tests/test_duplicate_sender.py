@@ -113,7 +113,7 @@ def test_one_broken_sender_is_no_second_sender(codebook: Codebook, name: str) ->
                          + [("delay", d) for d in (0.015, 0.05, 0.1, 0.15)])
 def test_injected_faults_are_no_second_sender(codebook: Codebook, kind: str, param: float) -> None:
     """Every frame fault the bench injects acts on one sender's frames: none is reported as two senders. A
-    delay that ends interleaves the held-back frames with the new ones (testcases/test_faults.py delays
+    delay that ends interleaves the held-back frames with the new ones (testcases/ev4wis/test_faults.py delays
     DRV_MotionRequest by 0.1 s), but only for as many frames as were held back (here up to 15)."""
     plan = FaultPlan(codebook)
     plan.add(Fault(kind, MESSAGE, 0.2, 0.6, param))

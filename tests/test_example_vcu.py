@@ -3,9 +3,9 @@
 Three processes on one host (udp_multicast, hop limit 0: nothing leaves the host): `bench plant --external VCU`
 simulates every node but the VCU, the example plays the VCU, and `bench run --external all --dut VCU` runs every
 case that judges the VCU (the 4WIS campaign, the 4WS cases at speed, the fault cases), whose expected values come
-from testcases/oracle.py and oracle_4ws.py (docs/spec/formulas.md), not from the example. Cases that can only
-judge the reference VCU (`reference_only`) must be skipped with their reason, and the report must show the VCU's
-conformance table. Unit tests below check the example's kinematics without a bus against the rigid-body
+from testcases/ev4wis/oracle.py and testcases/rear_steer_4ws/oracle.py (docs/spec/formulas.md), not from the
+example. Cases that can only judge the reference VCU (`reference_only`) must be skipped with their reason, and the
+report must show the VCU's conformance table. Unit tests below check the example's kinematics without a bus against the rigid-body
 definition of docs/spec/formulas.md §2 (independent of the paper's eq. 1-10 the example implements).
 """
 

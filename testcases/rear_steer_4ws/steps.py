@@ -52,7 +52,7 @@ def start(bench: Case, speed_kmh: float, strategy: str, mu: float = 1.0) -> floa
 
 def driver_model(strategy: str, u: float, v: oracle.Vehicle = oracle.EV, lag: float = DRIVER_LAG) -> CarModel:
     """The path driver's internal model of the car under a law (the driver knows the car, as a trained test
-    driver does): docs/spec/formulas.md §5 with docs/spec/vehicles.md A's numbers and the law's rear angle (oracle_4ws)."""
+    driver does): docs/spec/formulas.md §5 with docs/spec/vehicles.md A's numbers and the law's rear angle (oracle)."""
     rear = {"2WS": (0.0, 0.0), "FEEDFORWARD": (oracle.zero_sideslip_ratio(v, u), 0.0),
             "FEEDBACK": (-oracle.C1, oracle.c2(v) * u)}[strategy]
     return CarModel(v.m, v.iz, v.a, v.b, v.cf, v.cr, v.ratio, u, rear, lag)

@@ -7,7 +7,7 @@ standard's 3.5 m offset is measured between the right-hand cone lines of section
 the same side of the two lanes, so the lane centres are 3.5 + (w₃ − w₁)/2 = 3.56 m apart); section 5 shares
 section 1's right-hand boundary. Section 1 starts RUN_IN m after the point where the driver takes over.
 
-Driver: testcases/path_driver.PreviewDriver (the stimulus: MacAdam's optimal preview), the same for the three
+Driver: PreviewDriver of testcases/rear_steer_4ws/path_driver.py (the stimulus: MacAdam's optimal preview), the same for the three
 laws except its internal model of the car (docs/spec/formulas.md §5 with the law under test, as a trained test driver
 knows the car). Path: lane centres joined by half-cosine transitions from about the end of one gated section to
 just inside the next (PATH below). Speed held at 80 km/h by the hub motors (no throttle lift).

@@ -3,7 +3,7 @@ feedback side by side.
 
 Course (slalom_cones in testcases/rear_steer_4ws/oracle.py): SLALOM_CONES cones on the course's centre line every 30 m (GB/T
 6323-2014's spacing for passenger cars; [P3] gives no layout), the first one RUN_IN m after the driver's
-take-over. Driver: testcases/path_driver.PreviewDriver (MacAdam's optimal preview, its internal model of the
+take-over. Driver: PreviewDriver of testcases/rear_steer_4ws/path_driver.py (MacAdam's optimal preview, its internal model of the
 car per law, docs/spec/formulas.md §5) on a sinusoid through ±AMPLITUDE at the cones (passing the first cone on its
 right). The path asks a_y ≈ A (π/S)² u² = 2.0 m/s², 0.69 μ g: well beyond the tyres' linear range (0.5 μ g),
 short of their limit. Road friction: BENCH_Control.RoadMu = 0.3. Speed held by the hub motors.
