@@ -80,7 +80,8 @@ class Case:
 
     def _mark_counts(self) -> None:
         # absolute counts (kept + dropped), so that trimming the monitor's lists never shifts a mark
-        self._interval_marks = {name: s.intervals_dropped + len(s.intervals) for name, s in self._monitor.by_name.items()}
+        self._interval_marks = {name: s.intervals_dropped + len(s.intervals)
+                                for name, s in self._monitor.by_name.items()}
         self._invalid_mark = self._monitor.invalid_dropped + len(self._monitor.invalid_log)
 
     # -- time --------------------------------------------------------------------------------------
