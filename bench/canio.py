@@ -36,7 +36,6 @@ from bench.logread import LoggedFrame, read_frames
 from bench.monitor import Monitor
 from bench.recorder import Recorder
 
-SUFFIX = ".mcap"
 NO_CHANNEL = ""       # the channel label of frames whose bus gives none (read back as None)
 
 

@@ -74,10 +74,6 @@ class MessageState:
     senders: e2e.SenderTracker | None = None  # counter streams, followed after a sequence error
     calm: int = 0                            # accepted frames in a row while they are followed
 
-    @property
-    def invalid_count(self) -> int:
-        return sum(self.invalid.values())
-
 
 @dataclass(slots=True)
 class DuplicateSender:
@@ -297,11 +293,6 @@ class Monitor:
                              f"{HISTORY_CAP}-{2 * HISTORY_CAP} frames are kept (from {ts[0]:.3f} s): ask for less")
         start = _first_at_or_after(ts, since)
         return ts[start:], [v[index] for v in vs[start:]]
-
-    def clear_history(self) -> None:
-        for state in self.states.values():
-            state.history_t.clear()
-            state.history_v.clear()
 
     @property
     def invalid_frames(self) -> int:

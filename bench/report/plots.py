@@ -284,8 +284,3 @@ class Plotter:
         out.append(f'<text transform="translate(12 {_TOP + ax_h / 2:.0f}) rotate(-90)" class="yl">{ylabel}</text>')
         out.append("</svg>")
         return RenderedPlot(clean(plot.title), kind, "".join(out), legend, shaded)
-
-
-def render_svg(plot: Plot, prefix: str = "p") -> str:
-    """One plot as an inline ``<svg>``."""
-    return Plotter().render(plot, prefix).svg
