@@ -1,13 +1,15 @@
 """Plants are found by name through the entry-point group `bench.plants`, so that the bench
 never imports a vehicle: a plant package registers `name = module:function`, where the function
 is `build(external: Collection[str], vehicle: str | None) -> list[Behaviour]`; `external` holds
-every node the plant must not simulate."""
+every node the plant must not simulate. The build function's module may also provide `vehicles()` and
+`stimulus(vehicle)`, which `plant_vehicles` and `plant_stimulus` pass on to test cases."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Collection
 import importlib
 from importlib.metadata import entry_points
+from types import ModuleType
 
 from bench.errors import ConfigError
 from bench.node import Behaviour
@@ -30,3 +32,27 @@ def load_plant(name: str) -> PlantFactory:
         raise ConfigError(f"no plant {name!r} is registered in the entry-point group {PLANT_GROUP!r} "
                           f"(registered: {', '.join(sorted(found)) or 'none'}; is the project installed?)")
     return found[name].load()
+
+
+def _plant_module(name: str) -> ModuleType:
+    """The module that holds a plant's build function: it may also answer what a test case asks of the plant."""
+    return importlib.import_module(load_plant(name).__module__)
+
+
+def plant_vehicles(name: str) -> tuple[str, ...]:
+    """The vehicles a plant can be (its module's `vehicles()`); () when the plant names none."""
+    vehicles = getattr(_plant_module(name), "vehicles", None)
+    return tuple(vehicles()) if callable(vehicles) else ()
+
+
+def plant_stimulus(name: str, vehicle: str) -> tuple[str, ...]:
+    """The stimulus messages a scenario of the plant's `vehicle` sends (`start_scenario(stimulus=...)`), from the
+    plant module's `stimulus(vehicle)`: test cases learn them here, never by importing the plant. ConfigError when
+    the plant declares no stimulus or knows no such vehicle."""
+    stimulus = getattr(_plant_module(name), "stimulus", None)
+    if not callable(stimulus):
+        raise ConfigError(f"plant {name!r} declares no stimulus(vehicle) beside its build function")
+    try:
+        return tuple(stimulus(vehicle))
+    except ValueError as exc:
+        raise ConfigError(f"plant {name!r}: {exc}") from None

@@ -48,9 +48,9 @@ class Servo:
     limit): how long it takes to move the threshold after a command step — the "servo dynamics" of the target."""
 
     def __init__(self) -> None:
-        from plant.vehicles import load_vehicle
+        from plant.vehicles import load_parameters
 
-        params = load_vehicle("EV4WIS")
+        params = load_parameters("EV4WIS")
         self.tau, self.rate = params.servo_lag, params.servo_rate_limit
 
     def time_to_move(self, h: float, step: float) -> float:

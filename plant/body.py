@@ -18,9 +18,9 @@ from collections.abc import Mapping, Sequence
 from typing import Protocol
 
 from bench.node import Behaviour, NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.kinematics import CORNERS, Geometry
-from plant.vehicles import VEHICLE_CODES
+from plant.scenario import ScenarioTracker
 
 _DEG = 180.0 / math.pi
 _RAD = math.pi / 180.0
@@ -86,7 +86,7 @@ class PlanarBody:
         self.heading = 0.0               # rad, clockwise from +Y, continuous (not wrapped)
         self.vx = self.vy = 0.0          # body-frame velocity, m/s (right, forward)
         self.omega = 0.0                 # rad/s, clockwise
-        self.ax = self.ay = 0.0          # body-frame acceleration, m/s^2 (lateral right, longitudinal)
+        self.lat_accel = self.long_accel = 0.0   # body-frame acceleration, m/s^2 (right, forward)
         self._fresh = True
 
     def advance(self, angles_deg: Sequence[float], speeds_rpm: Sequence[float], dt: float) -> None:
@@ -107,8 +107,8 @@ class PlanarBody:
         self.y += (-mvx * sn + mvy * c) * s * dt
         self.heading += mom * dt
         # a = dv/dt + omega x v in the rotating body frame (omega clockwise = -z).
-        self.ax = (vx - self.vx) / dt + om * vy
-        self.ay = (vy - self.vy) / dt - om * vx
+        self.lat_accel = (vx - self.vx) / dt + om * vy
+        self.long_accel = (vy - self.vy) / dt - om * vx
         self.vx, self.vy, self.omega = vx, vy, om
 
     # -- ground truth in bus units -----------------------------------------------------------------
@@ -175,7 +175,7 @@ class BusWheel:
         if status is None:
             return self._angle, 0.0
         angle, speed = status.get("SteerAngle", math.nan), status.get("WheelSpeed", math.nan)
-        if not limits.finite(angle, speed):
+        if not ranges.finite(angle, speed):
             return self._angle, 0.0
         self._angle = angle
         return angle, speed
@@ -184,7 +184,7 @@ class BusWheel:
 class BodyNode:
     """The PLANT node: integrates the body and publishes ground truth (dbc/bench.dbc, PLANT_*).
 
-    Reads BENCH_Control: whenever ScenarioId changes (the first one seen included), the body and every
+    The scenario protocol (plant/scenario.py): whenever BENCH_Control.ScenarioId changes, the body and every
     linked behaviour (the in-process VCU, wheels and IMU) reset; the in-process wheels then start
     rolling straight ahead at BENCH_Control.InitialSpeed (0: at rest), and PLANT_Status.ScenarioIdAck
     echoes the id. RoadMu and SensorNoise do not affect this kinematic model (no tyre forces, no
@@ -195,19 +195,18 @@ class BodyNode:
 
     nodes: tuple[str, ...] = ("PLANT",)
 
-    def __init__(self, g: Geometry, wheels: Mapping[str, WheelSource], *, vehicle: str = "EV4WIS",
+    def __init__(self, g: Geometry, wheels: Mapping[str, WheelSource], *, vehicle_code: int,
                  linked: Sequence[Behaviour] = ()) -> None:
         self.body = PlanarBody(g)
         self.wheels = tuple(wheels[c] for c in CORNERS)
         self.linked = tuple(linked)
-        self.vehicle_code = VEHICLE_CODES[vehicle]
+        self.scenario = ScenarioTracker(vehicle_code)
         self._rpm_per_mps = g.rpm_per_mps
         self.reset()
 
     def reset(self) -> None:
         self.body.reset()
-        self.scenario: int | None = None
-        self._t0: float | None = None
+        self.scenario.reset()
 
     def wheel_positions(self) -> dict[str, tuple[float, float]]:
         return self.body.wheel_positions()
@@ -217,22 +216,16 @@ class BodyNode:
         for behaviour in self.linked:
             behaviour.reset()
         v0 = control.get("InitialSpeed", 0.0)
-        if limits.finite(v0) and v0 != 0.0:
+        if ranges.finite(v0) and v0 != 0.0:
             for wheel in self.wheels:
                 preset = getattr(wheel, "preset", None)
                 if preset is not None:
                     preset(0.0, v0 * self._rpm_per_mps)
-        self._t0 = t - dt
 
     def step(self, io: NodeIO, t: float, dt: float) -> None:
-        control = io.latest("BENCH_Control")
-        if control is not None:
-            sid = control.get("ScenarioId")
-            if sid is not None and sid != self.scenario and limits.finite(sid):
-                self.scenario = int(sid)
-                self._restart(control, t, dt)
-        if self._t0 is None:
-            self._t0 = t - dt
+        scenario = self.scenario
+        if scenario.poll(io, t, dt) and scenario.control is not None:
+            self._restart(scenario.control, t, dt)
         angles, speeds = [], []
         for wheel in self.wheels:
             a, n = wheel.wheel_state(io)
@@ -240,13 +233,12 @@ class BodyNode:
             speeds.append(n)
         body = self.body
         body.advance(angles, speeds, dt)
-        clamp = limits.clamp
+        clamp = ranges.clamp
         speed, sideslip = body.speed_and_sideslip()
-        io.send_values("PLANT_Position", PosX=clamp(body.x, limits.PLANT_POS), PosY=clamp(body.y, limits.PLANT_POS))
-        io.send_values("PLANT_Motion", Heading=clamp(body.heading_deg, limits.PLANT_HEADING),
-                       Speed=clamp(speed, limits.PLANT_SPEED),
-                       YawRate=clamp(body.yaw_rate_dps, limits.PLANT_YAW_RATE))
-        io.send_values("PLANT_Dynamics", Sideslip=clamp(sideslip, limits.PLANT_SIDESLIP),
-                       LatAccel=clamp(body.ax, limits.PLANT_ACCEL), LongAccel=clamp(body.ay, limits.PLANT_ACCEL))
-        io.send_values("PLANT_Status", ScenarioIdAck=self.scenario or 0, Vehicle=self.vehicle_code,
-                       PlantTime=clamp(t - self._t0, limits.PLANT_TIME))
+        io.send_values("PLANT_Position", PosX=clamp(body.x, ranges.PLANT_POS), PosY=clamp(body.y, ranges.PLANT_POS))
+        io.send_values("PLANT_Motion", Heading=clamp(body.heading_deg, ranges.PLANT_HEADING),
+                       Speed=clamp(speed, ranges.PLANT_SPEED),
+                       YawRate=clamp(body.yaw_rate_dps, ranges.PLANT_YAW_RATE))
+        io.send_values("PLANT_Dynamics", Sideslip=clamp(sideslip, ranges.PLANT_SIDESLIP),
+                       LatAccel=clamp(body.lat_accel, ranges.PLANT_ACCEL), LongAccel=clamp(body.long_accel, ranges.PLANT_ACCEL))
+        scenario.acknowledge(io, t)

@@ -13,7 +13,7 @@ Inputs (io.latest; a timed-out message keeps its last value, the driver does not
   - BENCH_Control: a change of ScenarioId (the first one seen included) resets the world and every linked
     behaviour (the in-process ABS ECU): straight ahead at InitialSpeed, wheels free rolling, brakes
     released; RoadMu (tyre set, plant/braking_vehicle.road_shape) and SensorNoise (plant/sensors.py) are taken
-    then and whenever they change. PLANT_Status.ScenarioIdAck echoes the id (plant/body.py does the same).
+    then and whenever they change. PLANT_Status.ScenarioIdAck echoes the id (the scenario protocol, plant/scenario.py).
 
 Ground truth (dbc/bench.dbc): PLANT_Position (geometric centre = mid-point of the axles, start frame of
 docs/spec/formulas.md §1), PLANT_Motion (Heading, Speed of the geometric centre, YawRate positive right),
@@ -30,11 +30,12 @@ import math
 from collections.abc import Mapping, Sequence
 
 from bench.node import Behaviour, NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.brakes import BrakeHydraulics, Valve
 from plant.braking_vehicle import KMH, BrakingVehicle, VehicleSpec
 from plant.sensors import WheelSpeedSensors
-from plant.vehicles import VEHICLE_CODES, AbsParams, AclassParams
+from plant.scenario import ScenarioTracker
+from plant.vehicles import AbsParams, AclassParams
 
 _DEG = 180.0 / math.pi
 CORNERS = ("FL", "FR", "RL", "RR")
@@ -69,7 +70,7 @@ class BrakingPlantNode:
 
     nodes: tuple[str, ...] = ("PLANT",)
 
-    def __init__(self, car: AclassParams, abs_params: AbsParams, *, vehicle: str = "ACLASS_ABS") -> None:
+    def __init__(self, car: AclassParams, abs_params: AbsParams, *, vehicle_code: int) -> None:
         self.params = abs_params
         self.vehicle = BrakingVehicle(vehicle_spec(car, abs_params))
         self.hydraulics = BrakeHydraulics(
@@ -80,7 +81,7 @@ class BrakingPlantNode:
         self.sensors = WheelSpeedSensors(quantum=abs_params.sensor_quantum, roughness_ratio=abs_params.roughness_ratio,
                                          roughness_time=abs_params.roughness_time, seed=int(abs_params.noise_seed))
         self.linked: tuple[Behaviour, ...] = ()
-        self.vehicle_code = VEHICLE_CODES[vehicle]
+        self.scenario = ScenarioTracker(vehicle_code)
         self._ratio = abs_params.hand_wheel_ratio
         self._gc = (car.cog_to_front_axle - car.cog_to_rear_axle) / 2.0   # geometric centre ahead of the CoG, m
         self.reset()
@@ -89,8 +90,7 @@ class BrakingPlantNode:
         self.vehicle.reset()
         self.hydraulics.reset()
         self.sensors.reset()
-        self.scenario: int | None = None
-        self._t0: float | None = None
+        self.scenario.reset()
         self._mu = math.nan
         self._hand_wheel = 0.0
         self._demand = 0.0
@@ -110,50 +110,46 @@ class BrakingPlantNode:
     # -- per tick ---------------------------------------------------------------------------------------------
     def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:
         v0 = control.get("InitialSpeed", 0.0)
-        self.vehicle.reset(v0 if limits.finite(v0) else 0.0)
+        self.vehicle.reset(v0 if ranges.finite(v0) else 0.0)
         self.hydraulics.reset()
         self._mu = math.nan
         self._apply_control(control, force=True)
         for behaviour in self.linked:
             behaviour.reset()
         self._hand_wheel = self._demand = self._accel = 0.0
-        self._t0 = t - dt
         self._ack_due = True
 
     def _apply_control(self, control: Mapping[str, float], force: bool = False) -> None:
         mu = control.get("RoadMu", 1.0)
         if force or mu != self._mu:
             self._mu = mu
-            self.vehicle.set_road(mu if limits.finite(mu) else 1.0)
+            self.vehicle.set_road(mu if ranges.finite(mu) else 1.0)
         noise = control.get("SensorNoise", 0.0)
         if force:
-            self.sensors.reset(noise if limits.finite(noise) else 0.0)
-        elif noise != self.sensors.noise and limits.finite(noise) and noise >= 0.0:
+            self.sensors.reset(noise if ranges.finite(noise) else 0.0)
+        elif noise != self.sensors.noise and ranges.finite(noise) and noise >= 0.0:
             self.sensors.noise = noise
 
     def step(self, io: NodeIO, t: float, dt: float) -> None:
-        control = io.latest("BENCH_Control")
+        started = self.scenario.poll(io, t, dt)
+        control = self.scenario.control
         if control is not None:
-            sid = control.get("ScenarioId")
-            if sid is not None and sid != self.scenario and limits.finite(sid):
-                self.scenario = int(sid)
+            if started:
                 self._restart(control, t, dt)
             else:
                 self._apply_control(control)
-        if self._t0 is None:
-            self._t0 = t - dt
         p = self.params
         steering = io.latest("DRV_Steering")
         if steering is not None:
             hw = steering.get("HandWheelAngle", math.nan)
-            if limits.finite(hw):
+            if ranges.finite(hw):
                 self._hand_wheel = hw
         pedals = io.latest("DRV_Pedals")
         if pedals is not None:
             demand = self.hydraulics.demand(pedals.get("BrakePressure", math.nan), pedals.get("BrakePedal", math.nan))
             accel = pedals.get("AccelPedal", 0.0)
             self._demand = demand
-            self._accel = accel if limits.finite(accel) and accel > 0.0 else 0.0
+            self._accel = accel if ranges.finite(accel) and accel > 0.0 else 0.0
         stimulus = io.latest("BENCH_AbsStimulus")
         cruise = bypass = 0.0
         if stimulus is not None:
@@ -163,7 +159,7 @@ class BrakingPlantNode:
         hyd.bypass = bypass == 1
         hyd.step(self._demand, dt)
         drive = min(self._accel, 100.0) / 100.0 * p.max_drive_torque
-        if limits.finite(cruise) and cruise > 0.0 and hyd.master < CRUISE_RELEASE_BAR:
+        if ranges.finite(cruise) and cruise > 0.0 and hyd.master < CRUISE_RELEASE_BAR:
             drive += p.cruise_gain * (cruise - veh.speed * KMH)
         veh.drive_torque = 0.0 if drive < 0.0 else p.max_drive_torque if drive > p.max_drive_torque else drive
         veh.delta = -self._hand_wheel / self._ratio / _DEG          # bus positive right -> internal left
@@ -176,19 +172,18 @@ class BrakingPlantNode:
 
     def _publish(self, io: NodeIO, t: float) -> None:
         veh, hyd = self.vehicle, self.hydraulics
-        clamp = limits.clamp
+        clamp = ranges.clamp
         c, s = math.cos(veh.psi), math.sin(veh.psi)
         gx, gy = veh.x + self._gc * c, veh.y + self._gc * s          # geometric centre, internal world frame
         v_gc = veh.v + veh.r * self._gc
-        io.send_values("PLANT_Position", PosX=clamp(-gy, limits.PLANT_POS), PosY=clamp(gx, limits.PLANT_POS))
+        io.send_values("PLANT_Position", PosX=clamp(-gy, ranges.PLANT_POS), PosY=clamp(gx, ranges.PLANT_POS))
         heading = (-veh.psi * _DEG + 180.0) % 360.0 - 180.0
-        io.send_values("PLANT_Motion", Heading=clamp(heading, limits.PLANT_HEADING),
-                       Speed=clamp(math.hypot(veh.u, v_gc), limits.PLANT_SPEED),
-                       YawRate=clamp(-veh.r * _DEG, limits.PLANT_YAW_RATE))
-        io.send_values("PLANT_Dynamics", Sideslip=clamp(-veh.sideslip * _DEG, limits.PLANT_SIDESLIP),
-                       LatAccel=clamp(-veh.ay, limits.PLANT_ACCEL), LongAccel=clamp(veh.ax, limits.PLANT_ACCEL))
-        io.send_values("PLANT_Status", ScenarioIdAck=self.scenario or 0, Vehicle=self.vehicle_code,
-                       PlantTime=clamp(t - (self._t0 or 0.0), limits.PLANT_TIME))
+        io.send_values("PLANT_Motion", Heading=clamp(heading, ranges.PLANT_HEADING),
+                       Speed=clamp(math.hypot(veh.u, v_gc), ranges.PLANT_SPEED),
+                       YawRate=clamp(-veh.r * _DEG, ranges.PLANT_YAW_RATE))
+        io.send_values("PLANT_Dynamics", Sideslip=clamp(-veh.sideslip * _DEG, ranges.PLANT_SIDESLIP),
+                       LatAccel=clamp(-veh.lat_accel, ranges.PLANT_ACCEL), LongAccel=clamp(veh.long_accel, ranges.PLANT_ACCEL))
+        self.scenario.acknowledge(io, t)
         io.send_values("PLANT_AbsVehicle", VehicleSpeed=clamp(veh.speed * KMH, TRUTH_SPEED),
                        FrontWheelAngle=clamp(-veh.delta * _DEG, TRUTH_ANGLE),
                        MasterPressure=clamp(hyd.master, TRUTH_PRESSURE), ValveBypass=1 if hyd.bypass else 0)

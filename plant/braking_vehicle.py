@@ -136,8 +136,8 @@ class BrakingVehicle:
         self.delta = 0.0
         self.brake_torque: Sequence[float] = (0.0, 0.0, 0.0, 0.0)
         self.drive_torque = 0.0   # front axle, split equally (open differential)
-        self.ax = self.ay = 0.0   # body accelerations (CoG, body frame, y left), m/s^2
-        self._ax_f = self._ay_f = 0.0
+        self.long_accel = self.lat_accel = 0.0   # body accelerations (CoG, body frame, lateral left), m/s^2
+        self._long_accel_lag = self._lat_accel_lag = 0.0
         self.fz = list(self.static)
         self.kappa = [0.0, 0.0, 0.0, 0.0]
         self.alpha = [0.0, 0.0, 0.0, 0.0]
@@ -150,19 +150,19 @@ class BrakingVehicle:
         braking = any(t > 0.0 for t in self.brake_torque)
         if self.stopped:
             if self.drive_torque <= 0.0:
-                self.ax = self.ay = 0.0
+                self.long_accel = self.lat_accel = 0.0
                 return
             self.stopped = False
         # normal loads with the lagged accelerations
         k = dt / (spec.load_transfer_lag + dt)
-        self._ax_f += (self.ax - self._ax_f) * k
-        self._ay_f += (self.ay - self._ay_f) * k
+        self._long_accel_lag += (self.long_accel - self._long_accel_lag) * k
+        self._lat_accel_lag += (self.lat_accel - self._lat_accel_lag) * k
         h, L, B = spec.cog_height, spec.wheelbase, spec.track
-        d_long = -m * self._ax_f * h / L / 2.0            # per front wheel (+), per rear wheel (-)
+        d_long = -m * self._long_accel_lag * h / L / 2.0            # per front wheel (+), per rear wheel (-)
         m_front = m * spec.cog_to_rear_axle / L
         m_rear = m - m_front
-        d_lat_f = m_front * self._ay_f * h / B            # a_y > 0 (left turn): load to the right wheels
-        d_lat_r = m_rear * self._ay_f * h / B
+        d_lat_f = m_front * self._lat_accel_lag * h / B            # a_y > 0 (left turn): load to the right wheels
+        d_lat_r = m_rear * self._lat_accel_lag * h / B
         st = self.static
         fz = self.fz
         fz[0] = max(0.0, st[0] + d_long - d_lat_f)
@@ -221,10 +221,10 @@ class BrakingVehicle:
             fy_sum += fy_b
             mz += px * fy_b - py * fx_b
 
-        ax, ay = fx_sum / m, fy_sum / m
-        self.ax, self.ay = ax, ay
-        u_new = u + dt * (ax + v * r)
-        v_new = v + dt * (ay - u * r)
+        long_accel, lat_accel = fx_sum / m, fy_sum / m
+        self.long_accel, self.lat_accel = long_accel, lat_accel
+        u_new = u + dt * (long_accel + v * r)
+        v_new = v + dt * (lat_accel - u * r)
         r_new = r + dt * mz / spec.yaw_inertia
         # pose (trapezoid of the heading over the tick)
         psi_mid = self.psi + 0.5 * dt * (r + r_new)
@@ -238,7 +238,7 @@ class BrakingVehicle:
             self.omega = [0.0, 0.0, 0.0, 0.0]
             self.kappa = [0.0, 0.0, 0.0, 0.0]
             self.alpha = [0.0, 0.0, 0.0, 0.0]
-            self.ax = self.ay = 0.0
+            self.long_accel = self.lat_accel = 0.0
             self.stopped = True
             return
         self.u = u_new if u_new > 0.0 else 0.0

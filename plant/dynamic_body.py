@@ -54,7 +54,7 @@ the §5 equations keep their form when every angle, rate and force flips sign to
   plant/body.py (exact for constant body velocities over the step).
 
 Ground truth (PLANT_*) and the IMU read the same attributes as for the kinematic body (x, y, heading, vx = w,
-vy = u, omega, ax = lateral, ay = longitudinal): `VehicleBody` is a `PlanarBody`.
+vy = u, omega, lat_accel, long_accel): `VehicleBody` is a `PlanarBody`.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.body import BodyNode, PlanarBody, WheelSource
 from plant.single_track import SingleTrackParams
 from plant.vehicles import Ev4wisParams
@@ -267,8 +267,8 @@ class VehicleBody(PlanarBody):
         u = follow_speed(self.vy, vy, self.long_limit, dt)
         d.step(dt, u, delta_f, delta_r)
         self._move(d.w, u, d.omega, dt)
-        self.ax = d.lat_accel
-        self.ay = (u - self.vy) / dt - d.omega * d.w
+        self.lat_accel = d.lat_accel
+        self.long_accel = (u - self.vy) / dt - d.omega * d.w
         self.vx, self.vy, self.omega = d.w, u, d.omega
 
     def _move(self, vx: float, vy: float, om: float, dt: float) -> None:
@@ -289,13 +289,13 @@ class EvBodyNode(BodyNode):
     with `VehicleBody`, and BENCH_Control.RoadMu taken at every scenario start (at least MU_MIN; 1.0 when
     missing or not finite)."""
 
-    def __init__(self, params: Ev4wisParams, wheels: Mapping[str, WheelSource], *,
+    def __init__(self, params: Ev4wisParams, wheels: Mapping[str, WheelSource], *, vehicle_code: int,
                  linked: Sequence[object] = ()) -> None:
-        super().__init__(params.geometry, wheels, vehicle="EV4WIS", linked=linked)  # type: ignore[arg-type]
+        super().__init__(params.geometry, wheels, vehicle_code=vehicle_code, linked=linked)  # type: ignore[arg-type]
         self.body: VehicleBody = VehicleBody(params)
         self.reset()
 
     def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:
         mu = control.get("RoadMu", 1.0)
-        self.body.set_mu(max(mu, MU_MIN) if limits.finite(mu) else 1.0)
+        self.body.set_mu(max(mu, MU_MIN) if ranges.finite(mu) else 1.0)
         super()._restart(control, t, dt)

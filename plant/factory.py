@@ -1,46 +1,43 @@
-"""The plant's entry point (`bench.plants: chassis = plant.factory:build`).
+"""The plant's entry point (`bench.plants: chassis = plant.factory:build`), with what the bench may ask of it.
 
 The bench asks for the plant once; the plant then becomes whichever vehicle `BENCH_Control.Vehicle`
 asks for (a test campaign mixes vehicles), through a host behaviour that builds that vehicle's
-behaviours (plant/assemblies/) and steps them in their order.
+behaviours (its declaration, plant/registry.py) and steps them in their order. `stimulus(vehicle)` answers
+`bench.plugins.plant_stimulus`: which stimulus messages a scenario of that vehicle sends.
 """
 
 from __future__ import annotations
 
-import importlib
-from collections.abc import Callable, Collection
-from types import ModuleType
+import logging
+from collections.abc import Collection
 
 from bench.node import Behaviour, NodeIO
-from plant.vehicles import VEHICLE_CODES
+from plant import registry
+
+log = logging.getLogger(__name__)
 
 DEFAULT_VEHICLE = "EV4WIS"
-
-#: vehicle name (BENCH_Control.Vehicle value table) -> module in plant/assemblies with build(external)
-ASSEMBLIES = {"EV4WIS": "plant.assemblies.ev4wis",
-              "ACLASS_ABS": "plant.assemblies.aclass_abs",
-              "ACLASS": "plant.assemblies.aclass",
-              }
-
-_BY_CODE = {code: name for name, code in VEHICLE_CODES.items()}
-
-
-def _assembly(vehicle: str) -> ModuleType:
-    module = ASSEMBLIES.get(vehicle.upper())
-    if module is None:
-        raise ValueError(f"no plant for vehicle {vehicle!r} (available: {', '.join(sorted(ASSEMBLIES))})")
-    return importlib.import_module(module)
+CONTROL = "BENCH_Control"     # its signal Vehicle selects the vehicle (dbc/bench.dbc)
 
 
 def assemble(vehicle: str, external: Collection[str]) -> list[Behaviour]:
     """The behaviours of one vehicle; ValueError naming the vehicle when there is no such plant."""
-    builder: Callable[[Collection[str]], list[Behaviour]] = _assembly(vehicle).build
-    return builder(frozenset(external))
+    return registry.vehicle(vehicle).build(frozenset(external))
 
 
 def messages_of(vehicle: str) -> frozenset[str]:
-    """The plant-side messages the vehicle's network carries (its assembly's MESSAGES)."""
-    return _assembly(vehicle).MESSAGES
+    """The plant-side messages the vehicle's network carries (its declaration's messages)."""
+    return registry.vehicle(vehicle).messages
+
+
+def stimulus(vehicle: str) -> tuple[str, ...]:
+    """The stimulus messages the vehicle's behaviours read: what a scenario of it sends besides BENCH_Control."""
+    return registry.vehicle(vehicle).stimulus
+
+
+def vehicles() -> tuple[str, ...]:
+    """The names of every declared vehicle (the BENCH_Control.Vehicle values this plant can be)."""
+    return tuple(registry.vehicles())
 
 
 class PlantHost:
@@ -48,10 +45,10 @@ class PlantHost:
 
     def __init__(self, external: Collection[str], vehicle: str) -> None:
         self.external = frozenset(external)
-        self.vehicle = vehicle.upper()
+        self.vehicle = registry.vehicle(vehicle).name
         self.inner = assemble(self.vehicle, self.external)
         self.nodes = tuple(dict.fromkeys(n for b in self.inner for n in b.nodes))
-        self.unavailable: str | None = None   # a vehicle asked for that has no plant
+        self.unavailable: int | None = None   # the code of a vehicle asked for that has no plant
         self._network: str | None = None   # the vehicle whose network the bus carries (None: not set yet)
 
     def reset(self) -> None:
@@ -59,14 +56,18 @@ class PlantHost:
             behaviour.reset()
 
     def step(self, io: NodeIO, t: float, dt: float) -> None:
-        control = io.latest("BENCH_Control")
+        control = io.latest(CONTROL)
         if control is not None:
-            wanted = _BY_CODE.get(int(control["Vehicle"]))
-            if wanted is not None and wanted != self.vehicle and wanted in ASSEMBLIES:
-                self.vehicle = wanted
-                self.inner = assemble(wanted, self.external)
+            code = int(control["Vehicle"])
+            wanted = registry.by_code(code)
+            if wanted is not None and wanted.name != self.vehicle:
+                self.vehicle = wanted.name
+                self.inner = wanted.build(self.external)
                 io.reset_outputs()          # nothing of the previous vehicle stays on the bus
-            self.unavailable = wanted if wanted not in ASSEMBLIES else None
+            if wanted is None and self.unavailable != code:
+                log.warning("BENCH_Control.Vehicle = %d names no declared vehicle (%s): the plant stays %s",
+                            code, ", ".join(vehicles()), self.vehicle)
+            self.unavailable = code if wanted is None else None
         if self._network != self.vehicle:
             self._set_network(io)
         for behaviour in self.inner:
@@ -76,7 +77,7 @@ class PlantHost:
         """Send the messages of this vehicle's network, and none of the other vehicles' (a 4WIS EV has no
         SBW ECU: its bus carries no SBW frames). Messages no vehicle claims are left as they are."""
         mine = messages_of(self.vehicle)
-        others = frozenset().union(*(messages_of(vehicle) for vehicle in ASSEMBLIES)) - mine
+        others = frozenset().union(*(v.messages for v in registry.vehicles().values())) - mine
         for message in others:
             io.stop_sending(message)
         for message in mine:

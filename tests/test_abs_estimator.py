@@ -18,10 +18,10 @@ from plant.ecus import abs as abs_ecu
 from plant.ecus.abs import estimator_config
 from plant.ecus.abs_estimator import (DECREASE, INCREASE, TurnStateEstimator, front_wheel_angle, nth_largest,
                                       turn_direction, yaw_rate)
-from plant.vehicles import AbsParams, load_file, load_vehicle
+from plant.vehicles import AbsParams, load_file, load_parameters
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
-CAR, PARAMS = load_vehicle("ACLASS"), load_vehicle("ACLASS_ABS")
+CAR, PARAMS = load_parameters("ACLASS"), load_parameters("ABS")
 CONFIG = estimator_config(PARAMS, CAR)
 B, L, A, K = 1.55, 2.65, 1.06, 1.90e-3          # docs/spec/vehicles.md B
 L0, L1, L2 = CONFIG.v_l0, CONFIG.v_l1, CONFIG.v_l2

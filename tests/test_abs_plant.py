@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plant import braking_plant, limits
+from plant import braking_plant, signal_ranges
 from plant.assemblies.aclass_abs import build
 from plant.brakes import BrakeHydraulics, Valve
 from plant.braking_plant import vehicle_spec
@@ -22,10 +22,10 @@ from plant.ecus import abs as abs_ecu
 from plant.ecus.abs import AbsEcu, AbsFault
 from plant.factory import assemble
 from plant.sensors import WheelSpeedSensors
-from plant.vehicles import load_vehicle
+from plant.vehicles import load_parameters
 
 DT = 1e-3
-CAR, PARAMS = load_vehicle("ACLASS"), load_vehicle("ACLASS_ABS")
+CAR, PARAMS = load_parameters("ACLASS"), load_parameters("ABS")
 G = 9.81
 
 
@@ -60,9 +60,9 @@ def test_locked_wheels_decelerate_at_the_sliding_friction(mu: float, bcde: tuple
     for _ in range(300):
         v.step(DT)
     assert all(w == 0.0 for w in v.omega)
-    assert -v.ax == pytest.approx(mf(1.0, *bcde) * G, rel=1e-6)
+    assert -v.long_accel == pytest.approx(mf(1.0, *bcde) * G, rel=1e-6)
     # load transfer to the front: m a h / L (docs/spec/vehicles.md B, h_cg 0.55 m), after the suspension lag
-    shift = CAR.mass * -v.ax * CAR.cog_height / CAR.wheelbase
+    shift = CAR.mass * -v.long_accel * CAR.cog_height / CAR.wheelbase
     static_front = CAR.mass * G * CAR.cog_to_rear_axle / CAR.wheelbase
     assert v.fz[0] + v.fz[1] == pytest.approx(static_front + shift, rel=1e-3)
 
@@ -77,7 +77,7 @@ def test_steady_turn_matches_the_linear_2dof_gain_at_low_lateral_acceleration() 
     k = 1.90e-3                                      # docs/spec/vehicles.md B
     expected = x / CAR.wheelbase / (1 + k * x * x) * v.delta      # docs/spec/formulas.md §6 eq. 11
     assert v.r == pytest.approx(expected, rel=0.02)
-    assert v.r > 0 and v.ay > 0                      # left turn positive in the internal frame
+    assert v.r > 0 and v.lat_accel > 0                      # left turn positive in the internal frame
 
 
 def test_the_car_stops_and_stays_stopped() -> None:
@@ -147,7 +147,7 @@ def test_sensors_quantise_are_seeded_and_have_the_configured_noise() -> None:
 class FakeIO:
     """Latest values per message; every sent value must be finite and inside the DBC range mirrored in plant/."""
 
-    RANGES = {**limits.BY_SIGNAL,
+    RANGES = {**signal_ranges.BY_SIGNAL,
               **{("ABS_WheelSpeeds", f"WheelSpeed{w}"): abs_ecu.WHEEL_SPEED_RANGE for w in "FL FR RL RR".split()},
               ("ABS_SteerState", "RefVehicleSpeed"): abs_ecu.REF_SPEED_RANGE,
               ("ABS_SteerState", "FrontWheelAngleEst"): abs_ecu.ANGLE_RANGE,

@@ -24,7 +24,7 @@ from bench.logread import read_decoded
 from bench.run import BenchRun
 from plant.ecus.abs import brake_demand, estimator_config
 from plant.ecus.abs_estimator import TurnStateEstimator
-from plant.vehicles import load_vehicle
+from plant.vehicles import load_parameters
 
 WHEELS = ("FL", "FR", "RL", "RR")
 
@@ -56,7 +56,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _replay(path: Path):
     """(live, replayed): lists of (t, TurnDirection, RefVehicleSpeed, FrontWheelAngleEst) per ECU update."""
-    car, params = load_vehicle("ACLASS"), load_vehicle("ACLASS_ABS")
+    car, params = load_parameters("ACLASS"), load_parameters("ABS")
     control = [(t, v) for t, _, v in read_decoded(path, "BENCH_Control")]
     scenario = control[-1][1]["ScenarioId"]
     t_reset = next(t for t, v in control if v["ScenarioId"] == scenario) + 0.001

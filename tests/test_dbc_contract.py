@@ -96,10 +96,10 @@ BENCH: list[tuple[int, str, str, int, dict[str, str | None]]] = [
     (0x693, "PLANT_Dynamics", "PLANT", 10, {"Sideslip": "deg", "LatAccel": "m/s^2", "LongAccel": "m/s^2"}),
 ]
 BENCH_ENUMS = {
-    ("BENCH_Control", "Vehicle"): {0: "EV4WIS", 1: "ACLASS", 2: "ACLASS_ABS"},
-    ("PLANT_Status", "Vehicle"): {0: "EV4WIS", 1: "ACLASS", 2: "ACLASS_ABS"},
     ("BENCH_SteeringRobot", "RobotMode"): {0: "OFF", 1: "ANGLE", 2: "TORQUE"},
 }
+#: The signals whose value table is the plant's vehicles: each declaration's code and name (plant/registry.py).
+VEHICLE_ENUMS = (("BENCH_Control", "Vehicle"), ("PLANT_Status", "Vehicle"))
 
 E2E = {"AliveCounter", "Checksum"}
 PAYLOAD_BITS = frozenset(range(0, 48)) | frozenset(range(52, 56))
@@ -225,6 +225,14 @@ def test_bench_message(frame_id: int, name: str, sender: str, cycle: int, signal
 def test_bench_value_tables(key: tuple[str, str]) -> None:
     signal = BENCH_DB.get_message_by_name(key[0]).get_signal_by_name(key[1])
     assert {int(v): str(n) for v, n in signal.choices.items()} == BENCH_ENUMS[key]
+
+
+@pytest.mark.parametrize("key", VEHICLE_ENUMS, ids=lambda k: ".".join(k))
+def test_vehicle_value_tables_are_the_declared_vehicles(key: tuple[str, str]) -> None:
+    from plant.registry import vehicles
+
+    signal = BENCH_DB.get_message_by_name(key[0]).get_signal_by_name(key[1])
+    assert {int(v): str(n) for v, n in signal.choices.items()} == {v.code: v.name for v in vehicles().values()}
 
 
 def test_bench_ids_are_private() -> None:

@@ -19,13 +19,13 @@ from plant.ecus.rear_steer import SeedLaws, Strategy
 from plant.ecus.vcu import Vcu, VcuFault
 from plant.factory import assemble
 from plant.single_track import SingleTrack
-from plant.vehicles import load_vehicle
+from plant.vehicles import load_parameters
 from tests.plant_io import RangeCheckedIO as FakeIO
 
 DT = 1e-3
 
 
-P = load_vehicle("EV4WIS")
+P = load_parameters("EV4WIS")
 M, IZ, A, B, CF, CR = 900.0, 1100.0, 1.38, 1.38, 45000.0, 55000.0      # docs/spec/vehicles.md A
 WB = A + B
 KS = M / WB ** 2 * (B / CF - A / CR)                                      # §5 stability factor
@@ -156,13 +156,13 @@ def test_leaving_the_dynamic_regime_has_no_acceleration_spike() -> None:
     for _ in range(2000):
         body.advance(angles, [6.0 * RPM_PER_MPS] * 4, DT)
     assert body.dynamic and body.sideslip_deg != 0.0
-    lat = body.ax
+    lat = body.lat_accel
     for _ in range(1000):                             # the body slides down to the wheels at μ g (PLANT-DYN-03)
         body.advance(angles, [4.0 * RPM_PER_MPS] * 4, DT)
         if not body.dynamic:
             break
     assert not body.dynamic
-    assert abs(body.ax) < 2.0 * abs(lat) + 1.0                          # centripetal only, no jump / dt
+    assert abs(body.lat_accel) < 2.0 * abs(lat) + 1.0                          # centripetal only, no jump / dt
 
 
 def test_road_mu_is_taken_at_scenario_start() -> None:

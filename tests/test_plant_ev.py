@@ -11,16 +11,16 @@ from pathlib import Path
 import pytest
 
 from bench.node import Behaviour
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.body import BodyNode, BusWheel
 from plant.ecus.imu import Imu
 from plant.ecus.vcu import CENTRE_AT_INFINITY_M, Vcu, VcuFault
 from plant.ecus.wheel import WheelEcu, WheelFault
 from plant.factory import assemble, build
-from plant.vehicles import Ev4wisParams, load_file, load_vehicle
+from plant.vehicles import Ev4wisParams, load_file, load_parameters
 
 DT = 1e-3
-PARAMS = load_vehicle("EV4WIS")
+PARAMS = load_parameters("EV4WIS")
 K, L, R = 1.11 / 2, 2.76 / 2, 0.281
 CORNERS = ("FL", "FR", "RL", "RR")
 POSITIONS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
@@ -44,7 +44,7 @@ class FakeIO:
     def send_values(self, message: str, **signals: float) -> None:
         for name, value in signals.items():
             assert isinstance(value, (int, float)) and math.isfinite(value), f"{message}.{name} = {value!r}"
-            bounds = limits.BY_SIGNAL.get((message, name))
+            bounds = ranges.BY_SIGNAL.get((message, name))
             if bounds is not None:
                 assert bounds[0] <= value <= bounds[1], f"{message}.{name} = {value} outside {bounds}"
         self.values.setdefault(message, {}).update(signals)
@@ -448,7 +448,7 @@ def test_vehicle_file_values_and_sources():
 
 def test_vehicle_loader_errors(tmp_path):
     with pytest.raises(ValueError, match="NOSUCHCAR"):
-        load_vehicle("NOSUCHCAR")
+        load_parameters("NOSUCHCAR")
     text = (REPO / "plant" / "vehicles" / "ev4wis.toml").read_text()
     broken = {
         "missing": ("\nmass ", "\n#mass ", "parameters.mass"),
@@ -469,7 +469,7 @@ def test_vehicle_loader_errors(tmp_path):
 
 # -- the DBC contract --------------------------------------------------------------------------------------
 
-def test_sent_signals_exist_in_the_dbc_with_the_plants_limits():
+def test_sent_signals_exist_in_the_dbc_with_the_plants_ranges():
     cantools = pytest.importorskip("cantools")
     files = [REPO / "dbc" / "chassis.dbc", REPO / "dbc" / "bench.dbc"]
     if not all(f.is_file() for f in files):
@@ -479,7 +479,7 @@ def test_sent_signals_exist_in_the_dbc_with_the_plants_limits():
         for m in cantools.database.load_file(str(f)).messages:
             for s in m.signals:
                 signals[(m.name, s.name)] = s
-    for key, (lo, hi) in limits.BY_SIGNAL.items():
+    for key, (lo, hi) in ranges.BY_SIGNAL.items():
         s = signals[key]
         assert s.minimum <= lo and hi <= s.maximum, key
     rig = Rig(vcu=Vcu(ANGLE_VCU))

@@ -21,11 +21,11 @@ from plant.ecus import sbw as ecu_module
 from plant.ecus.sbw import SbwEcu, SbwFault, SteeringMode
 from plant.factory import assemble
 from plant.sbw import SbwMechanics, SbwSensors, SensorFault
-from plant.vehicles import SbwParams, load_file, load_vehicle
+from plant.vehicles import SbwParams, load_file, load_parameters
 
 DT = 1e-3
 RAD = math.pi / 180.0
-P = load_vehicle("SBW")
+P = load_parameters("SBW")
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -200,7 +200,7 @@ def test_external_sbw_takes_the_road_wheel_angle_from_sbw_pinion() -> None:
     rig.io.values["SBW_Pinion"] = {"PinionAngle": 30.0}
     rig.run(2.0)
     assert rig.plant is not None and rig.plant.mechanics is None
-    expected = load_vehicle("ACLASS")
+    expected = load_parameters("ACLASS")
     u = 13.89
     big_l = expected.cog_to_front_axle + expected.cog_to_rear_axle
     k = expected.mass / big_l ** 2 * (expected.cog_to_rear_axle / expected.cornering_stiffness_front

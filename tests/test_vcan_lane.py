@@ -23,7 +23,7 @@ import pytest
 
 from bench.codec import load_codebook
 from bench.config import load_config
-from plant.factory import ASSEMBLIES, messages_of
+from plant.factory import messages_of, vehicles
 from tests.reference import contract_checksum
 from tests.repo import ROOT
 from tests.vcan import CHANNEL, IN_LANE, has_vcan
@@ -68,7 +68,7 @@ def test_plant_process_keeps_the_contract_on_vcan() -> None:
     for msg in frames:
         by_id.setdefault(msg.arbitration_id, []).append(msg)
     network = messages_of("EV4WIS")
-    others = frozenset().union(*(messages_of(v) for v in ASSEMBLIES)) - network
+    others = frozenset().union(*(messages_of(v) for v in vehicles())) - network
     seen = {codebook.by_id[i].name for i in by_id if i in codebook.by_id}
     assert network <= seen, f"missing from the bus: {sorted(network - seen)}"
     assert not seen & others, f"another vehicle's messages on the bus: {sorted(seen & others)}"

@@ -1,2 +1,7 @@
-"""One module per vehicle the plant can be: each has `build(external) -> list[Behaviour]`, the
-behaviours of that vehicle's nodes not in `external`, in the order they must be stepped."""
+"""The vehicles the plant can be: one module per vehicle, each declaring it as `VEHICLE` (plant/declaration.py).
+plant/registry.py discovers them; nothing lists them by hand. Modules from a `plant/assemblies/` folder elsewhere on
+the import path count too (extend_path)."""
+
+from pkgutil import extend_path
+
+__path__ = extend_path(__path__, __name__)

@@ -15,8 +15,8 @@ Behaviours, stepped in this order every plant tick:
 
 Scenario: whenever BENCH_Control.ScenarioId changes (the first one seen included) everything resets and
 the car drives straight at BENCH_Control.InitialSpeed, which this model holds constant (no longitudinal
-dynamics: LongAccel is 0); PLANT_Status.ScenarioIdAck echoes the id, as plant/body.py does. RoadMu and
-SensorNoise do not affect the linear model.
+dynamics: LongAccel is 0); PLANT_Status.ScenarioIdAck echoes the id (the scenario protocol,
+plant/scenario.py). RoadMu and SensorNoise do not affect the linear model.
 
 External nodes: with SBW external the mechanics are not simulated (the real ECU has its own actuators);
 the road-wheel angle is SBW_Pinion.PinionAngle / 15 (held when the message is missing). With PLANT external
@@ -30,17 +30,22 @@ import math
 from collections.abc import Collection, Mapping, Sequence
 
 from bench.node import Behaviour, NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.driver import SteeringRobot
 from plant.ecus.imu import Imu
 from plant.ecus.sbw import SbwEcu
 from plant.sbw import SbwMechanics, SbwSensors
 from plant.single_track import SingleTrack, SingleTrackParams
-from plant.vehicles import VEHICLE_CODES, AclassParams, SbwParams, load_vehicle
+from plant.declaration import Vehicle
+from plant.scenario import ScenarioTracker
+from plant.vehicles import PARAMETER_FILES, AclassParams, SbwParams
 
 _DEG = 180.0 / math.pi
 _RAD = math.pi / 180.0
 _KMH = 3.6
+
+NAME, CODE = "ACLASS", 1     # BENCH_Control.Vehicle value table
+PARAMETERS = (PARAMETER_FILES["ACLASS"], PARAMETER_FILES["SBW"])
 
 # bench.dbc ranges of the SBW ground truth (tests/test_sbw_model.py checks them against the file)
 TRUTH_ANGLE = (-2000.0, 2000.0)          # PLANT_SbwAngles.HandWheelAngle/PinionAngle, deg
@@ -66,6 +71,9 @@ MESSAGES = frozenset({
     "PLANT_SbwAngles", "PLANT_SbwTorques", "PLANT_SbwSensors",
 })
 
+#: What its behaviours read of the stimulus: the steering robot, the SBW ECU's configuration, the sensor faults.
+STIMULUS = ("BENCH_SteeringRobot", "BENCH_SbwConfig", "BENCH_SbwSensorFault")
+
 
 def single_track_params(p: AclassParams) -> SingleTrackParams:
     """docs/spec/vehicles.md B as the §5 model's parameters."""
@@ -79,7 +87,7 @@ class AclassPlant:
     nodes: tuple[str, ...] = ("PLANT",)
 
     def __init__(self, vehicle: AclassParams, sbw: SbwParams, ecu: SbwEcu | None,
-                 linked: Sequence[Behaviour] = ()) -> None:
+                 linked: Sequence[Behaviour] = (), *, vehicle_code: int) -> None:
         self.vehicle_params = vehicle
         self.model = SingleTrack(single_track_params(vehicle))
         self.ecu = ecu
@@ -89,27 +97,27 @@ class AclassPlant:
         self.control_rate = sbw.control_rate
         self.ratio = sbw.steering_ratio
         self.linked = tuple(linked)
-        self.vehicle_code = VEHICLE_CODES["ACLASS"]
+        self.scenario = ScenarioTracker(vehicle_code)
         self.reset()
 
     def reset(self) -> None:
+        self.scenario.reset()
+        self._reset_world()
+
+    def _reset_world(self) -> None:
         self.model.reset(0.0)
         if self.mechanics is not None:
             self.mechanics.reset()
         self.robot.reset()
-        self.scenario: int | None = None
-        self._t0: float | None = None
         self.x = self.y = 0.0               # world position of the CoG, m (start frame, docs/spec/formulas.md §1)
         self._bus_pinion = 0.0              # deg, SBW_Pinion.PinionAngle when the SBW is external
 
     def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:
         for behaviour in self.linked:
             behaviour.reset()
-        self.reset()
+        self._reset_world()
         speed = control.get("InitialSpeed", 0.0)
-        self.model.reset(speed if limits.finite(speed) and speed > 0.0 else 0.0)
-        self.scenario = int(control["ScenarioId"])
-        self._t0 = t - dt
+        self.model.reset(speed if ranges.finite(speed) and speed > 0.0 else 0.0)
 
     # -- bus signs of the vehicle's state ---------------------------------------------------------------
     @property
@@ -118,12 +126,12 @@ class AclassPlant:
         return -self.model.yaw_rate * _DEG
 
     @property
-    def ax(self) -> float:
-        """Lateral acceleration, m/s², positive to the right (the IMU's name, as plant.body.PlanarBody)."""
+    def lat_accel(self) -> float:
+        """Lateral acceleration, m/s², positive to the right (as plant.body.PlanarBody, which the IMU reads)."""
         return -self.model.lat_accel
 
     @property
-    def ay(self) -> float:
+    def long_accel(self) -> float:
         """Longitudinal acceleration, m/s²: 0, the speed is held."""
         return 0.0
 
@@ -136,19 +144,15 @@ class AclassPlant:
 
     # -- tick -------------------------------------------------------------------------------------------------
     def step(self, io: NodeIO, t: float, dt: float) -> None:
-        control = io.latest("BENCH_Control")
-        if control is not None:
-            sid = control.get("ScenarioId")
-            if sid is not None and sid != self.scenario and limits.finite(sid):
-                self._restart(control, t, dt)
-        if self._t0 is None:
-            self._t0 = t - dt
+        scenario = self.scenario
+        if scenario.poll(io, t, dt) and scenario.control is not None:
+            self._restart(scenario.control, t, dt)
         self.robot.command(io.latest("BENCH_SteeringRobot"))
         model = self.model
         mech = self.mechanics
         if mech is not None and self.ecu is not None:
             fault = io.latest("BENCH_SbwSensorFault")
-            if fault is not None and limits.finite(fault.get("SensorFault", 0.0), fault.get("SensorOffset", 0.0)):
+            if fault is not None and ranges.finite(fault.get("SensorFault", 0.0), fault.get("SensorOffset", 0.0)):
                 mech.set_sensor_fault(int(fault["SensorFault"]), fault["SensorOffset"] * _RAD)
             else:
                 mech.set_sensor_fault(0)
@@ -157,7 +161,7 @@ class AclassPlant:
             mech.advance(dt, self.ecu, self.robot, self.sensors, substeps)
         else:
             pinion = io.latest("SBW_Pinion")
-            if pinion is not None and limits.finite(pinion.get("PinionAngle", math.nan)):
+            if pinion is not None and ranges.finite(pinion.get("PinionAngle", math.nan)):
                 self._bus_pinion = pinion["PinionAngle"]
         model.step(dt, -self.road_wheel_angle)
         self._move(dt)
@@ -182,16 +186,15 @@ class AclassPlant:
 
     def _publish(self, io: NodeIO, t: float) -> None:
         model = self.model
-        clamp = limits.clamp
+        clamp = ranges.clamp
         heading = (-model.yaw_angle * _DEG + 180.0) % 360.0 - 180.0
-        io.send_values("PLANT_Position", PosX=clamp(self.x, limits.PLANT_POS), PosY=clamp(self.y, limits.PLANT_POS))
-        io.send_values("PLANT_Motion", Heading=clamp(heading, limits.PLANT_HEADING),
-                       Speed=clamp(model.speed, limits.PLANT_SPEED),
-                       YawRate=clamp(self.yaw_rate_dps, limits.PLANT_YAW_RATE))
-        io.send_values("PLANT_Dynamics", Sideslip=clamp(-model.beta * _DEG, limits.PLANT_SIDESLIP),
-                       LatAccel=clamp(self.ax, limits.PLANT_ACCEL), LongAccel=0.0)
-        io.send_values("PLANT_Status", ScenarioIdAck=self.scenario or 0, Vehicle=self.vehicle_code,
-                       PlantTime=clamp(t - (self._t0 or 0.0), limits.PLANT_TIME))
+        io.send_values("PLANT_Position", PosX=clamp(self.x, ranges.PLANT_POS), PosY=clamp(self.y, ranges.PLANT_POS))
+        io.send_values("PLANT_Motion", Heading=clamp(heading, ranges.PLANT_HEADING),
+                       Speed=clamp(model.speed, ranges.PLANT_SPEED),
+                       YawRate=clamp(self.yaw_rate_dps, ranges.PLANT_YAW_RATE))
+        io.send_values("PLANT_Dynamics", Sideslip=clamp(-model.beta * _DEG, ranges.PLANT_SIDESLIP),
+                       LatAccel=clamp(self.lat_accel, ranges.PLANT_ACCEL), LongAccel=0.0)
+        self.scenario.acknowledge(io, t)
         mech = self.mechanics
         if mech is None:
             return
@@ -234,28 +237,27 @@ class WheelSpeedSensors:
         for name, x, y, steered in self.positions:
             vx, vy = u - r * y, v + r * x
             speed = vx * c + vy * s if steered else vx
-            out[f"WheelSpeed{name}"] = limits.clamp(abs(speed) * _KMH, WHEEL_SPEED)
+            out[f"WheelSpeed{name}"] = ranges.clamp(abs(speed) * _KMH, WHEEL_SPEED)
         io.send_values("ABS_WheelSpeeds", **out)
 
 
 def build(external: Collection[str]) -> list[Behaviour]:
     """The ACLASS behaviours not in `external`, in step order (module docstring)."""
-    vehicle = load_vehicle("ACLASS")
-    sbw = load_vehicle("SBW")
+    vehicle, sbw = (parameters.load() for parameters in PARAMETERS)
     behaviours: list[Behaviour] = []
     if "PLANT" in external:
         if "IMU" not in external:
             behaviours.append(Imu(None))
         return behaviours
     ecu = SbwEcu(sbw) if "SBW" not in external else None
-    plant = AclassPlant(vehicle, sbw, ecu)
+    plant = AclassPlant(vehicle, sbw, ecu, vehicle_code=CODE)
     behaviours.append(plant)
     linked: list[Behaviour] = []
     if ecu is not None:
         behaviours.append(ecu)
         linked.append(ecu)
     if "IMU" not in external:
-        imu = Imu(plant)  # type: ignore[arg-type]   # duck-typed: yaw_rate_dps, ax, ay as plant.body.PlanarBody
+        imu = Imu(plant)  # type: ignore[arg-type]   # duck-typed: yaw_rate_dps, lat_accel, long_accel as plant.body.PlanarBody
         behaviours.append(imu)
         linked.append(imu)
     if "ABS" not in external:
@@ -264,3 +266,6 @@ def build(external: Collection[str]) -> list[Behaviour]:
         linked.append(wheels)
     plant.linked = tuple(linked)
     return behaviours
+
+
+VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=PARAMETERS, messages=MESSAGES, stimulus=STIMULUS)

@@ -19,7 +19,11 @@ from collections.abc import Collection
 from bench.node import Behaviour
 from plant.braking_plant import BrakingPlantNode
 from plant.ecus.abs import AbsEcu
-from plant.vehicles import load_vehicle
+from plant.declaration import Vehicle
+from plant.vehicles import PARAMETER_FILES
+
+NAME, CODE = "ACLASS_ABS", 2     # BENCH_Control.Vehicle value table
+PARAMETERS = (PARAMETER_FILES["ACLASS"], PARAMETER_FILES["ABS"])
 
 
 #: What this vehicle's network carries from the plant's side (plant/factory.py stops the rest): the ABS ECU
@@ -29,14 +33,22 @@ MESSAGES = frozenset({
     "PLANT_AbsVehicle", "PLANT_AbsWheel_FL", "PLANT_AbsWheel_FR", "PLANT_AbsWheel_RL", "PLANT_AbsWheel_RR",
 })
 
+#: What its behaviours read of the stimulus: the ABS test's drive robot and valve bypass, the pedals, the hand wheel.
+STIMULUS = ("BENCH_AbsStimulus", "DRV_Pedals", "DRV_Steering")
+
+
 def build(external: Collection[str]) -> list[Behaviour]:
+    """The braking car's behaviours not in `external`, in step order (module docstring)."""
     if "PLANT" in external:
         return []
-    car, abs_params = load_vehicle("ACLASS"), load_vehicle("ACLASS_ABS")
-    plant = BrakingPlantNode(car, abs_params)
+    car, abs_params = (parameters.load() for parameters in PARAMETERS)
+    plant = BrakingPlantNode(car, abs_params, vehicle_code=CODE)
     behaviours: list[Behaviour] = [plant]
     if "ABS" not in external:
         ecu = AbsEcu(abs_params, car, plant)
         behaviours.append(ecu)
         plant.linked = (ecu,)
     return behaviours
+
+
+VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=PARAMETERS, messages=MESSAGES, stimulus=STIMULUS)

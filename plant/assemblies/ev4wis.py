@@ -21,7 +21,11 @@ from plant.ecus.imu import Imu
 from plant.ecus.vcu import Vcu
 from plant.ecus.wheel import WheelEcu
 from plant.kinematics import CORNERS
-from plant.vehicles import load_vehicle
+from plant.declaration import Vehicle
+from plant.vehicles import PARAMETER_FILES
+
+NAME, CODE = "EV4WIS", 0     # BENCH_Control.Vehicle value table
+PARAMETERS = PARAMETER_FILES["EV4WIS"]
 
 
 #: What this vehicle's network carries from the plant's side (plant/factory.py stops the rest): the VCU's
@@ -32,8 +36,13 @@ MESSAGES = frozenset({
     "PLANT_Status", "PLANT_Position", "PLANT_Motion", "PLANT_Dynamics",
 })
 
+#: What its behaviours read of the stimulus: the VCU's driver requests and its bench-private configuration.
+STIMULUS = ("DRV_MotionRequest", "DRV_Steering", "BENCH_VcuConfig")
+
+
 def build(external: Collection[str]) -> list[Behaviour]:
-    params = load_vehicle("EV4WIS")
+    """The EV's behaviours not in `external`, in step order (module docstring)."""
+    params = PARAMETERS.load()
     behaviours: list[Behaviour] = []
     if "VCU" not in external:
         behaviours.append(Vcu(params))
@@ -47,7 +56,7 @@ def build(external: Collection[str]) -> list[Behaviour]:
             sources[corner] = wheel
     body_node = None
     if "PLANT" not in external:
-        body_node = EvBodyNode(params, sources, linked=list(behaviours))
+        body_node = EvBodyNode(params, sources, vehicle_code=CODE, linked=list(behaviours))
         behaviours.append(body_node)
     if "IMU" not in external:
         imu = Imu(body_node.body if body_node is not None else None)
@@ -55,3 +64,6 @@ def build(external: Collection[str]) -> list[Behaviour]:
         if body_node is not None:
             body_node.linked = (*body_node.linked, imu)
     return behaviours
+
+
+VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=(PARAMETERS,), messages=MESSAGES, stimulus=STIMULUS)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import random
 
 from bench.node import NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.body import PlanarBody
 
 
@@ -36,11 +36,11 @@ class Imu:
     def _truth(self, io: NodeIO) -> tuple[float, float, float]:
         if self.body is not None:
             b = self.body
-            return b.yaw_rate_dps, b.ax, b.ay
+            return b.yaw_rate_dps, b.lat_accel, b.long_accel
         motion, dynamics = io.latest("PLANT_Motion"), io.latest("PLANT_Dynamics")
         if motion is not None and dynamics is not None:
             values = (motion.get("YawRate", 0.0), dynamics.get("LatAccel", 0.0), dynamics.get("LongAccel", 0.0))
-            if limits.finite(*values):
+            if ranges.finite(*values):
                 self._last = values
         return self._last
 
@@ -50,6 +50,6 @@ class Imu:
         if sy or sl or sg:
             gauss = self._rng.gauss
             yaw, lat, lon = yaw + gauss(0.0, sy), lat + gauss(0.0, sl), lon + gauss(0.0, sg)
-        clamp = limits.clamp
-        io.send_values("IMU_Motion", YawRate=clamp(yaw, limits.IMU_YAW_RATE),
-                       LatAccel=clamp(lat, limits.IMU_ACCEL), LongAccel=clamp(lon, limits.IMU_ACCEL))
+        clamp = ranges.clamp
+        io.send_values("IMU_Motion", YawRate=clamp(yaw, ranges.IMU_YAW_RATE),
+                       LatAccel=clamp(lat, ranges.IMU_ACCEL), LongAccel=clamp(lon, ranges.IMU_ACCEL))

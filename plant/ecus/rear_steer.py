@@ -35,7 +35,7 @@ import math
 from enum import IntEnum
 
 from bench.node import NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.body import VelocityFit
 from plant.vehicles import Ev4wisParams
 
@@ -126,7 +126,7 @@ class VehicleSpeedEstimate:
                 return None
             angles.append(status.get("SteerAngle", math.nan))
             speeds.append(status.get("WheelSpeed", math.nan))
-        if not limits.finite(*angles, *speeds):
+        if not ranges.finite(*angles, *speeds):
             return None
         return self._fit(angles, speeds)[1]
 
@@ -137,7 +137,7 @@ class VehicleSpeedEstimate:
         if imu is None or io.invalid("IMU_Motion"):
             return None
         a = imu.get("LongAccel", math.nan)
-        return a if limits.finite(a) else None
+        return a if ranges.finite(a) else None
 
     def update(self, io: NodeIO, t: float) -> float | None:
         """Advance to bench time t (once per control task); returns the estimate."""

@@ -44,7 +44,7 @@ import math
 from enum import IntEnum
 
 from bench.node import NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.sbw import SbwSensors
 from plant.vehicles import SbwParams
 
@@ -240,7 +240,7 @@ class SbwEcu:
         mode, gain = SteeringMode.DIRECT, self.p.ideal_yaw_gain
         if config is not None:
             raw_mode, raw_gain = config.get("SteeringMode", 0.0), config.get("IdealYawGain", gain)
-            if raw_mode in (0, 1, 2) and limits.finite(raw_gain) and raw_gain > 0.0:
+            if raw_mode in (0, 1, 2) and ranges.finite(raw_gain) and raw_gain > 0.0:
                 mode, gain = SteeringMode(int(raw_mode)), raw_gain
         self.mode, self.ideal_gain = mode, gain
 
@@ -251,7 +251,7 @@ class SbwEcu:
             return None
         r, ay = imu.get("YawRate", math.nan), imu.get("LatAccel", math.nan)
         rl, rr = wheels.get("WheelSpeedRL", math.nan), wheels.get("WheelSpeedRR", math.nan)
-        if not limits.finite(r, ay, rl, rr):
+        if not ranges.finite(r, ay, rl, rr):
             return None
         return 0.5 * (rl + rr) * _KMH, r * _RAD, ay
 
@@ -309,7 +309,7 @@ class SbwEcu:
         return SbwFault.OK
 
     def _publish(self, io: NodeIO) -> None:
-        clamp = limits.clamp                        # NaN-safe: a NaN (never expected) is sent as 0
+        clamp = ranges.clamp                        # NaN-safe: a NaN (never expected) is sent as 0
         io.send_values("SBW_HandWheel",
                        HandWheelAngle=clamp(self.hand_wheel * _DEG, HAND_WHEEL_ANGLE),
                        DriverTorque=clamp(self.driver_torque, DRIVER_TORQUE),

@@ -66,7 +66,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 from bench.node import NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.body import VelocityFit
 from plant.ecus.rear_steer import DEFAULT_LAW, SeedLaws, Strategy, VehicleSpeedEstimate
 from plant.kinematics import (CORNERS, centre_from_axle_angles, classify_centre, curvature_angle,
@@ -135,8 +135,8 @@ class Vcu:
         self.vehicle_speed = VehicleSpeedEstimate(params)   # u of the rear-steer laws (rear_steer.py)
         self._ratio = params.hand_wheel_ratio
         self._low_speed = params.adaptive_low_speed_limit / 3.6
-        self._max_rpm = min(params.hub_motor_max_speed, limits.WHEEL_SPEED_CMD[1])
-        self._max_yaw = min(params.max_yaw_rate, limits.YAW_RATE_TARGET[1])
+        self._max_rpm = min(params.hub_motor_max_speed, ranges.WHEEL_SPEED_CMD[1])
+        self._max_yaw = min(params.max_yaw_rate, ranges.YAW_RATE_TARGET[1])
         self._fit = VelocityFit(self.geometry)
         self._status = tuple(f"WHL_Status_{c}" for c in CORNERS)
         self._cmd = tuple(f"VCU_WheelCmd_{c}" for c in CORNERS)
@@ -161,7 +161,7 @@ class Vcu:
         mode = req.get("DriveMode", math.nan)
         px, py = req.get("PivotX", math.nan), req.get("PivotY", math.nan)
         v = req.get("TargetSpeed", math.nan)
-        if not limits.finite(mode, px, py, v) or mode not in _MODES:
+        if not ranges.finite(mode, px, py, v) or mode not in _MODES:
             return VcuFault.REQUEST_INVALID, None
         mode = int(mode)
         hw = rear = 0.0
@@ -170,7 +170,7 @@ class Vcu:
             if steering is None:
                 return VcuFault.REQUEST_TIMEOUT, None
             hw = steering.get("HandWheelAngle", math.nan)
-            if io.invalid("DRV_Steering") or not limits.finite(hw):
+            if io.invalid("DRV_Steering") or not ranges.finite(hw):
                 return VcuFault.REQUEST_INVALID, None
             if mode == DriveMode.ADAPTIVE:
                 u = self.vehicle_speed.value      # the vehicle's speed, not the request's (VCU-4WS-01)
@@ -191,10 +191,10 @@ class Vcu:
             strategy = self._strategy(io)
             if strategy is None:
                 return math.nan                     # an unknown coding: REQUEST_INVALID
-            measured = yaw if imu is not None and limits.finite(yaw) and not io.invalid("IMU_Motion") else None
+            measured = yaw if imu is not None and ranges.finite(yaw) and not io.invalid("IMU_Motion") else None
             return self.laws.rear_angle(strategy, front, speed, measured)
         try:
-            rear = float(self.high_speed_law(front, speed, yaw if limits.finite(yaw) else 0.0))
+            rear = float(self.high_speed_law(front, speed, yaw if ranges.finite(yaw) else 0.0))
         except Exception:       # a broken hook is a bad request, never a crash of the VCU
             return math.nan
         return rear
@@ -225,7 +225,7 @@ class Vcu:
             direction = (-py / r_o, px / r_o) if r_o > 0.0 else (0.0, 1.0)
             plan = Plan(mode, angles, rpm, (px, py), curvature_angle(px, py, g), yaw_rate(px, py, v), direction)
         else:  # NORMAL (rear 0) and ADAPTIVE (rear from the law)
-            if not limits.finite(rear):
+            if not ranges.finite(rear):
                 return VcuFault.REQUEST_INVALID, None
             if abs(x_deg) >= 90.0 or abs(rear) >= 90.0:
                 return VcuFault.ANGLE_OVER_90, None
@@ -266,7 +266,7 @@ class Vcu:
                 return 0.0
             angles.append(status.get("SteerAngle", math.nan))
             speeds.append(status.get("WheelSpeed", math.nan))
-        if not limits.finite(*angles, *speeds):
+        if not ranges.finite(*angles, *speeds):
             return 0.0
         vx, vy, _ = self._fit(angles, speeds)
         magnitude = math.hypot(vx, vy)
@@ -294,14 +294,14 @@ class Vcu:
         else:
             rpm, yaw = (0.0, 0.0, 0.0, 0.0), 0.0
         held = self.held
-        clamp = limits.clamp
+        clamp = ranges.clamp
         for message, angle, n in zip(self._cmd, held.angles, rpm):
-            io.send_values(message, SteerAngleCmd=clamp(angle, limits.STEER_ANGLE_CMD),
-                           WheelSpeedCmd=clamp(n, limits.WHEEL_SPEED_CMD))
+            io.send_values(message, SteerAngleCmd=clamp(angle, ranges.STEER_ANGLE_CMD),
+                           WheelSpeedCmd=clamp(n, ranges.WHEEL_SPEED_CMD))
         io.send_values("VCU_VehicleState", ActiveMode=int(held.mode),
-                       VehicleSpeed=clamp(self._speed_estimate(io, held.direction), limits.VEHICLE_SPEED),
-                       YawRateTarget=clamp(yaw, limits.YAW_RATE_TARGET),
-                       CurvatureAngle=clamp(held.curvature, limits.CURVATURE_ANGLE), VcuFault=int(fault))
+                       VehicleSpeed=clamp(self._speed_estimate(io, held.direction), ranges.VEHICLE_SPEED),
+                       YawRateTarget=clamp(yaw, ranges.YAW_RATE_TARGET),
+                       CurvatureAngle=clamp(held.curvature, ranges.CURVATURE_ANGLE), VcuFault=int(fault))
         if held.centre is None:
             theta = math.radians(held.angles[0])
             right = (math.cos(theta), -math.sin(theta))

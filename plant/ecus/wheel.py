@@ -26,7 +26,7 @@ import math
 from enum import IntEnum
 
 from bench.node import NodeIO
-from plant import limits
+from plant import signal_ranges as ranges
 from plant.vehicles import Ev4wisParams
 
 
@@ -84,7 +84,7 @@ class WheelEcu:
         if cmd is None:
             return WheelFault.CMD_TIMEOUT, None
         angle, speed = cmd.get("SteerAngleCmd", math.nan), cmd.get("WheelSpeedCmd", math.nan)
-        if not limits.finite(angle, speed):
+        if not ranges.finite(angle, speed):
             return WheelFault.CMD_INVALID, None
         fault = WheelFault.CMD_INVALID if io.invalid(self.cmd_message) else WheelFault.OK
         if abs(angle) > self._limit:
@@ -120,9 +120,9 @@ class WheelEcu:
         v = abs(self.speed_rpm) * self._mps_per_rpm
         self.current = (self._k_rate * rate
                         + self._k_twist * math.tanh(rate / TWIST_RATE_DPS) / (1.0 + v / TWIST_FADE_MPS))
-        clamp = limits.clamp
+        clamp = ranges.clamp
         io.send_values(self.status_message,
-                       SteerAngle=clamp(self.angle_deg, limits.STEER_ANGLE),
-                       WheelSpeed=clamp(self.speed_rpm, limits.WHEEL_SPEED),
-                       SteerMotorCurrent=clamp(self.current, limits.STEER_MOTOR_CURRENT),
+                       SteerAngle=clamp(self.angle_deg, ranges.STEER_ANGLE),
+                       WheelSpeed=clamp(self.speed_rpm, ranges.WHEEL_SPEED),
+                       SteerMotorCurrent=clamp(self.current, ranges.STEER_MOTOR_CURRENT),
                        WheelFault=int(fault))

@@ -1,6 +1,6 @@
-"""Vehicle parameter sets: one TOML file per vehicle, every value with its unit and its source.
+"""Parameter sets: one TOML file per set (a vehicle or a subsystem of one), every value with its unit and its source.
 
-Why a file per vehicle and a strict loader: docs/spec/vehicles.md asks that chosen values live in one data
+Why a file per set and a strict loader: docs/spec/vehicles.md asks that chosen values live in one data
 file with their source, and a typo in a key or a unit must fail loudly (naming file and key) rather
 than run a campaign on a default.
 
@@ -24,12 +24,9 @@ from plant.kinematics import Geometry
 
 HERE = Path(__file__).resolve().parent
 
-#: BENCH_Control.Vehicle / PLANT_Status.Vehicle value table (dbc/bench.dbc).
-VEHICLE_CODES = {"EV4WIS": 0, "ACLASS": 1, "ACLASS_ABS": 2}
 
-
-def _p(unit: str) -> Any:
-    """A parameter field: its unit is checked against the file's."""
+def param(unit: str) -> Any:
+    """A parameter field of a parameter class: its unit is checked against the file's."""
     return field(metadata={"unit": unit})
 
 
@@ -37,26 +34,26 @@ def _p(unit: str) -> Any:
 class Ev4wisParams:
     """docs/spec/vehicles.md A: the 4WIS steer-by-wire EV of [P0] (SI units unless the name says so)."""
 
-    track: float = _p("m")
-    wheelbase: float = _p("m")
-    wheel_radius: float = _p("m")
-    steer_limit: float = _p("deg")
-    mass: float = _p("kg")
-    cog_to_front_axle: float = _p("m")
-    cog_to_rear_axle: float = _p("m")
-    yaw_inertia: float = _p("kg*m^2")
-    cornering_stiffness_front: float = _p("N/rad")
-    cornering_stiffness_rear: float = _p("N/rad")
-    hand_wheel_ratio: float = _p("1")
-    servo_rate_limit: float = _p("deg/s")
-    servo_lag: float = _p("s")
-    hub_motor_lag: float = _p("s")
-    hub_motor_max_speed: float = _p("rpm")
-    timeout_speed_ramp: float = _p("rpm/s")
-    servo_current_per_rate: float = _p("A*s/deg")
-    servo_twist_current: float = _p("A")
-    adaptive_low_speed_limit: float = _p("km/h")
-    max_yaw_rate: float = _p("deg/s")
+    track: float = param("m")
+    wheelbase: float = param("m")
+    wheel_radius: float = param("m")
+    steer_limit: float = param("deg")
+    mass: float = param("kg")
+    cog_to_front_axle: float = param("m")
+    cog_to_rear_axle: float = param("m")
+    yaw_inertia: float = param("kg*m^2")
+    cornering_stiffness_front: float = param("N/rad")
+    cornering_stiffness_rear: float = param("N/rad")
+    hand_wheel_ratio: float = param("1")
+    servo_rate_limit: float = param("deg/s")
+    servo_lag: float = param("s")
+    hub_motor_lag: float = param("s")
+    hub_motor_max_speed: float = param("rpm")
+    timeout_speed_ramp: float = param("rpm/s")
+    servo_current_per_rate: float = param("A*s/deg")
+    servo_twist_current: float = param("A")
+    adaptive_low_speed_limit: float = param("km/h")
+    max_yaw_rate: float = param("deg/s")
     #: parameter name -> source text, from the file (not compared).
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
 
@@ -75,16 +72,16 @@ class Ev4wisParams:
 class AclassParams:
     """docs/spec/vehicles.md B: the A-class car of [P1] and [P4] (SI units unless the name says so)."""
 
-    mass: float = _p("kg")
-    yaw_inertia: float = _p("kg*m^2")
-    cog_to_front_axle: float = _p("m")
-    cog_to_rear_axle: float = _p("m")
-    cornering_stiffness_front: float = _p("N/rad")
-    cornering_stiffness_rear: float = _p("N/rad")
-    track: float = _p("m")
-    wheel_radius: float = _p("m")
-    hand_wheel_ratio: float = _p("1")
-    cog_height: float = _p("m")
+    mass: float = param("kg")
+    yaw_inertia: float = param("kg*m^2")
+    cog_to_front_axle: float = param("m")
+    cog_to_rear_axle: float = param("m")
+    cornering_stiffness_front: float = param("N/rad")
+    cornering_stiffness_rear: float = param("N/rad")
+    track: float = param("m")
+    wheel_radius: float = param("m")
+    hand_wheel_ratio: float = param("1")
+    cog_height: float = param("m")
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -95,50 +92,50 @@ class AclassParams:
 
 @dataclass(frozen=True)
 class AbsParams:
-    """ACLASS_ABS (docs/spec/vehicles.md B with [P4]'s brakes, tyres, sensors and ABS ECU): what braking adds to
+    """The ABS set (docs/spec/vehicles.md B with [P4]'s brakes, tyres, sensors and ABS ECU): what braking adds to
     AclassParams (aclass.toml), from abs.toml. Units in the field metadata, sources in the file."""
 
-    hand_wheel_ratio: float = _p("1")
-    wheel_inertia: float = _p("kg*m^2")
-    lateral_c: float = _p("1")
-    lateral_e: float = _p("1")
-    slip_speed_floor: float = _p("m/s")
-    load_transfer_lag: float = _p("s")
-    stop_speed: float = _p("m/s")
-    brake_gain_front: float = _p("N*m/bar")
-    brake_gain_rear: float = _p("N*m/bar")
-    inlet_flow: float = _p("bar^0.5/s")
-    outlet_flow: float = _p("bar^0.5/s")
-    master_rate: float = _p("bar/s")
-    pedal_to_pressure: float = _p("bar/%")
-    max_pressure: float = _p("bar")
-    max_drive_torque: float = _p("N*m")
-    cruise_gain: float = _p("N*m/(km/h)")
-    sensor_quantum: float = _p("km/h")
-    roughness_ratio: float = _p("1")
-    roughness_time: float = _p("s")
-    noise_seed: float = _p("1")
-    control_period: float = _p("s")
-    decel_threshold: float = _p("m/s^2")
-    accel_threshold: float = _p("m/s^2")
-    slip_threshold: float = _p("1")
-    slip_max: float = _p("1")
-    turn_front_slip_threshold: float = _p("1")
-    fast_reapply_time: float = _p("s")
-    step_duty: float = _p("1")
-    abs_min_speed: float = _p("km/h")
-    brake_switch_pressure: float = _p("bar")
-    stability_factor: float = _p("s^2/m^2")
-    v_l0: float = _p("km/h")
-    v_l1: float = _p("km/h")
-    v_l2: float = _p("km/h")
-    t0: float = _p("s")
-    t1: float = _p("s")
-    speed_filter_time: float = _p("s")
-    min_turn_speed: float = _p("km/h")
-    delta_average_points: float = _p("1")
-    rear_release_time: float = _p("s")
-    min_delta_speed: float = _p("km/h")
+    hand_wheel_ratio: float = param("1")
+    wheel_inertia: float = param("kg*m^2")
+    lateral_c: float = param("1")
+    lateral_e: float = param("1")
+    slip_speed_floor: float = param("m/s")
+    load_transfer_lag: float = param("s")
+    stop_speed: float = param("m/s")
+    brake_gain_front: float = param("N*m/bar")
+    brake_gain_rear: float = param("N*m/bar")
+    inlet_flow: float = param("bar^0.5/s")
+    outlet_flow: float = param("bar^0.5/s")
+    master_rate: float = param("bar/s")
+    pedal_to_pressure: float = param("bar/%")
+    max_pressure: float = param("bar")
+    max_drive_torque: float = param("N*m")
+    cruise_gain: float = param("N*m/(km/h)")
+    sensor_quantum: float = param("km/h")
+    roughness_ratio: float = param("1")
+    roughness_time: float = param("s")
+    noise_seed: float = param("1")
+    control_period: float = param("s")
+    decel_threshold: float = param("m/s^2")
+    accel_threshold: float = param("m/s^2")
+    slip_threshold: float = param("1")
+    slip_max: float = param("1")
+    turn_front_slip_threshold: float = param("1")
+    fast_reapply_time: float = param("s")
+    step_duty: float = param("1")
+    abs_min_speed: float = param("km/h")
+    brake_switch_pressure: float = param("bar")
+    stability_factor: float = param("s^2/m^2")
+    v_l0: float = param("km/h")
+    v_l1: float = param("km/h")
+    v_l2: float = param("km/h")
+    t0: float = param("s")
+    t1: float = param("s")
+    speed_filter_time: float = param("s")
+    min_turn_speed: float = param("km/h")
+    delta_average_points: float = param("1")
+    rear_release_time: float = param("s")
+    min_delta_speed: float = param("km/h")
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -167,67 +164,67 @@ class SbwParams:
     `steering_ratio` times the road wheels). Units in the field metadata, sources in the file."""
 
     # hand-wheel module ([P1] eq. 1-2)
-    hand_wheel_inertia: float = _p("kg*m^2")
-    hand_wheel_damping: float = _p("N*m*s/rad")
-    torsion_bar_stiffness: float = _p("N*m/rad")
+    hand_wheel_inertia: float = param("kg*m^2")
+    hand_wheel_damping: float = param("N*m*s/rad")
+    torsion_bar_stiffness: float = param("N*m/rad")
     # road-feel motor with its worm gear (eq. 3-5)
-    road_feel_inertia: float = _p("kg*m^2")
-    road_feel_damping: float = _p("N*m*s/rad")
-    road_feel_torque_constant: float = _p("N*m/A")
-    road_feel_resistance: float = _p("ohm")
-    road_feel_inductance: float = _p("H")
-    road_feel_gear_ratio: float = _p("1")
-    road_feel_current_limit: float = _p("A")
+    road_feel_inertia: float = param("kg*m^2")
+    road_feel_damping: float = param("N*m*s/rad")
+    road_feel_torque_constant: float = param("N*m/A")
+    road_feel_resistance: float = param("ohm")
+    road_feel_inductance: float = param("H")
+    road_feel_gear_ratio: float = param("1")
+    road_feel_current_limit: float = param("A")
     # steering actuator motor with its reduction to the pinion (eq. 6-8)
-    steer_motor_inertia: float = _p("kg*m^2")
-    steer_motor_damping: float = _p("N*m*s/rad")
-    steer_motor_torque_constant: float = _p("N*m/A")
-    steer_motor_resistance: float = _p("ohm")
-    steer_motor_inductance: float = _p("H")
-    steer_motor_gear_ratio: float = _p("1")
-    steer_motor_current_limit: float = _p("A")
-    supply_voltage: float = _p("V")
+    steer_motor_inertia: float = param("kg*m^2")
+    steer_motor_damping: float = param("N*m*s/rad")
+    steer_motor_torque_constant: float = param("N*m/A")
+    steer_motor_resistance: float = param("ohm")
+    steer_motor_inductance: float = param("H")
+    steer_motor_gear_ratio: float = param("1")
+    steer_motor_current_limit: float = param("A")
+    supply_voltage: float = param("V")
     # rack and pinion with dry friction and the aligning torque (eq. 9-10)
-    pinion_inertia: float = _p("kg*m^2")
-    pinion_damping: float = _p("N*m*s/rad")
-    dry_friction: float = _p("N*m")
-    pinion_radius: float = _p("m")
-    steering_ratio: float = _p("1")
-    tyre_trail: float = _p("m")
-    pinion_travel: float = _p("deg")
+    pinion_inertia: float = param("kg*m^2")
+    pinion_damping: float = param("N*m*s/rad")
+    dry_friction: float = param("N*m")
+    pinion_radius: float = param("m")
+    steering_ratio: float = param("1")
+    tyre_trail: float = param("m")
+    pinion_travel: float = param("deg")
     # steering robot (plant/driver.py)
-    robot_rate_limit: float = _p("deg/s")
-    robot_bandwidth: float = _p("rad/s")
-    robot_torque_lag: float = _p("s")
+    robot_rate_limit: float = param("deg/s")
+    robot_bandwidth: float = param("rad/s")
+    robot_torque_lag: float = param("s")
     # reference ECU: bilateral control (plant/ecus/sbw.py)
-    control_rate: float = _p("Hz")
-    assist_gain: float = _p("1")
-    torque_rate_gain: float = _p("s")
-    pinion_damping_gain: float = _p("N*m*s/rad")
-    position_gain: float = _p("1/s")
-    speed_kp: float = _p("N*m*s/rad")
-    speed_ki: float = _p("N*m/rad")
-    road_feel_current_kp: float = _p("V/A")
-    road_feel_current_ki: float = _p("V/(A*s)")
-    road_feel_current_kd: float = _p("V*s/A")
-    steer_current_kp: float = _p("V/A")
-    steer_current_ki: float = _p("V/(A*s)")
-    steer_current_kd: float = _p("V*s/A")
-    rack_force_filter: float = _p("s")
+    control_rate: float = param("Hz")
+    assist_gain: float = param("1")
+    torque_rate_gain: float = param("s")
+    pinion_damping_gain: float = param("N*m*s/rad")
+    position_gain: float = param("1/s")
+    speed_kp: float = param("N*m*s/rad")
+    speed_ki: float = param("N*m/rad")
+    road_feel_current_kp: float = param("V/A")
+    road_feel_current_ki: float = param("V/(A*s)")
+    road_feel_current_kd: float = param("V*s/A")
+    steer_current_kp: float = param("V/A")
+    steer_current_ki: float = param("V/(A*s)")
+    steer_current_kd: float = param("V*s/A")
+    rack_force_filter: float = param("s")
     # reference ECU: yaw-rate feedback with an ideal steering ratio ([P3] §1.1, §1.2)
-    ideal_yaw_gain: float = _p("1/s")
-    yaw_reference_lag: float = _p("s")
-    yaw_feedback_kp: float = _p("s")
-    yaw_feedback_ki: float = _p("1")
-    lat_accel_weight: float = _p("1")
-    feedback_min_speed: float = _p("km/h")
-    additional_angle_limit: float = _p("deg")
-    additional_angle_rate: float = _p("deg/s")
+    ideal_yaw_gain: float = param("1/s")
+    yaw_reference_lag: float = param("s")
+    yaw_feedback_kp: float = param("s")
+    yaw_feedback_ki: float = param("1")
+    lat_accel_weight: float = param("1")
+    feedback_min_speed: float = param("km/h")
+    additional_angle_limit: float = param("deg")
+    additional_angle_rate: float = param("deg/s")
     # reference ECU: sensor plausibility (SBW_Pinion.SbwFault)
-    hand_wheel_range: float = _p("deg")
-    pinion_range: float = _p("deg")
-    plausibility_limit: float = _p("deg")
-    stuck_motion: float = _p("deg")
+    hand_wheel_range: float = param("deg")
+    pinion_range: float = param("deg")
+    plausibility_limit: float = param("deg")
+    stuck_motion: float = param("deg")
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -242,26 +239,39 @@ class SbwParams:
 
 P = TypeVar("P")
 
-#: vehicle name (as on the bus, BENCH_Control.Vehicle) -> (file, parameter class)
-VEHICLES: dict[str, tuple[str, type]] = {
-    "EV4WIS": ("ev4wis.toml", Ev4wisParams),
-    "ACLASS": ("aclass.toml", AclassParams),
-    "ACLASS_ABS": ("abs.toml", AbsParams),
-    "SBW": ("sbw.toml", SbwParams),
+
+@dataclass(frozen=True)
+class ParameterFile:
+    """A parameter file and the frozen dataclass it loads into (a vehicle's declaration names its files)."""
+
+    path: Path
+    cls: type
+
+    def load(self) -> Any:
+        """The checked parameter set (ValueError naming the file and key, see `load_file`)."""
+        return load_file(self.path, self.cls)
+
+
+#: The parameter files of this folder by name. They are parameter sets, not vehicles: the A-class car uses
+#: ACLASS with SBW (its front steer-by-wire) or with ABS (what braking adds).
+PARAMETER_FILES: dict[str, ParameterFile] = {
+    "EV4WIS": ParameterFile(HERE / "ev4wis.toml", Ev4wisParams),
+    "ACLASS": ParameterFile(HERE / "aclass.toml", AclassParams),
+    "ABS": ParameterFile(HERE / "abs.toml", AbsParams),
+    "SBW": ParameterFile(HERE / "sbw.toml", SbwParams),
 }
 
 
-def load_vehicle(name: str) -> Any:
-    """The parameter set of a vehicle by its bus name (case-insensitive), e.g. "EV4WIS".
+def load_parameters(name: str) -> Any:
+    """A parameter set of this folder by name (case-insensitive), e.g. "EV4WIS", "SBW".
 
-    Raises ValueError naming the file and key for an unknown vehicle or a missing, extra or ill-typed key.
+    Raises ValueError naming the file and key for an unknown set or a missing, extra or ill-typed key.
     """
-    entry = VEHICLES.get(str(name).upper())
+    entry = PARAMETER_FILES.get(str(name).upper())
     if entry is None:
-        raise ValueError(f"unknown vehicle {name!r}: no parameter file for it in {HERE} "
-                         f"(known: {', '.join(sorted(VEHICLES))})")
-    file_name, cls = entry
-    return load_file(HERE / file_name, cls)
+        raise ValueError(f"unknown parameter set {name!r}: no parameter file for it in {HERE} "
+                         f"(known: {', '.join(sorted(PARAMETER_FILES))})")
+    return entry.load()
 
 
 def load_file(path: Path, cls: type[P]) -> P:

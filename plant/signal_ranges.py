@@ -1,4 +1,4 @@
-"""The DBC ranges of the signals the plant sends, mirrored here because `plant` must not load the DBC.
+"""The DBC ranges of the signals the plant sends (minimum, maximum), mirrored: `plant` must not load the DBC.
 
 Why: the restbus refuses (stops the sender on) a NaN or out-of-range value, so every behaviour clamps
 to these bounds before `send_values` and flags a fault where its message has one.
