@@ -366,3 +366,29 @@ def test_stream_is_valid_for_an_in_memory_reader(log: tuple[Path, Written]) -> N
     path, written = log
     reader = make_reader(io.BytesIO(path.read_bytes()))
     assert sum(1 for _ in reader.iter_messages(topics=[FRAMES_TOPIC])) == len(written.frames)
+
+
+def test_fast_message_path_writes_what_mcaps_writer_writes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The recorder's one-pack message records and message indexes (bench.recorder._fast_adder) are mcap's own
+    bytes: the same log written through mcap's Writer.add_message has the same records, chunk for chunk."""
+    from mcap.records import Metadata
+    from mcap.stream_reader import StreamReader
+
+    import bench.recorder
+
+    fast, slow = tmp_path / "fast.mcap", tmp_path / "slow.mcap"
+    write_log(fast, tmp_path, count=400, chunk_size=4096)
+    monkeypatch.setattr(bench.recorder, "_fast_adder", lambda writer: None)
+    write_log(slow, tmp_path, count=400, chunk_size=4096)
+
+    def records(path: Path) -> list[Any]:
+        with path.open("rb") as file:
+            out = list(StreamReader(file, skip_magic=False, emit_chunks=True).records)
+        return [r for r in out if not (isinstance(r, Metadata) and r.name == "bench")]   # its "created" time
+
+    fast_records, slow_records = records(fast), records(slow)
+    assert sum(type(r).__name__ == "Chunk" for r in fast_records) > 3
+    assert fast_records == slow_records
+    with fast.open("rb") as file:   # chunk CRCs and the summary's statistics hold
+        reader = make_reader(file, validate_crcs=True)
+        assert sum(1 for _ in reader.iter_messages()) == reader.get_summary().statistics.message_count
