@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 _AF_CAN = getattr(socket, "AF_CAN", None)                    # absent off Linux: no bus has a raw CAN socket
 _SOL_CAN_RAW = getattr(socket, "SOL_CAN_RAW", 101)          # linux/can/raw.h
 _CAN_RAW_RECV_OWN_MSGS = getattr(socket, "CAN_RAW_RECV_OWN_MSGS", 4)
-_MULTICAST_LOOP = {socket.AF_INET: (socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP),
+_MULTICAST_LOOP: dict[int, tuple[int, int]] = {socket.AF_INET: (socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP),
                    socket.AF_INET6: (socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_LOOP)}
 
 
@@ -59,6 +59,8 @@ def delivers_own_frames(bus: can.BusABC) -> bool:
 
 def _own_frames_option(sock: Any) -> bool | None:
     family = getattr(sock, "family", None)
+    if not isinstance(family, int):
+        return None
     if _AF_CAN is not None and family == _AF_CAN:
         option: tuple[int, int] | None = (_SOL_CAN_RAW, _CAN_RAW_RECV_OWN_MSGS)
     else:

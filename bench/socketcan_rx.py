@@ -74,7 +74,7 @@ class FastReceiver:
     def attach(cls, bus: can.BusABC) -> "FastReceiver | None":
         if not plain_socketcan(bus) or os.environ.get(ENV_SWITCH, "1") == "0" or not _ANCILLARY:
             return None
-        return cls(bus.socket)
+        return cls(raw_can_socket(bus))
 
     def frames(self, timeout: float, limit: int) -> Iterator[RawFrame]:
         """Up to `limit` frames: the first may be waited for up to `timeout` s, the rest only if waiting."""

@@ -43,7 +43,7 @@ class FakeKernel:
     def clock(self) -> float:
         return self.now
 
-    def deliver(self, frame_id: int, data: bytes, source: str, sender: "FakeRawSocket | None") -> None:
+    def deliver(self, frame_id: int, data: bytes, source: str, sender: FakeRawSocket | None) -> None:
         self.wire.append((self.now, frame_id, bytes(data), source))
         raw = struct.pack("=IB3x8s", frame_id, len(data), bytes(data).ljust(8, b"\0"))
         for sock in self.sockets:
