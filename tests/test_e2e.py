@@ -3,6 +3,7 @@ receiver's transition table as the document writes it."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,39 @@ def test_protect_writes_counter_and_checksum_over_id_and_bytes_0_to_6(frame_id: 
     expected = crc8_j1850(bytes([frame_id & 0xFF, frame_id >> 8]) + bytes(data[:7]))
     assert data[7] == expected
     assert e2e.counter_of(data) == counter
+
+
+@given(st.integers(0, 0x7FF), st.binary(min_size=8, max_size=8), st.integers(0, 15), st.integers(0, 255))
+def test_the_receiver_reads_the_counter_of_intact_frames_only(frame_id: int, payload: bytes, counter: int,
+                                                              other: int) -> None:
+    """counter_if_intact: the counter when the Checksum is the CRC (independent reference), else None."""
+    data = bytearray(payload)
+    e2e.protect(frame_id, data, counter)
+    assert e2e.counter_if_intact(frame_id, bytes(data)) == counter
+    assert e2e.checksum_of(data) == crc8_j1850(bytes([frame_id & 0xFF, frame_id >> 8]) + bytes(data[:7]))
+    e2e.set_checksum(data, data[7] + other)             # any other byte (mod 256) breaks it
+    assert e2e.checksum_of(data) == (e2e.checksum(frame_id, data) + other) % 256
+    assert e2e.counter_if_intact(frame_id, bytes(data)) == (counter if other == 0 else None)
+
+
+@given(st.binary(min_size=8, max_size=8), st.integers(0, 15), st.integers(0, 15))
+def test_payload_is_the_frame_without_its_e2e_bytes(payload: bytes, first: int, second: int) -> None:
+    a, b = bytearray(payload), bytearray(payload)
+    e2e.protect(0x123, a, first)
+    e2e.protect(0x123, b, second)
+    assert e2e.payload(bytes(a)) == e2e.payload(bytes(b)) == payload[:6] + bytes([payload[6] & 0xF0])
+
+
+def test_only_e2e_py_reads_or_writes_the_e2e_bytes() -> None:
+    """Counter and checksum bytes go through bench/e2e.py everywhere else (sender and receiver cannot disagree):
+    no other module of bench/ or plant/ indexes or slices a frame with COUNTER_BYTE or CHECKSUM_BYTE."""
+    root = Path(__file__).resolve().parents[1]
+    pattern = re.compile(r"\[[^\]]*\b(COUNTER_BYTE|CHECKSUM_BYTE)\b[^\]]*\]")   # a subscript or slice with one
+    found = [f"{path.relative_to(root)}:{n}: {line.strip()}"
+             for folder in ("bench", "plant") for path in sorted((root / folder).rglob("*.py"))
+             if path.name != "e2e.py"
+             for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if pattern.search(line)]
+    assert found == []
 
 
 def test_counter_wraps_15_to_0() -> None:
