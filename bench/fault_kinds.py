@@ -16,7 +16,7 @@ import random
 import re
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
@@ -42,7 +42,7 @@ class Outgoing:
     frames: list[bytes]
     rng: random.Random
     delay: float = 0.0                   # s, 0: now
-    dropped: bool = field(default=False)
+    dropped: bool = False                # no frame goes on the bus
 
 
 class FaultKind:

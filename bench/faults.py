@@ -22,14 +22,13 @@ from dataclasses import dataclass, field
 
 from bench.codec import Codebook
 from bench.errors import ConfigError
-from bench.fault_kinds import FLOOD_SATURATION, KINDS, MESSAGE, NODE, Outgoing, kinds_with_target
+from bench.fault_kinds import KINDS, MESSAGE, Outgoing, kinds_with_target
 from bench.results import FaultRecord
 
-__all__ = ["FLOOD_SATURATION", "KINDS", "FRAME_KINDS", "NODE_KINDS", "Fault", "FaultPlan", "parse_fault",
-           "check_fault", "validate"]
+__all__ = ["KINDS", "FRAME_KINDS", "RUN", "CASE", "CASE_PREFIX", "COMMAND_LINE", "RANDOM_SEED", "Fault", "FaultPlan",
+           "parse_fault", "check_fault", "validate"]
 
-FRAME_KINDS = kinds_with_target(MESSAGE)   # derived from the registry (bench/fault_kinds.py)
-NODE_KINDS = kinds_with_target(NODE)
+FRAME_KINDS = kinds_with_target(MESSAGE)   # the kinds whose TARGET is a message (from the registry)
 RANDOM_SEED = 0x5EED     # checksum_random is deterministic, so a campaign stays reproducible
 RUN, CASE = "run", "case"   # what a fault's window counts from
 CASE_PREFIX = "case+"
