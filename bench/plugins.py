@@ -6,8 +6,8 @@ every node the plant must not simulate. The build function's module may also pro
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection
 import importlib
+from collections.abc import Callable, Collection
 from importlib.metadata import entry_points
 from types import ModuleType
 
@@ -24,14 +24,16 @@ def load_plant(name: str) -> PlantFactory:
     if ":" in name:
         module, _, attr = name.partition(":")
         try:
-            return getattr(importlib.import_module(module), attr)
+            factory: PlantFactory = getattr(importlib.import_module(module), attr)
+            return factory
         except (ImportError, AttributeError) as exc:
             raise ConfigError(f"plant {name!r}: cannot load: {exc}") from None
     found = {ep.name: ep for ep in entry_points(group=PLANT_GROUP)}
     if name not in found:
         raise ConfigError(f"no plant {name!r} is registered in the entry-point group {PLANT_GROUP!r} "
                           f"(registered: {', '.join(sorted(found)) or 'none'}; is the project installed?)")
-    return found[name].load()
+    loaded: PlantFactory = found[name].load()
+    return loaded
 
 
 def _plant_module(name: str) -> ModuleType:

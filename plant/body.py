@@ -240,5 +240,6 @@ class BodyNode:
                        Speed=clamp(speed, ranges.PLANT_SPEED),
                        YawRate=clamp(body.yaw_rate_dps, ranges.PLANT_YAW_RATE))
         io.send_values("PLANT_Dynamics", Sideslip=clamp(sideslip, ranges.PLANT_SIDESLIP),
-                       LatAccel=clamp(body.lat_accel, ranges.PLANT_ACCEL), LongAccel=clamp(body.long_accel, ranges.PLANT_ACCEL))
+                       LatAccel=clamp(body.lat_accel, ranges.PLANT_ACCEL),
+                       LongAccel=clamp(body.long_accel, ranges.PLANT_ACCEL))
         scenario.acknowledge(io, t)

@@ -33,8 +33,8 @@ from bench.node import Behaviour, NodeIO
 from plant import signal_ranges as ranges
 from plant.brakes import BrakeHydraulics, Valve
 from plant.braking_vehicle import KMH, BrakingVehicle, VehicleSpec
-from plant.sensors import WheelSpeedSensors
 from plant.scenario import ScenarioTracker
+from plant.sensors import WheelSpeedSensors
 from plant.vehicles import AbsParams, AclassParams
 
 _DEG = 180.0 / math.pi
@@ -182,7 +182,8 @@ class BrakingPlantNode:
                        Speed=clamp(math.hypot(veh.u, v_gc), ranges.PLANT_SPEED),
                        YawRate=clamp(-veh.r * _DEG, ranges.PLANT_YAW_RATE))
         io.send_values("PLANT_Dynamics", Sideslip=clamp(-veh.sideslip * _DEG, ranges.PLANT_SIDESLIP),
-                       LatAccel=clamp(-veh.lat_accel, ranges.PLANT_ACCEL), LongAccel=clamp(veh.long_accel, ranges.PLANT_ACCEL))
+                       LatAccel=clamp(-veh.lat_accel, ranges.PLANT_ACCEL),
+                       LongAccel=clamp(veh.long_accel, ranges.PLANT_ACCEL))
         self.scenario.acknowledge(io, t)
         io.send_values("PLANT_AbsVehicle", VehicleSpeed=clamp(veh.speed * KMH, TRUTH_SPEED),
                        FrontWheelAngle=clamp(-veh.delta * _DEG, TRUTH_ANGLE),

@@ -1,4 +1,4 @@
-"""Kinematics of the 4WIS EV: rotation about a point (docs/spec/formulas.md §2) and Ackermann (docs/spec/formulas.md §3).
+"""Kinematics of the 4WIS EV: rotation about a point (docs/spec/formulas.md §2) and Ackermann (§3 there).
 
 Pure functions on plain floats (they run every plant tick). Frame and signs: docs/spec/formulas.md §1 ([P0]
 §2.1): origin at the geometric centre, +x right, +y forward; wheels FL (-K, L), FR (K, L), RL (-K, -L),
@@ -36,8 +36,8 @@ class Geometry:
     @property
     def wheel_positions(self) -> tuple[tuple[float, float], ...]:
         """Contact points (= steering axes, [P0] §1.1) in CORNERS order."""
-        k, l = self.half_track, self.half_wheelbase
-        return ((-k, l), (k, l), (-k, -l), (k, -l))
+        k, half_l = self.half_track, self.half_wheelbase
+        return ((-k, half_l), (k, half_l), (-k, -half_l), (k, -half_l))
 
     @property
     def rpm_per_mps(self) -> float:

@@ -111,8 +111,8 @@ class SingleTrack:
     def __init__(self, params: SingleTrackParams, speed: float = 0.0) -> None:
         self.params = params
         self._key: tuple[float, float] | None = None
-        self._phi = ((1.0, 0.0), (0.0, 1.0))
-        self._gamma = ((0.0, 0.0), (0.0, 0.0))
+        self._phi: Matrix = ((1.0, 0.0), (0.0, 1.0))
+        self._gamma: Matrix = ((0.0, 0.0), (0.0, 0.0))
         self.reset(speed)
 
     def reset(self, speed: float = 0.0, beta: float = 0.0, yaw_rate: float = 0.0) -> None:

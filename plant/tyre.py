@@ -8,7 +8,8 @@ Longitudinal x = slip ratio kappa = (omega R - V) / V (braking: kappa < 0). docs
 set B = 10, C = 1.9, E = 0.97, D = mu = 1.0 (peak at kappa = 0.18) and the wet set B = 12, C = 2.3,
 E = 1.0, D = 0.82 (peak at kappa = 0.088). Lateral x = slip angle alpha (rad): shape C_y, E_y (chosen,
 plant/vehicles/abs.toml) and B_y per axle such that B_y C_y D Fz_static equals the axle cornering
-stiffness of docs/spec/vehicles.md B split over its two wheels, so the linear range is the car of docs/spec/vehicles.md B.
+stiffness of docs/spec/vehicles.md B split over its two wheels, so the linear range is the car of
+docs/spec/vehicles.md B.
 
 Combined slip (documented choice, a "normalised slip" weighting, not Pacejka's full G-functions):
 each slip is normalised by the slip at its own peak, s_x = kappa / kappa_peak, s_y = alpha / alpha_peak,

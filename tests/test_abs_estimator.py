@@ -16,8 +16,15 @@ from hypothesis import strategies as st
 from plant import braking_plant
 from plant.ecus import abs as abs_ecu
 from plant.ecus.abs import estimator_config
-from plant.ecus.abs_estimator import (DECREASE, INCREASE, TurnStateEstimator, front_wheel_angle, nth_largest,
-                                      turn_direction, yaw_rate)
+from plant.ecus.abs_estimator import (
+    DECREASE,
+    INCREASE,
+    TurnStateEstimator,
+    front_wheel_angle,
+    nth_largest,
+    turn_direction,
+    yaw_rate,
+)
 from plant.vehicles import AbsParams, load_file, load_parameters
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 

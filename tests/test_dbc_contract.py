@@ -272,7 +272,8 @@ def test_signal_metadata(db_name: str, message: Message) -> None:
         raw_lo, raw_hi = _raw_limits(signal)
         lo, hi = sorted((_phys(signal, raw_lo), _phys(signal, raw_hi)))
         tolerance = abs(signal.scale) * 1e-6
-        assert lo - tolerance <= signal.minimum and signal.maximum <= hi + tolerance, f"{where}: range not representable"
+        assert lo - tolerance <= signal.minimum and signal.maximum <= hi + tolerance, \
+            f"{where}: range not representable"
         raw_start = _attr(signal, "GenSigStartValue")
         assert isinstance(raw_start, int) and raw_lo <= raw_start <= raw_hi, where
         start = signal.conversion.raw_to_scaled(raw_start, decode_choices=False)

@@ -13,8 +13,18 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from plant.dynamic_body import (DYNAMIC_OFF_SPEED, DYNAMIC_ON_SPEED, GRAVITY, LINEAR_FRACTION, MU_MIN, EvBodyNode,
-                                LateralDynamics, SaturatingTyre, VehicleBody, ev_single_track)
+from plant.dynamic_body import (
+    DYNAMIC_OFF_SPEED,
+    DYNAMIC_ON_SPEED,
+    GRAVITY,
+    LINEAR_FRACTION,
+    MU_MIN,
+    EvBodyNode,
+    LateralDynamics,
+    SaturatingTyre,
+    VehicleBody,
+    ev_single_track,
+)
 from plant.ecus.rear_steer import SeedLaws, Strategy
 from plant.ecus.vcu import Vcu, VcuFault
 from plant.factory import assemble

@@ -74,7 +74,8 @@ class Rig:
         self.wheels = {c: by_node.get(f"WHL_{c}") for c in CORNERS}
         self.plant: BodyNode | None = by_node.get("PLANT")  # type: ignore[assignment]
 
-    def request(self, mode: int, speed: float, pivot: tuple[float, float] = (0.0, 0.0), hand_wheel: float = 0.0) -> None:
+    def request(self, mode: int, speed: float, pivot: tuple[float, float] = (0.0, 0.0),
+                hand_wheel: float = 0.0) -> None:
         self.io.values["DRV_MotionRequest"] = {"DriveMode": mode, "PivotX": pivot[0], "PivotY": pivot[1],
                                                "TargetSpeed": speed}
         self.io.values["DRV_Steering"] = {"HandWheelAngle": hand_wheel, "HandWheelRate": 0.0, "DriverTorque": 0.0}

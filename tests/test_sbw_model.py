@@ -106,14 +106,16 @@ class Rig:
 
 def test_parameter_file_values_units_and_sources() -> None:
     assert P.steering_ratio == 15.0 and P.ideal_yaw_gain == 0.28 and P.control_rate >= 1000.0
-    assert P.sources["steering_ratio"].startswith("docs/spec/vehicles.md") and P.sources["assist_gain"].startswith("chosen")
+    assert P.sources["steering_ratio"].startswith("docs/spec/vehicles.md")
+    assert P.sources["assist_gain"].startswith("chosen")
     assert all(P.sources[name] for name in P.sources)
 
 
 def test_parameter_file_errors_name_the_file_and_key(tmp_path: Path) -> None:
     text = (REPO / "plant" / "vehicles" / "sbw.toml").read_text()
     cases = {"missing": ("\nassist_gain ", "\n#assist_gain ", "parameters.assist_gain"),
-             "wrong unit": ('unit = "1/s",  source = "issue 4', 'unit = "Hz",  source = "issue 4', "parameters.ideal_yaw_gain"),
+             "wrong unit": ('unit = "1/s",  source = "issue 4', 'unit = "Hz",  source = "issue 4',
+                            "parameters.ideal_yaw_gain"),
              "negative": ("value = 4.0,    unit = \"1\"", "value = -4.0,    unit = \"1\"", "parameters.assist_gain"),
              "slow control": ("value = 4000.0", "value = 500.0", "parameters.control_rate")}
     for name, (old, new, key) in cases.items():
@@ -308,7 +310,8 @@ def test_steady_twist_is_aligning_torque_over_assist_times_torsion_bar() -> None
     twist = rig.mech.theta_h - rig.mech.theta_p
     g_kh = P.assist_gain * P.torsion_bar_stiffness
     assert abs(twist - t_a / g_kh) <= P.dry_friction / g_kh + 1e-6
-    assert rig.v("SBW_HandWheel", "DriverTorque") == pytest.approx(t_a / P.assist_gain, abs=P.dry_friction / P.assist_gain + 0.01)
+    assert rig.v("SBW_HandWheel", "DriverTorque") == pytest.approx(t_a / P.assist_gain,
+                                                                   abs=P.dry_friction / P.assist_gain + 0.01)
     assert rig.v("SBW_HandWheel", "RoadFeelTorque") == pytest.approx(-rig.v("SBW_HandWheel", "DriverTorque"), abs=0.05)
 
 
@@ -360,7 +363,8 @@ def test_hand_wheel_out_of_range_uses_the_column_estimate() -> None:
     rig.fault(SensorFault.HANDWHEEL_OFFSET, 1000.0)
     rig.run(0.2)
     assert rig.v("SBW_Pinion", "SbwFault") == SbwFault.HANDWHEEL_RANGE
-    assert rig.v("SBW_HandWheel", "HandWheelAngle") == pytest.approx(rig.v("PLANT_SbwAngles", "HandWheelAngle"), abs=1e-6)
+    truth = rig.v("PLANT_SbwAngles", "HandWheelAngle")
+    assert rig.v("SBW_HandWheel", "HandWheelAngle") == pytest.approx(truth, abs=1e-6)
     assert rig.v("SBW_Pinion", "PinionAngleTarget") == pytest.approx(rig.v("SBW_HandWheel", "HandWheelAngle"))
     rig.fault(SensorFault.HANDWHEEL_OFFSET, 25.0)                     # in range but implausible
     rig.run(0.01)
@@ -424,7 +428,7 @@ def test_anything_on_the_inputs_never_puts_nan_or_out_of_range_on_the_bus(mode, 
     rig.run(0.3)                       # FakeIO.send_values asserts finite values inside the DBC ranges
 
 
-# -- cost ---------------------------------------------------------------------------------------------------------------
+# -- cost --------------------------------------------------------------------------------------------------------------
 
 class _LeanIO(FakeIO):
     def send_values(self, message: str, **signals: float) -> None:

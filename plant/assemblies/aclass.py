@@ -31,13 +31,13 @@ from collections.abc import Collection, Mapping, Sequence
 
 from bench.node import Behaviour, NodeIO
 from plant import signal_ranges as ranges
+from plant.declaration import Vehicle
 from plant.driver import SteeringRobot
 from plant.ecus.imu import Imu
 from plant.ecus.sbw import SbwEcu
 from plant.sbw import SbwMechanics, SbwSensors
-from plant.single_track import SingleTrack, SingleTrackParams
-from plant.declaration import Vehicle
 from plant.scenario import ScenarioTracker
+from plant.single_track import SingleTrack, SingleTrackParams
 from plant.vehicles import PARAMETER_FILES, AclassParams, SbwParams
 
 _DEG = 180.0 / math.pi
@@ -222,7 +222,8 @@ class WheelSpeedSensors:
         self.plant = plant
         half = vehicle.track / 2.0
         a, b = vehicle.cog_to_front_axle, vehicle.cog_to_rear_axle
-        self.positions = (("FL", a, half, True), ("FR", a, -half, True), ("RL", -b, half, False), ("RR", -b, -half, False))
+        self.positions = (("FL", a, half, True), ("FR", a, -half, True),
+                          ("RL", -b, half, False), ("RR", -b, -half, False))
 
     def reset(self) -> None:
         pass

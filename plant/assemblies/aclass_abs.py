@@ -1,5 +1,5 @@
-"""Vehicle ACLASS_ABS: the A-class car of docs/spec/vehicles.md B with brake hydraulics, Magic Formula tyres, wheel-speed
-sensors and the reference ABS ECU of [P4].
+"""Vehicle ACLASS_ABS: the A-class car of docs/spec/vehicles.md B with brake hydraulics, Magic Formula tyres,
+wheel-speed sensors and the reference ABS ECU of [P4].
 
 Parameters: plant/vehicles/aclass.toml (the car) and plant/vehicles/abs.toml (what braking adds; its
 hand_wheel_ratio 18 is [P4]'s i_w and replaces the car's 15 for this vehicle).
@@ -18,8 +18,8 @@ from collections.abc import Collection
 
 from bench.node import Behaviour
 from plant.braking_plant import BrakingPlantNode
-from plant.ecus.abs import AbsEcu
 from plant.declaration import Vehicle
+from plant.ecus.abs import AbsEcu
 from plant.vehicles import PARAMETER_FILES
 
 NAME, CODE = "ACLASS_ABS", 2     # BENCH_Control.Vehicle value table

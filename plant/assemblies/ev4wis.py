@@ -16,12 +16,12 @@ from collections.abc import Collection
 
 from bench.node import Behaviour
 from plant.body import BusWheel, WheelSource
+from plant.declaration import Vehicle
 from plant.dynamic_body import EvBodyNode
 from plant.ecus.imu import Imu
 from plant.ecus.vcu import Vcu
 from plant.ecus.wheel import WheelEcu
 from plant.kinematics import CORNERS
-from plant.declaration import Vehicle
 from plant.vehicles import PARAMETER_FILES
 
 NAME, CODE = "EV4WIS", 0     # BENCH_Control.Vehicle value table

@@ -89,7 +89,8 @@ def brake_demand(pedals: Mapping[str, float], pedal_to_pressure: float) -> float
 
 
 def estimator_config(params: AbsParams, car: AclassParams) -> EstimatorConfig:
-    """The estimator of the reference ECU: geometry of docs/spec/vehicles.md B, calibration and thresholds of abs.toml."""
+    """The estimator of the reference ECU: geometry of docs/spec/vehicles.md B, calibration and thresholds of
+    abs.toml."""
     return EstimatorConfig(track=car.track, wheelbase=car.wheelbase, cog_to_front_axle=car.cog_to_front_axle,
                            stability_factor=params.stability_factor, v_l0=params.v_l0, v_l1=params.v_l1,
                            v_l2=params.v_l2, t0=params.t0, t1=params.t1, period=OUTPUT_PERIOD_MS / 1000.0,

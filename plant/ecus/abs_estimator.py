@@ -301,7 +301,7 @@ class TurnStateEstimator:
         dv2 = sum(w[0] for w in window) / len(window)
         x = sum(w[1] for w in window) / len(window)
         self._yaw = dv2 / KMH / c.track                    # eq. 9, for the ECU's wheel references
-        if len(window) < window.maxlen:
+        if len(window) < (window.maxlen or 0):
             return True
         if x >= c.min_turn_speed:
             if (dv2 if self.turn == LEFT else -dv2) > c.v_l0:

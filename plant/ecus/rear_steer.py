@@ -96,7 +96,7 @@ class VehicleSpeedEstimate:
     wheels' value is taken as it is. None until the four WHL_Status have arrived.
     """
 
-    SLIP_BAND = 0.3      # m/s: wheel fit vs prediction (rolling at μ g moves WHL_Status ≤ 0.1 m/s per 10 ms frame; chosen)
+    SLIP_BAND = 0.3      # m/s: wheel fit vs prediction (rolling at μ g moves WHL_Status ≤ 0.1 m/s per 10 ms; chosen)
     GRACE_S = 0.1        # s after a reset: frames from before the scenario start may still be the latest
     MAX_GAP_S = 0.05     # s: a longer gap between updates restarts from the wheels
     RESYNC_S = 0.2       # s of steady wheels and no acceleration that end a slip (chosen)
@@ -155,7 +155,8 @@ class VehicleSpeedEstimate:
             return self.value
         dt = t - t_prev
         predicted = previous + accel * dt
-        steady = abs(accel) < self.STEADY_ACCEL and abs(wheels - wheels_prev) < self.STEADY_WHEEL_RATE * dt + self.WHEEL_LSB
+        steady = (abs(accel) < self.STEADY_ACCEL
+                  and abs(wheels - wheels_prev) < self.STEADY_WHEEL_RATE * dt + self.WHEEL_LSB)
         if not steady:
             self._steady_since = None
         elif self._steady_since is None:

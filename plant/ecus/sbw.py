@@ -27,12 +27,14 @@ Inputs of the feedback: IMU_Motion (YawRate, LatAccel) and the speed u = mean of
 ABS_WheelSpeeds; the feedback is off below `feedback_min_speed`.
 
 SbwFault (SBW_Pinion, dbc/chassis.dbc value table), the first that applies in this order:
-| value | name | when | reaction |
-|---|---|---|---|
-| 3 | PINION_RANGE | pinion angle sensor beyond ±`pinion_range` or more than `plausibility_limit` from the steering motor's rotor angle | the rotor angle replaces the sensor; feedback off |
-| 2 | HANDWHEEL_STUCK | the sensor has not changed while the column estimate moved more than `stuck_motion` (latched until the sensor changes) | the estimate θ_c + T_d/K_h replaces the sensor; feedback off |
-| 1 | HANDWHEEL_RANGE | hand-wheel angle sensor beyond ±`hand_wheel_range` (the DBC range) or more than `plausibility_limit` from the column estimate θ_c + T_d/K_h (column from the road-feel motor's rotor sensor, T_d from the torsion bar) | as HANDWHEEL_STUCK (the estimate is clamped to the range on the bus) |
-| 4 | INPUT_TIMEOUT | a YAW mode is selected and IMU_Motion or ABS_WheelSpeeds is timed out | feedback off |
+- 3 PINION_RANGE, when the pinion angle sensor is beyond ±`pinion_range` or more than `plausibility_limit` from
+  the steering motor's rotor angle: the rotor angle replaces the sensor; feedback off.
+- 2 HANDWHEEL_STUCK, when the sensor has not changed while the column estimate moved more than `stuck_motion`
+  (latched until the sensor changes): the estimate θ_c + T_d/K_h replaces the sensor; feedback off.
+- 1 HANDWHEEL_RANGE, when the hand-wheel angle sensor is beyond ±`hand_wheel_range` (the DBC range) or more than
+  `plausibility_limit` from the column estimate θ_c + T_d/K_h (column from the road-feel motor's rotor sensor,
+  T_d from the torsion bar): as HANDWHEEL_STUCK (the estimate is clamped to the range on the bus).
+- 4 INPUT_TIMEOUT, when a YAW mode is selected and IMU_Motion or ABS_WheelSpeeds is timed out: feedback off.
 "Feedback off": Δ returns to 0 at the rate limit, so the car steers at the fixed ratio of the mechanical car;
 the bilateral loops never use the hand-wheel or bus inputs, so steering and road feel continue. A fault
 clears when its condition does. Nothing NaN or out of range reaches the bus (every value is clamped).
@@ -288,7 +290,8 @@ class SbwEcu:
             self.speed = inputs[0]
         demand = self._feedback(dt, inputs)
         if self.feedback_active:   # smooth the 10 ms staircase of the bus inputs (off: back to 0 at the rate limit)
-            demand = self.additional_angle + (demand - self.additional_angle) * (1.0 - math.exp(-dt / ADDITIONAL_ANGLE_FILTER))
+            smoothing = 1.0 - math.exp(-dt / ADDITIONAL_ANGLE_FILTER)
+            demand = self.additional_angle + (demand - self.additional_angle) * smoothing
         step = self.p.additional_angle_rate * _RAD * dt
         self.additional_angle += _clamp(demand - self.additional_angle, -step, step)
         self.offset = self.ratio * self.additional_angle

@@ -20,8 +20,9 @@ Modes (every one a rotation about a point, [P0] §1.2):
   bench-private coding BENCH_VcuConfig.RearSteerLaw (plant/ecus/rear_steer.py: OFF = 2WS, FEEDFORWARD =
   zero-sideslip k(u) X, FEEDBACK = −X + C2 u r with the IMU_Motion yaw rate; FEEDFORWARD when the message
   is absent; REQUEST_INVALID when its last frame is invalid or its value unknown), or, when the VCU is
-  built with a hook `high_speed_law(X, |u|, measured yaw rate)` (u: the vehicle speed estimate of rear_steer.py), from the hook instead; all four wheels
-  steer about the one centre of the two axle headings (VCU_RotationCentre).
+  built with a hook `high_speed_law(X, |u|, measured yaw rate)` (u: the vehicle speed estimate of
+  rear_steer.py), from the hook instead; all four wheels steer about the one centre of the two axle
+  headings (VCU_RotationCentre).
 In NORMAL and ADAPTIVE a positive v drives forward: v_o = v * sign(x_centre) in §2's convention.
 
 Faults (VCU_VehicleState.VcuFault), checked in this order, the first found is sent:
@@ -69,8 +70,15 @@ from bench.node import NodeIO
 from plant import signal_ranges as ranges
 from plant.body import VelocityFit
 from plant.ecus.rear_steer import DEFAULT_LAW, SeedLaws, Strategy, VehicleSpeedEstimate
-from plant.kinematics import (CORNERS, centre_from_axle_angles, classify_centre, curvature_angle,
-                              rotation, translation, yaw_rate)
+from plant.kinematics import (
+    CORNERS,
+    centre_from_axle_angles,
+    classify_centre,
+    curvature_angle,
+    rotation,
+    translation,
+    yaw_rate,
+)
 from plant.vehicles import Ev4wisParams
 
 CENTRE_AT_INFINITY_M = 5242.87  # VCU_RotationCentre range end = centre at infinity (dbc/chassis.dbc comment)
@@ -146,7 +154,7 @@ class Vcu:
         self.held: Plan = _STRAIGHT
         self.fault = VcuFault.OK
         self._t_start: float | None = None
-        self._cache: tuple[tuple[float, ...], tuple[VcuFault, Plan | None]] | None = None
+        self._cache: tuple[tuple[float | None, ...], tuple[VcuFault, Plan | None]] | None = None
         self._next_task = -math.inf
         self.vehicle_speed.reset()
 
@@ -175,7 +183,7 @@ class Vcu:
             if mode == DriveMode.ADAPTIVE:
                 u = self.vehicle_speed.value      # the vehicle's speed, not the request's (VCU-4WS-01)
                 rear = self._rear_angle(hw / self._ratio, abs(v) if u is None else abs(u), io)
-        key = (mode, px, py, v, hw, rear)
+        key: tuple[float | None, ...] = (mode, px, py, v, hw, rear)
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
         result = self._plan(mode, px, py, v, hw / self._ratio, rear)
@@ -247,7 +255,7 @@ class Vcu:
 
     def _wheel_fault(self, io: NodeIO, t: float) -> bool:
         in_grace = self._t_start is not None and t - self._t_start < WHEEL_FAULT_GRACE_S
-        for i, message in enumerate(self._status):
+        for message in self._status:
             status = io.latest(message)
             if status is None:
                 if not in_grace:

@@ -15,10 +15,11 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Mapping, TypeVar
+from typing import Any, TypeVar
 
 from plant.kinematics import Geometry
 
@@ -232,7 +233,8 @@ class SbwParams:
             if "unit" in f.metadata and not getattr(self, f.name) > 0.0:
                 raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(self, f.name)!r}")
         if self.control_rate < 1000.0:
-            raise ValueError(f"key 'parameters.control_rate' must be at least 1000 Hz (issue 4), got {self.control_rate!r}")
+            raise ValueError(f"key 'parameters.control_rate' must be at least 1000 Hz (issue 4), "
+                             f"got {self.control_rate!r}")
         if self.lat_accel_weight > 1.0:
             raise ValueError(f"key 'parameters.lat_accel_weight' must be at most 1, got {self.lat_accel_weight!r}")
 
