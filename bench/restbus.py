@@ -8,7 +8,7 @@ plant tick at no cost; a NaN or out-of-range value stops the sender with an erro
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Mapping
 
 from bench import e2e
 from bench.codec import Codebook, MessageCodec
@@ -50,7 +50,7 @@ class Restbus:
             slot.codec.physical(name, value)
         slot.values.update(signals)
 
-    def set_unchecked(self, message: str, signals: dict[str, float | int | str]) -> None:
+    def set_unchecked(self, message: str, signals: Mapping[str, float | int | str]) -> None:
         """Set values without checking now (for behaviours stepping every tick); checked at send."""
         self._slot(message).values.update(signals)
 

@@ -116,6 +116,18 @@ class CaseRef:
 
 
 @dataclass
+class Finding:
+    """Something that went wrong without stopping the run: a warning the bench or the plant logged
+    (bench.findings), e.g. frames the driver could not send."""
+
+    source: str                  # the logger: "bench.station", "bench.periodic", "plant...."
+    level: str                   # "warning", "error" or "critical"
+    message: str
+    time: float | None = None    # bench time of the first occurrence, s; None before the clock ran
+    count: int = 1               # how often the same message came
+
+
+@dataclass
 class RunResult:
     started: str                 # ISO 8601 wall time
     interface: str
@@ -133,6 +145,7 @@ class RunResult:
     requirements: list[RequirementInfo] = field(default_factory=list)   # the contract's catalogue
     deselected: list[CaseRef] = field(default_factory=list)
     faults: list[FaultRecord] = field(default_factory=list)   # every fault injected in the run
+    findings: list[Finding] = field(default_factory=list)     # warnings logged during the run (bench.findings)
 
     @property
     def counts(self) -> dict[str, int]:

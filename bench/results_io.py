@@ -8,7 +8,18 @@ from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
 
-from bench.results import CaseRef, CaseResult, FaultRecord, Plot, RequirementInfo, RunResult, Series, Step, Table
+from bench.results import (
+    CaseRef,
+    CaseResult,
+    FaultRecord,
+    Finding,
+    Plot,
+    RequirementInfo,
+    RunResult,
+    Series,
+    Step,
+    Table,
+)
 
 
 def dump(run: RunResult, path: Path) -> None:
@@ -26,8 +37,9 @@ def load(path: Path) -> RunResult:
     requirements = [RequirementInfo(**_known(RequirementInfo, r)) for r in data.pop("requirements", [])]
     deselected = [CaseRef(**_known(CaseRef, c)) for c in data.pop("deselected", [])]
     faults = [FaultRecord(**_known(FaultRecord, f)) for f in data.pop("faults", [])]
+    findings = [Finding(**_known(Finding, f)) for f in data.pop("findings", [])]   # absent in older parts
     return RunResult(**_known(RunResult, data), cases=cases, tables=tables, requirements=requirements,
-                     deselected=deselected, faults=faults)
+                     deselected=deselected, faults=faults, findings=findings)
 
 
 def _case(data: dict[str, Any]) -> CaseResult:
@@ -59,6 +71,13 @@ def merge(parts: list[tuple[str, RunResult]], wall_time: float) -> RunResult:
                 merged.faults.append(FaultRecord(**asdict(fault)))
             else:
                 same.frames += fault.frames
+        for finding in part.findings:   # the same warning in several workers: one finding, counts summed
+            same_finding = next((f for f in merged.findings
+                                 if (f.source, f.message) == (finding.source, finding.message)), None)
+            if same_finding is None:
+                merged.findings.append(Finding(**asdict(finding)))
+            else:
+                same_finding.count += finding.count
         merged.sim_time += part.sim_time
         merged.frames += part.frames
         merged.invalid_frames += part.invalid_frames

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Mapping
 from datetime import datetime
@@ -9,20 +10,24 @@ from pathlib import Path
 
 import pytest
 
+from bench import results_io
 from bench.case import Case
 from bench.checks import LOG_ERROR, LOG_INFO, StepLog
-from bench import results_io
 from bench.codec import Codebook, MessageCodec
+from bench.config import ProjectConfig, RunSettings
 from bench.errors import BenchError
 from bench.faults import Fault
+from bench.findings import FindingCollector
 from bench.logproc import LogProcess
 from bench.monitor import DuplicateSender, Monitor
-from bench.config import ProjectConfig, RunSettings
 from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
 from bench.session import BenchSession
 from bench.timing import TimingCollector
 
+log = logging.getLogger(__name__)
+
 MCAP_NAME, HTML_NAME, JUNIT_NAME = "run.mcap", "report.html", "junit.xml"
+RESULTS_NAME = "results.json"   # the run's record, machine-readable: `bench report merge` renders from it
 
 
 def default_out_dir(reports: Path) -> Path:
@@ -47,10 +52,13 @@ class BenchRun:
         self.cases: dict[str, CaseResult] = {}
         self._case_wall0: dict[str, float] = {}
         self.recorder: LogProcess | None = None
-        self.session = None
+        self.session: BenchSession | None = None
         self.finished: RunResult | None = None
         self.requirements: list[RequirementInfo] = []   # the contract's catalogue (set by the pytest plugin)
         self.deselected: list[CaseRef] = []             # cases of the campaign this process did not run
+        # warnings of the bench and the plant from here to the end become the report's findings
+        self.findings = FindingCollector(lambda: self.session.now() if self.session is not None else None)
+        self.findings.attach()
         label = f"{settings.interface}:{settings.channel or 'default'}"
         self.recorder = log = LogProcess(self.mcap_path, project.databases, label)
         self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
@@ -102,7 +110,7 @@ class BenchRun:
         if self.recorder is not None and self.session is not None:
             self.recorder.step(self.session.now(), level, name, message)
 
-    def record_report(self, nodeid: str, name: str, report: pytest.TestReport, call: pytest.CallInfo) -> None:
+    def record_report(self, nodeid: str, name: str, report: pytest.TestReport, call: pytest.CallInfo[None]) -> None:
         result = self.cases.get(nodeid)
         if result is None:   # skipped or errored before the fixture ran
             now = self.session.now() if self.session else 0.0
@@ -153,8 +161,13 @@ class BenchRun:
                 run.tables.insert(0, found)
         try:
             if session is not None:
+                for station in session.stations:   # counted per frame by the station; said once here
+                    if station.send_errors:
+                        log.warning("%s station: %d frames could not be sent (the bus driver refused them: a "
+                                    "full transmit queue or bus-off)", station.name, station.send_errors)
                 session.close()
         finally:
+            run.findings = self.findings.detach()
             if self.recorder is not None:
                 try:
                     if run.faults:   # what each fault did, for tools that read the log without the report
@@ -172,10 +185,11 @@ class BenchRun:
 
 
 def write_reports(run: RunResult, out_dir: Path) -> None:
-    from bench.report import write_html, write_junit   # jinja2 only when a report is written
+    from bench.report import write_html, write_junit  # jinja2 only when a report is written
 
     write_html(run, out_dir / HTML_NAME)
     write_junit(run, out_dir / JUNIT_NAME)
+    results_io.dump(run, out_dir / RESULTS_NAME)
 
 
 def duplicates_table(monitors: list[Monitor]) -> Table | None:

@@ -114,6 +114,10 @@ def build_junit(run: RunResult) -> ET.ElementTree:
         ET.SubElement(props, "property", name=key, value=xml_safe(value))
     for fault in run.faults:
         ET.SubElement(props, "property", name="fault", value=xml_safe(fault_text(fault)))
+    for finding in run.findings:   # warnings of the bench and the plant (bench.findings), once each
+        times = f" ({finding.count} times)" if finding.count > 1 else ""
+        ET.SubElement(props, "property", name="finding",
+                      value=xml_safe(f"{finding.level} {finding.source}: {finding.message}{times}"))
     for case in run.cases:
         _testcase(suite, case)
     if run.aborted:

@@ -1,0 +1,147 @@
+"""Silent failures are logged and reported (issue 17): a warning of the bench or the plant is a `logging`
+record and, during a run, a finding in the report (bench.findings): frames the bus driver refused, and the
+kernel's periodic sending given up."""
+
+from __future__ import annotations
+
+import logging
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from types import SimpleNamespace
+
+import can
+import pytest
+
+from bench import periodic
+from bench.config import RunSettings, load_config
+from bench.findings import MAX_FINDINGS, FindingCollector
+from bench.restbus import Restbus
+from bench.results import Finding, RunResult
+from bench.results_io import dump, load, merge
+from bench.run import RESULTS_NAME, BenchRun
+
+
+def test_collector_keeps_warnings_of_the_bench_and_the_plant() -> None:
+    clock = iter([1.5, 2.5, 3.5])
+    collector = FindingCollector(lambda: next(clock)).attach()
+    try:
+        logging.getLogger("bench.station").warning("frame %s refused", "0x100")
+        logging.getLogger("bench.station").warning("frame %s refused", "0x100")    # the same: counted
+        logging.getLogger("plant.body").error("model diverged")
+        logging.getLogger("bench.station").info("not a finding")
+        logging.getLogger("somebody.else").warning("not ours")
+    finally:
+        findings = collector.detach()
+    logging.getLogger("bench.station").warning("after the run: not collected")
+    assert [(f.source, f.level, f.message, f.time, f.count) for f in findings] == [
+        ("bench.station", "warning", "frame 0x100 refused", 1.5, 2),
+        ("plant.body", "error", "model diverged", 2.5, 1)]
+
+
+def test_collector_is_bounded() -> None:
+    collector = FindingCollector().attach()
+    try:
+        for i in range(MAX_FINDINGS + 50):
+            logging.getLogger("bench.x").warning("distinct %d", i)
+    finally:
+        findings = collector.detach()
+    assert len(findings) == MAX_FINDINGS
+    assert sum(f.count for f in findings) == MAX_FINDINGS + 50 and findings[-1].count == 51
+
+
+class _Refusing:
+    """Wraps a bus: every send of one identifier fails as a full transmit queue would."""
+
+    def __init__(self, bus: can.BusABC, frame_id: int) -> None:
+        self._bus, self._id, self.refused = bus, frame_id, 0
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if msg.arbitration_id == self._id:
+            self.refused += 1
+            raise can.CanOperationError("transmit buffer full")
+        self._bus.send(msg, timeout)
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._bus, name)
+
+
+def test_refused_frames_are_a_warning_and_a_finding(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A station whose driver refuses frames: one warning at the first, the count at the end, both in the
+    report (HTML, JUnit property, results.json)."""
+    run = BenchRun(load_config(), RunSettings(), tmp_path)
+    run.start()
+    assert run.session is not None and run.session.runner is not None
+    runner = run.session.runner
+    frame_id = runner.restbus.codebook["DRV_Steering"].frame_id
+    refusing = _Refusing(runner.bus, frame_id)
+    runner.bus = refusing   # type: ignore[assignment]
+    with caplog.at_level(logging.WARNING, logger="bench"):
+        try:
+            run.session.run_until(0.2)
+        finally:
+            result = run.finish()
+    assert refusing.refused >= 10                           # DRV_Steering every 10 ms for 0.2 s
+    assert runner.send_errors == refusing.refused
+    warnings = [r for r in caplog.records if r.name == "bench.station" and r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and f"0x{frame_id:03X}" in warnings[0].getMessage()
+    texts = [f.message for f in result.findings]
+    assert any("refused a frame" in t and f"0x{frame_id:03X}" in t for t in texts), texts
+    assert any(f"{refusing.refused} frames could not be sent" in t for t in texts), texts
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert 'id="findings"' in html and f"{refusing.refused} frames could not be sent" in html
+    props = [p.get("value") for p in ET.parse(tmp_path / "junit.xml").getroot().iter("property")
+             if p.get("name") == "finding"]
+    assert any("could not be sent" in (v or "") for v in props)
+    assert load(tmp_path / RESULTS_NAME).findings == result.findings
+
+
+def test_a_clean_run_has_no_finding(tmp_path: Path) -> None:
+    run = BenchRun(load_config(), RunSettings(), tmp_path)
+    run.start()
+    try:
+        assert run.session is not None
+        run.session.run_until(0.05)
+    finally:
+        result = run.finish()
+    assert result.findings == []
+    assert 'id="findings"' not in (tmp_path / "report.html").read_text(encoding="utf-8")
+
+
+def test_findings_of_workers_merge(tmp_path: Path) -> None:
+    """pytest-xdist parts: the same warning in two workers is one finding with the counts summed."""
+    parts = []
+    for worker, count in (("gw0", 2), ("gw1", 3)):
+        part = RunResult(started="2026-01-01T00:00:00", interface="virtual", channel="", time_mode="virtual",
+                         findings=[Finding("bench.station", "warning", "x", 0.5, count)])
+        dump(part, tmp_path / f"{worker}.json")
+        parts.append((worker, load(tmp_path / f"{worker}.json")))
+    merged = merge(parts, 1.0)
+    assert [(f.message, f.count) for f in merged.findings] == [("x", 5)]
+
+
+def test_kernel_periodic_fallback_is_a_warning(codebook: object, monkeypatch: pytest.MonkeyPatch,
+                                               caplog: pytest.LogCaptureFixture) -> None:
+    """A socketcan bus whose kernel refuses the broadcast manager's sockets: the restbus sends every frame
+    itself (as before), and says so."""
+    def refuse() -> object:
+        raise OSError(97, "Address family not supported by protocol")
+
+    monkeypatch.delenv(periodic.ENV_SWITCH, raising=False)
+    monkeypatch.setattr(periodic, "plain_socketcan", lambda bus: True)
+    monkeypatch.setattr(periodic, "_raw_socket", refuse)
+    restbus = Restbus(codebook, ["TESTER"])   # type: ignore[arg-type]
+    with caplog.at_level(logging.WARNING, logger="bench"):
+        assert periodic.KernelPeriodic.attach(SimpleNamespace(channel="vcan0"), restbus) is None  # type: ignore[arg-type]
+    [record] = [r for r in caplog.records if r.name == "bench.periodic"]
+    assert "vcan0" in record.getMessage() and "restbus sends every frame itself" in record.getMessage()
+
+
+def test_kernel_periodic_given_up_is_said_once(caplog: pytest.LogCaptureFixture) -> None:
+    kernel = periodic.KernelPeriodic.__new__(periodic.KernelPeriodic)   # only the state _disable touches
+    kernel.enabled, kernel.error, kernel.bus = True, "", SimpleNamespace(channel="vcan0")
+    with caplog.at_level(logging.WARNING, logger="bench"):
+        kernel._disable("modify_data of X failed: [Errno 105] No buffer space available")
+        kernel._disable("stopping the task of X failed: again")
+    records = [r for r in caplog.records if r.name == "bench.periodic"]
+    assert len(records) == 1 and "No buffer space" in records[0].getMessage()
+    assert not kernel.enabled and kernel.error.startswith("stopping")
