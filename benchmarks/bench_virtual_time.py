@@ -212,7 +212,8 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
                         f"{v} {r['cpu_s'] / r['ticks'] * 1e6:.1f} µs/tick = {r['bench_s'] / r['cpu_s']:.0f}×"
                         for v, r in vehicles.items()))
     result.add("B1 session on the virtual bus, no log", b1f, "× real time", b0f, "B0 bare plant tick loop, no bus",
-               note=f"{b1['frames'] / b1['bench_s']:.0f} frames per bench s; per CPU-second {b1['bench_s'] / b1['cpu_s']:.1f}×")
+               note=f"{b1['frames'] / b1['bench_s']:.0f} frames per bench s; "
+                    f"per CPU-second {b1['bench_s'] / b1['cpu_s']:.1f}×")
     result.add("B2 B1 + the run's log and timing", b2f, "× real time", b1f, "B1 session, no log",
                note=f"CPU per bench second: B0 {b0['cpu_s'] / b0['bench_s'] * 1000:.0f} ms, B1 "
                     f"{b1['cpu_s'] / b1['bench_s'] * 1000:.0f} ms, B2 {b2['cpu_s'] / b2['bench_s'] * 1000:.0f} ms in "

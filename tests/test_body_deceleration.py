@@ -72,7 +72,8 @@ def test_longitudinal_acceleration_within_tyre_limit(v0: float, v1: float, mu: f
     # not trivially slow: the car changes speed about as fast as the tyres allow and arrives at the target
     v1_mps = v1 / 3.6
     arrive = next((ti for ti, ui in zip(t, u) if abs(ui - v1_mps) < 0.05), math.inf) - 1.0
-    assert t_min - 0.05 / (mu * G) - 2 * DT <= arrive <= t_min + 0.5, f"reached {v1:g} km/h {arrive:.2f} s after the step, tyre limit {t_min:.2f} s"
+    assert t_min - 0.05 / (mu * G) - 2 * DT <= arrive <= t_min + 0.5, \
+        f"reached {v1:g} km/h {arrive:.2f} s after the step, tyre limit {t_min:.2f} s"
     assert abs(u[-1] - v1_mps) < 0.01
 
 

@@ -13,11 +13,14 @@ from dataclasses import dataclass, field
 import pytest
 
 from bench.marks import CAMPAIGN
+from testcases.limits import load_limits
 from tests.repo import ROOT
 
 TESTCASES = ROOT / "testcases"
 #: campaign -> its package under testcases/ (the issue's four campaigns)
 PACKAGES = {"4WIS": "ev4wis", "4WS": "rear_steer_4ws", "SBW": "sbw", "ABS": "abs"}
+#: campaign -> the table of its package's limits.toml
+LIMIT_TABLES = {"4WIS": "4wis", "4WS": "4ws", "SBW": "sbw", "ABS": "abs"}
 
 
 @dataclass(eq=False)   # pytest keeps plugins in sets
@@ -72,3 +75,12 @@ def test_a_campaign_is_selected_by_its_marker(collected: _Collected, campaign: s
     selected = _collect("-m", f"campaign(name='{campaign}')")
     in_package = {n for n in collected.cases if n.startswith(f"testcases/{PACKAGES[campaign]}/")}
     assert in_package and set(selected.cases) == in_package
+
+
+@pytest.mark.parametrize("campaign", sorted(PACKAGES))
+def test_each_campaign_has_its_limits_with_sources(campaign: str) -> None:
+    """Every campaign keeps its acceptance limits in its own package, each with a unit and a source."""
+    limits = load_limits(TESTCASES / PACKAGES[campaign] / "limits.toml", LIMIT_TABLES[campaign])
+    assert limits
+    unsourced = [name for name, (_, unit, source) in limits.items() if not unit.strip() or not source.strip()]
+    assert not unsourced, f"limits without a unit or a source: {unsourced}"

@@ -5,8 +5,8 @@ simulates every node but the VCU, the example plays the VCU, and `bench run --ex
 case that judges the VCU (the 4WIS campaign, the 4WS cases at speed, the fault cases), whose expected values come
 from testcases/ev4wis/oracle.py and testcases/rear_steer_4ws/oracle.py (docs/spec/formulas.md), not from the
 example. Cases that can only judge the reference VCU (`reference_only`) must be skipped with their reason, and the
-report must show the VCU's conformance table. Unit tests below check the example's kinematics without a bus against the rigid-body
-definition of docs/spec/formulas.md §2 (independent of the paper's eq. 1-10 the example implements).
+report must show the VCU's conformance table. Unit tests below check the example's kinematics without a bus against
+the rigid-body definition of docs/spec/formulas.md §2 (independent of the paper's eq. 1-10 the example implements).
 """
 
 from __future__ import annotations
@@ -101,7 +101,8 @@ def _load_example():
 
 
 VCU = _load_example()
-WHEELS = {"FL": (-0.555, 1.38), "FR": (0.555, 1.38), "RL": (-0.555, -1.38), "RR": (0.555, -1.38)}  # docs/spec/vehicles.md A
+# docs/spec/vehicles.md A
+WHEELS = {"FL": (-0.555, 1.38), "FR": (0.555, 1.38), "RL": (-0.555, -1.38), "RR": (0.555, -1.38)}
 RADIUS = 0.281
 RPM_PER_MPS = 30 / (math.pi * RADIUS)
 HALF_ANGLE_STEP = math.sin(math.radians(0.005))   # half the bus step of SteerAngleCmd (0.01°), as a sine

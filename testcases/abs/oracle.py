@@ -1,6 +1,7 @@
 """The test oracle of the ABS turning-state cases ([P4], docs/spec/formulas.md §6), written independently of `plant/`.
 
-The formulas are typed from docs/spec/formulas.md §6 and docs/spec/vehicles.md B; nothing is read from plant/. Plain floats.
+The formulas are typed from docs/spec/formulas.md §6 and docs/spec/vehicles.md B; nothing is read from plant/.
+Plain floats.
 Signs as in the paper: wheels 1-4 = FL, FR, RL, RR; a left turn has V_w2 > V_w1 and V_w4 > V_w3; T = 1 left,
 -1 right, 0 straight (docs/spec/formulas.md §1 keeps that exception on the bus).
 """

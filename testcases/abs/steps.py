@@ -45,7 +45,8 @@ def source(name: str) -> str:
 
 def start(bench: Case, speed_kmh: float, *, mu: float = 1.0, noise: float = NOMINAL_NOISE) -> None:
     """A fresh ACLASS_ABS straight ahead at `speed_kmh` on a road of friction `mu`, wheel-speed noise `noise`."""
-    bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=round(speed_kmh / oracle.KMH, 2), RoadMu=mu,
+    bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=round(speed_kmh / oracle.KMH, 2),
+                         RoadMu=mu,
                          SensorNoise=noise)
 
 

@@ -104,7 +104,8 @@ def test_abs_straight_braking(bench, road: str) -> None:
     decel = -float(np.mean(locked["ax"][idx])) if idx.size else float("nan")
     bench.expect("locked: deceleration with four locked wheels = mu_locked g", decel, sliding * oracle.G,
                  rel_tol=steps.limit("locked_decel_rel_tol"), unit="m/s^2",
-                 detail=f"{idx.size} samples; mu_locked {sliding:.4f} (Magic Formula at slip 1, docs/spec/vehicles.md B); "
+                 detail=f"{idx.size} samples; mu_locked {sliding:.4f} (Magic Formula at slip 1, "
+                        "docs/spec/vehicles.md B); "
                         f"{steps.source('locked_decel_rel_tol')}")
     bench.expect_true("ABS stop not longer than the locked-wheel stop", abs_run["distance"] <= locked["distance"],
                       measured=round(float(abs_run["distance"]), 2), expected=f"<= {locked['distance']:.2f} m")

@@ -141,7 +141,7 @@ def curvature_angle(x: float, y: float) -> float | None:
     return math.atan(num / den) * _DEG
 
 
-# -- drive modes (docs/spec/vehicles.md A, docs/spec/k-matrix.md) -----------------------------------------------------------
+# -- drive modes (docs/spec/vehicles.md A, docs/spec/k-matrix.md) ------------------------------------------------------
 
 def curvature_from_hand_wheel(hand_wheel: float) -> float:
     """X = HandWheelAngle / ratio (docs/spec/vehicles.md A), deg."""

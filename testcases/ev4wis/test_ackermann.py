@@ -91,7 +91,8 @@ def test_ackermann_normal(bench, hand_wheel: float) -> None:
     v_b = bench.value(f"WHL_Status_{outer}", "WheelSpeed")
     v_a = bench.value(f"WHL_Status_{inner}", "WheelSpeed")
     bench.expect(f"V_b ({outer}) = V_d ({outer_rear}) / cos β", v_b, oracle.outer_front_speed_geometric(v_d, beta),
-                 abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm", detail="docs/spec/formulas.md §3 (E2 corrected)")
+                 abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm",
+                 detail="docs/spec/formulas.md §3 (E2 corrected)")
     bench.expect(f"V_a ({inner}) = V_b · sin β / sin α", v_a, oracle.inner_front_speed(v_b, beta, alpha),
                  abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm", detail="docs/spec/formulas.md §3")
     expect_clean_bus(bench)

@@ -1,4 +1,5 @@
-"""4WIS EV: bad requests (docs/spec/formulas.md §2 "undefined cases"; fault codes: VCU_VehicleState.VcuFault value table).
+"""4WIS EV: bad requests (docs/spec/formulas.md §2 "undefined cases"; fault codes: VCU_VehicleState.VcuFault value
+table).
 
 Each undefined or bad request must give its VcuFault, zero wheel-speed commands (and wheels that stop),
 wheel angles held at the last valid command (docs/contract/vcu.md VCU-FLT-08: a wheel never swings on bad
@@ -167,8 +168,8 @@ def test_steering_timeout_in_normal(bench) -> None:
                  "COM-RX-02", "VCU-MODE-02", "WHL-CTL-02", "VCU-GEN-01")
 def test_invalid_motion_request_frame(bench) -> None:
     """DRV_MotionRequest frames with a wrong checksum (bench.inject checksum_offset): the receiver treats them
-    as invalid (docs/spec/k-matrix.md) and the VCU answers REQUEST_INVALID while the last frame was invalid; once no valid
-    frame came for 3 × 20 ms the message is timed out and REQUEST_TIMEOUT follows (REQUEST_TIMEOUT is checked
+    as invalid (docs/spec/k-matrix.md) and the VCU answers REQUEST_INVALID while the last frame was invalid; once no
+    valid frame came for 3 × 20 ms the message is timed out and REQUEST_TIMEOUT follows (REQUEST_TIMEOUT is checked
     first, docs/contract/vcu.md VCU-FLT-03; the timeout runs from the last valid frame, COM-RX-02); a valid
     frame again recovers. The only invalid frames on the bus are the injected
     ones: the VCU and the wheels never send one.

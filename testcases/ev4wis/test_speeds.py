@@ -64,7 +64,8 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
     targets = oracle.rotation_targets(x, y, v_o)
     start(bench)
     send_pivot(bench, x, y, v_o)
-    bench.note(f"PIVOT about S = ({x:g}, {y:g}) m at v_o = {v_o:+g} m/s ({direction}, docs/spec/k-matrix.md: positive = "
+    bench.note(f"PIVOT about S = ({x:g}, {y:g}) m at v_o = {v_o:+g} m/s ({direction}, docs/spec/k-matrix.md: "
+               "positive = "
                f"clockwise); §2 speeds: " + ", ".join(f"{w} {t.rpm:+.2f} rpm" for w, t in targets.items()))
     wait_for_targets(bench, targets, settle=True)
     expect_fault(bench, "OK")
@@ -106,7 +107,8 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
                         f"(bus value {sideslip:g}°)")
     bench.expect("VCU VehicleSpeed (signed as TargetSpeed)", bench.value("VCU_VehicleState", "VehicleSpeed"), v_o,
                  abs_tol=SPEED_REL_TOL * abs(v_o) + 0.005, unit="m/s",
-                 detail="docs/spec/k-matrix.md; an estimate from the four WHL_Status: 0.5 % (the wheel-speed tolerance) "
+                 detail="docs/spec/k-matrix.md; an estimate from the four WHL_Status: 0.5 % (the wheel-speed "
+                        "tolerance) "
                         "+ half an LSB (0.005 m/s)")
     expect_clean_bus(bench)
     plot_wheels(bench)
@@ -138,7 +140,8 @@ def test_lateral_speeds(bench, v: float) -> None:
     body_dx, body_dy = dx * math.cos(h) - dy * math.sin(h), dx * math.sin(h) + dy * math.cos(h)
     bench.expect(f"ground truth: travelled to the right in {span:.3f} s (body frame)", body_dx, span * v,
                  abs_tol=0.002, rel_tol=SPEED_REL_TOL, unit="m",
-                 detail="positive = right (docs/spec/k-matrix.md); 0.002 m = two LSB of PLANT_Position; the time is that "
+                 detail="positive = right (docs/spec/k-matrix.md); 0.002 m = two LSB of PLANT_Position; the time is "
+                        "that "
                         "between the first and last PLANT_Position frames of 0.5 s")
     bench.expect(f"ground truth: travelled forward in {span:.3f} s (body frame)", body_dy, 0.0, abs_tol=0.002,
                  unit="m",

@@ -80,7 +80,7 @@ class CarModel:
     """The driver's internal model of the car, bus signs. State s = (x, ψ, w, r, δ_f, δ_r): lateral position (m),
     heading (rad), lateral velocity (m/s), yaw rate (rad/s), front and rear axle angles (rad); input θ, the
     hand-wheel angle (rad); speed u constant:
-        ẋ = u ψ + w,  ψ̇ = r,  m (ẇ + u r) = F_f + F_r,  I_z ṙ = a F_f − b F_r                    (docs/spec/formulas.md §5)
+        ẋ = u ψ + w,  ψ̇ = r,  m (ẇ + u r) = F_f + F_r,  I_z ṙ = a F_f − b F_r       (docs/spec/formulas.md §5)
         F_f = C_f (δ_f − (w + a r)/u),  F_r = C_r (δ_r − (w − b r)/u)
         τ δ̇_f = θ/i − δ_f,  τ δ̇_r = k_θ θ/i + k_r r − δ_r      (the law: 2WS (0, 0), FEEDFORWARD (k(u), 0),
                                                                   FEEDBACK (−C1, C2 u))

@@ -1,9 +1,11 @@
-"""Shared steps of the four-wheel-steering cases (testcases/rear_steer_4ws/test_*.py, [P3] §2 on the 4WIS EV of docs/spec/vehicles.md A).
+"""Shared steps of the four-wheel-steering cases (testcases/rear_steer_4ws/test_*.py, [P3] §2 on the 4WIS EV of
+docs/spec/vehicles.md A).
 
 Stimulus: BENCH_Control (Vehicle EV4WIS, InitialSpeed, RoadMu), BENCH_VcuConfig.RearSteerLaw (the reference
 VCU's law in ADAPTIVE above 20 km/h), DRV_MotionRequest (ADAPTIVE, TargetSpeed = the speed held) and
 DRV_Steering.HandWheelAngle. Observed: ground truth PLANT_* (dbc/bench.dbc), VCU_WheelCmd_xx, WHL_Status_xx,
-VCU_RotationCentre, VCU_VehicleState. Expected values come from testcases/rear_steer_4ws/oracle.py, never from plant/.
+VCU_RotationCentre, VCU_VehicleState. Expected values come from testcases/rear_steer_4ws/oracle.py, never from
+plant/.
 """
 
 from __future__ import annotations
@@ -15,9 +17,19 @@ import numpy as np
 
 from bench.case import Case
 from bench.results import Series
+from testcases.limits import limit_value, limits_file, load_limits
 from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.path_driver import CarModel
 from testcases.stimulus import STIMULUS
+
+LIMITS_FILE = limits_file(__file__)
+LIMITS = load_limits(LIMITS_FILE, "4ws")
+
+
+def limit(name: str) -> float:
+    """One acceptance limit of testcases/rear_steer_4ws/limits.toml [4ws] (its source is cited there)."""
+    return limit_value(LIMITS, name, LIMITS_FILE, "4ws")
+
 
 VEHICLE = "EV4WIS"
 STRATEGIES = ("2WS", "FEEDFORWARD", "FEEDBACK")
@@ -25,8 +37,9 @@ STRATEGIES = ("2WS", "FEEDFORWARD", "FEEDBACK")
 LAW = {"2WS": "OFF", "FEEDFORWARD": "FEEDFORWARD", "FEEDBACK": "FEEDBACK"}
 WHEELS = ("FL", "FR", "RL", "RR")
 SPEED_SETTLE_S = 3.0        # s the hub motors get to bring the speed back after the scenario start
-SPEED_TOL = 0.003           # relative: the speed counts as settled within 0.3 % of the target
-DRIVER_LAG = 0.07           # s: the driver's model of servo lag (50 ms, docs/spec/vehicles.md A) + network delay, chosen
+SPEED_TOL = limit("speed_settled_rel_tol")   # relative: the speed counts as settled within 0.3 % of the target
+#: s: the driver's model of servo lag (50 ms, docs/spec/vehicles.md A) + network delay, chosen
+DRIVER_LAG = 0.07
 
 
 def start(bench: Case, speed_kmh: float, strategy: str, mu: float = 1.0) -> float:

@@ -1,16 +1,16 @@
 """ISO 3888-1 double lane change at 80 km/h ([P3] §2, Fig. 6-7): 2WS, 4WS feedforward and 4WS feedback.
 
-Course (dlc_lanes in testcases/rear_steer_4ws/oracle.py): sections of 15, 30, 25, 25 and 15 m; lanes 1.1 w + 0.25, 1.2 w + 0.25
-and 1.3 w + 0.25 wide with the EV's width w = 1.255 m (track 1.11 m between the contact-patch centres +
+Course (dlc_lanes in testcases/rear_steer_4ws/oracle.py): sections of 15, 30, 25, 25 and 15 m; lanes 1.1 w + 0.25,
+1.2 w + 0.25 and 1.3 w + 0.25 wide with the EV's width w = 1.255 m (track 1.11 m between the contact-patch centres +
 one 145/80 R13 tyre, the size whose radius is [P0]'s 0.281 m); the lane change goes to the left. The
 standard's 3.5 m offset is measured between the right-hand cone lines of sections 1 and 3 (the boundaries on
 the same side of the two lanes, so the lane centres are 3.5 + (w₃ − w₁)/2 = 3.56 m apart); section 5 shares
 section 1's right-hand boundary. Section 1 starts RUN_IN m after the point where the driver takes over.
 
-Driver: PreviewDriver of testcases/rear_steer_4ws/path_driver.py (the stimulus: MacAdam's optimal preview), the same for the three
-laws except its internal model of the car (docs/spec/formulas.md §5 with the law under test, as a trained test driver
-knows the car). Path: lane centres joined by half-cosine transitions from about the end of one gated section to
-just inside the next (PATH below). Speed held at 80 km/h by the hub motors (no throttle lift).
+Driver: PreviewDriver of testcases/rear_steer_4ws/path_driver.py (the stimulus: MacAdam's optimal preview), the same
+for the three laws except its internal model of the car (docs/spec/formulas.md §5 with the law under test, as a
+trained test driver knows the car). Path: lane centres joined by half-cosine transitions from about the end of one
+gated section to just inside the next (PATH below). Speed held at 80 km/h by the hub motors (no throttle lift).
 
 Pass (issue 5: "without touching a cone"): along the whole run no cone lies inside the vehicle's footprint
 (the tyres' outer rectangle, w × (wheelbase + tyre diameter) = 1.255 m × 3.322 m) and no footprint corner
@@ -101,7 +101,7 @@ def test_double_lane_change_80_kmh(bench):
         driver.engage()
         t_engage = bench.now
         end_y = lanes[-1].y_end + RUN_OUT
-        done = bench.wait_until(lambda: bench.value("PLANT_Position", "PosY") >= end_y,
+        done = bench.wait_until(lambda end_y=end_y: bench.value("PLANT_Position", "PosY") >= end_y,
                                 (end_y - y0 + RUN_IN) / u + 2.0)
         driver.release()
         bench.expect_true(f"{strategy}: course completed", done, measured=round(bench.value("PLANT_Position", "PosY")

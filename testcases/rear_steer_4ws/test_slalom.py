@@ -1,11 +1,11 @@
 """Slalom at 40 km/h on a low-friction road, μ = 0.3 ([P3] §2, Fig. 8): 2WS, 4WS feedforward and 4WS
 feedback side by side.
 
-Course (slalom_cones in testcases/rear_steer_4ws/oracle.py): SLALOM_CONES cones on the course's centre line every 30 m (GB/T
-6323-2014's spacing for passenger cars; [P3] gives no layout), the first one RUN_IN m after the driver's
-take-over. Driver: PreviewDriver of testcases/rear_steer_4ws/path_driver.py (MacAdam's optimal preview, its internal model of the
-car per law, docs/spec/formulas.md §5) on a sinusoid through ±AMPLITUDE at the cones (passing the first cone on its
-right). The path asks a_y ≈ A (π/S)² u² = 2.0 m/s², 0.69 μ g: well beyond the tyres' linear range (0.5 μ g),
+Course (slalom_cones in testcases/rear_steer_4ws/oracle.py): SLALOM_CONES cones on the course's centre line every
+30 m (GB/T 6323-2014's spacing for passenger cars; [P3] gives no layout), the first one RUN_IN m after the driver's
+take-over. Driver: PreviewDriver of testcases/rear_steer_4ws/path_driver.py (MacAdam's optimal preview, its internal
+model of the car per law, docs/spec/formulas.md §5) on a sinusoid through ±AMPLITUDE at the cones (passing the first
+cone on its right). The path asks a_y ≈ A (π/S)² u² = 2.0 m/s², 0.69 μ g: well beyond the tyres' linear range (0.5 μ g),
 short of their limit. Road friction: BENCH_Control.RoadMu = 0.3. Speed held by the hub motors.
 
 Pass: no cone ever inside the vehicle's footprint (1.255 m × 3.322 m, the tyres' outer rectangle) for each law
@@ -72,7 +72,7 @@ def test_slalom_40_kmh_low_friction(bench):
         driver.engage()
         t_engage = bench.now
         end_y = cones[-1][1] + RUN_OUT
-        done = bench.wait_until(lambda: bench.value("PLANT_Position", "PosY") >= end_y,
+        done = bench.wait_until(lambda end_y=end_y: bench.value("PLANT_Position", "PosY") >= end_y,
                                 (end_y - y0 + RUN_IN) / u + 2.0)
         driver.release()
         bench.expect_true(f"{strategy}: course completed", done, measured=round(bench.value("PLANT_Position", "PosY")

@@ -8,8 +8,8 @@ in OPPOSITE phase (k(30 km/h) = −0.39) at 100 km/h: the destabilising case 4WS
 
 Measured: the commanded and reached axle angles (VCU_WheelCmd_xx, WHL_Status_xx; mean of the two wheels of an
 axle) and the vehicle's true speed (PLANT_Motion.Speed) throughout the deceleration. Expected: the phase and the
-value of k(u) (docs/spec/formulas.md §5, [P3] §2) at the measured speed, from testcases/rear_steer_4ws/oracle.py; phase only
-where |k| ≥ PHASE_BAND (near u_0 the sign is within the speed estimate's tolerance). Also the plant's ground
+value of k(u) (docs/spec/formulas.md §5, [P3] §2) at the measured speed, from testcases/rear_steer_4ws/oracle.py;
+phase only where |k| ≥ PHASE_BAND (near u_0 the sign is within the speed estimate's tolerance). Also the plant's ground
 truth: the deceleration stays within what the tyres can give (docs/contract/plant.md PLANT-DYN-03).
 """
 
@@ -20,7 +20,7 @@ import pytest
 
 from bench.results import Series
 from testcases.rear_steer_4ws import oracle
-from testcases.rear_steer_4ws.steps import start
+from testcases.rear_steer_4ws.steps import limit, start
 
 pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-01", "VCU-4WS-02", "VCU-4WS-03", "PLANT-DYN-03")]
 
@@ -28,9 +28,9 @@ HAND_WHEEL = 45.0           # deg: front axle 3° at ratio 15
 FROM_KMH, TO_KMH = 100.0, 30.0
 HOLD_BEFORE_S = 1.0
 HOLD_AFTER_S = 3.5          # the tyres need about 2 s for 70 km/h at μ = 1
-PHASE_BAND = 0.05           # |k| below this (u within about ±2.5 km/h of u_0): no phase verdict
-K_TOL = 0.04                # VCU-4WS-01: the speed estimate within ±1 km/h (dk/du ≤ 0.028 per km/h) + 10 ms frames
-REACHED_PHASE_BAND = 0.08   # the reached angles lag the command by the servo (50 ms): a wider band
+PHASE_BAND = limit("phase_band")     # |k| below this (u within about ±2.5 km/h of u_0): no phase verdict
+K_TOL = limit("k_tol")               # VCU-4WS-01: the speed estimate within ±1 km/h + 10 ms frames
+REACHED_PHASE_BAND = limit("reached_phase_band")   # the reached angles lag the command by the servo
 MU = 1.0
 G = 9.81
 DECEL_MARGIN = 0.02         # PLANT-DYN-03
@@ -72,8 +72,9 @@ def test_speed_step_100_to_30_kmh_rear_phase_follows_the_vehicle_speed(bench):
         same = judged & (k_expected > 0)
         bench.expect_true(f"same phase while the car is above u_0 after the step ({source})",
                           bool(same.any()) and bool(np.all(k[same] > 0)),
-                          measured=f"{int(same.sum())} frames above u_0, {oracle.kmh(u[same]).max() if same.any() else 0:.1f} "
-                                   "km/h the fastest", expected="> 0 frames, all k > 0")
+                          measured=f"{int(same.sum())} frames above u_0, "
+                                   f"{oracle.kmh(u[same]).max() if same.any() else 0:.1f} km/h the fastest",
+                          expected="> 0 frames, all k > 0")
         if source == "VCU_WheelCmd":
             err = np.abs(k - k_expected)
             i = int(np.argmax(err))
@@ -81,7 +82,8 @@ def test_speed_step_100_to_30_kmh_rear_phase_follows_the_vehicle_speed(bench):
             bench.expect("k commanded vs k(vehicle speed), worst over the deceleration", float(err[i]), 0.0,
                          abs_tol=K_TOL, detail=f"at {worst['u']:.1f} km/h, {worst['t']:.3f} s after the step "
                                                "(VCU-4WS-01: speed estimate ±1 km/h)")
-            curve = Series("k(PLANT_Motion.Speed), docs/spec/formulas.md §5", (t - t_step).tolist(), k_expected.tolist())
+            curve = Series("k(PLANT_Motion.Speed), docs/spec/formulas.md §5", (t - t_step).tolist(),
+                           k_expected.tolist())
             measured = Series("rear/front commanded (VCU_WheelCmd)", (t - t_step).tolist(), k.tolist())
             bench.plot_series("k during the 100 → 30 km/h step", [curve, measured],
                               xlabel="time since the step [s]", ylabel="k = δ_r/δ_f [-]")

@@ -19,14 +19,14 @@ import math
 import pytest
 
 from testcases.rear_steer_4ws import oracle
-from testcases.rear_steer_4ws.steps import Run, mean_since, plot_side_by_side, start
+from testcases.rear_steer_4ws.steps import Run, limit, mean_since, plot_side_by_side, start
 
 SPEEDS_KMH = (40.0, 80.0, 100.0)     # issue 5
 TARGET_LAT_ACCEL = 2.5               # m/s², chosen (linear range: below 0.5 μ g)
 HOLD_S = 2.0
 STEADY_S = 0.5
-SIDESLIP_MAX = 0.05                  # deg, issue 5 (feedforward)
-YAW_GAIN_REL_TOL = 0.03              # issue 5 (feedback); also used for feedforward (chosen, same tolerance)
+SIDESLIP_MAX = limit("sideslip_max")                   # deg
+YAW_GAIN_REL_TOL = limit("steady_yaw_gain_rel_tol")
 
 
 def _step(bench, strategy: str, speed_kmh: float) -> tuple[dict[str, float], Run]:
@@ -71,7 +71,8 @@ def test_feedforward_zero_sideslip(bench):
                                                 f"issue 5")
         bench.expect(f"steady yaw gain at {speed:g} km/h (FEEDFORWARD)", x["gain"], x["expected_gain"],
                      rel_tol=YAW_GAIN_REL_TOL, unit="1/s",
-                     detail="(u/L)(1 − k(u))/(1 + K u²), docs/spec/formulas.md §5; tolerance chosen as issue 5's feedback one")
+                     detail="(u/L)(1 − k(u))/(1 + K u²), docs/spec/formulas.md §5; tolerance chosen as issue 5's "
+                            "feedback one")
         results.append(x)
         runs.append(run)
     _report(bench, "FEEDFORWARD", results, runs)
@@ -88,7 +89,8 @@ def test_feedback_steady_yaw_gain(bench):
         x, run = _step(bench, "FEEDBACK", speed)
         bench.expect(f"steady yaw gain at {speed:g} km/h (FEEDBACK)", x["gain"], x["expected_gain"],
                      rel_tol=YAW_GAIN_REL_TOL, unit="1/s",
-                     detail=f"(u/L)(1 + C1)/(1 + K u² + C2 u²/L), C1 = 1, C2 = {c2:.6f} s²/m (docs/spec/formulas.md §5; issue 5)")
+                     detail=f"(u/L)(1 + C1)/(1 + K u² + C2 u²/L), C1 = 1, C2 = {c2:.6f} s²/m "
+                            "(docs/spec/formulas.md §5; issue 5)")
         bench.expect_between(f"steady |β| at {speed:g} km/h (FEEDBACK)", abs(x["beta"]), 0.0, SIDESLIP_MAX,
                              unit="deg", detail=f"β = {x['beta']:+.4f}°; C2 zeroes it for a = b "
                                                 f"(oracle.c2); limit as the feedforward one")

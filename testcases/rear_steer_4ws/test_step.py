@@ -14,7 +14,7 @@ import math
 import pytest
 
 from testcases.rear_steer_4ws import oracle
-from testcases.rear_steer_4ws.steps import STRATEGIES, Run, mean_since, plot_side_by_side, start
+from testcases.rear_steer_4ws.steps import STRATEGIES, Run, limit, mean_since, plot_side_by_side, start
 
 pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-12"),
               pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
@@ -25,8 +25,8 @@ HAND_WHEEL = 20.0           # deg: δ_f = 1.33°, 2WS a_y ≈ 3.2 m/s² (linear 
 STEER_RATE = 400.0          # deg/s at the hand wheel (ISO 7401: 200-500 °/s), chosen
 HOLD_S = 2.5
 STEADY_S = 0.5
-PEAK_RATIO_MAX = 0.5        # issue 5: 4WS peak sideslip at most half of 2WS
-YAW_REL_TOL = 0.03
+PEAK_RATIO_MAX = limit("peak_ratio_max")   # 4WS peak sideslip at most half of 2WS
+YAW_REL_TOL = limit("step_yaw_rel_tol")
 
 
 def _ramp(bench, target: float, rate: float) -> float:

@@ -1,8 +1,8 @@
 """Test oracle of the steer-by-wire cases: the linear 2-DOF model of docs/spec/formulas.md §5 and the ISO 7401 metrics,
 written here independently of `plant/` (own numbers, own integrator, numpy only).
 
-Vehicle: docs/spec/vehicles.md B (the A-class car). Signs: docs/spec/formulas.md §5 is written ISO left-positive; a linear
-model is odd, so the same formulas hold in the bus convention (positive to the right) for every angle,
+Vehicle: docs/spec/vehicles.md B (the A-class car). Signs: docs/spec/formulas.md §5 is written ISO left-positive; a
+linear model is odd, so the same formulas hold in the bus convention (positive to the right) for every angle,
 yaw rate and lateral acceleration together, which is how the cases use them.
 """
 
@@ -169,7 +169,8 @@ def phase_lag_deg(t_ref: np.ndarray, ref: np.ndarray, t_out: np.ndarray, out: np
     return (lag + 180.0) % 360.0 - 180.0 if lag != 180.0 else 180.0
 
 
-def is_monotonic_increasing(x: np.ndarray, y: np.ndarray, bin_width: float, slack: float) -> tuple[bool, list[tuple[float, float]]]:
+def is_monotonic_increasing(x: np.ndarray, y: np.ndarray, bin_width: float,
+                            slack: float) -> tuple[bool, list[tuple[float, float]]]:
     """Means of y in consecutive bins of x; True when each bin's mean exceeds the previous one by more than
     −slack (slack: the resolution of y on the bus). Returns the (bin centre, mean) pairs too."""
     x, y = np.asarray(x, float), np.asarray(y, float)

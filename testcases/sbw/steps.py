@@ -21,6 +21,14 @@ from testcases.stimulus import STIMULUS
 
 VEHICLE = "ACLASS"
 LIMITS_FILE = limits_file(__file__)
+
+
+def limit(name: str) -> float:
+    """One acceptance limit of testcases/sbw/limits.toml [sbw]; a check that should appear in the case's limits
+    table goes through `Limits` instead."""
+    return limit_value(load_limits(LIMITS_FILE, "sbw"), name, LIMITS_FILE, "sbw")
+
+
 SBW_FAULT = {"OK": 0, "HANDWHEEL_RANGE": 1, "HANDWHEEL_STUCK": 2, "PINION_RANGE": 3, "INPUT_TIMEOUT": 4}
 STEADY_WINDOW = 0.5   # s averaged at the end of a hold for steady values
 
@@ -103,7 +111,7 @@ def robot_angle(bench: Case, angle: float) -> None:
 def robot_sine(bench: Case, amplitude: float, frequency: float, duration: float, period: float = 0.01) -> None:
     """Steer a sine (deg, Hz) for `duration` s, updating RobotAngle every `period` s (its cycle time)."""
     t0 = bench.now
-    for k in range(round(duration / period)):
+    for _ in range(round(duration / period)):
         bench.set("BENCH_SteeringRobot", RobotMode="ANGLE",
                   RobotAngle=round(amplitude * math.sin(2.0 * math.pi * frequency * (bench.now - t0)), 2))
         bench.run(period)

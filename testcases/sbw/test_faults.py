@@ -42,7 +42,8 @@ def _bench_timeout(bench, lim: Limits, message: str, fault_start: float) -> floa
     last = float(t_frames[t_frames <= fault_start + 1e-9][-1])
     timeouts = [t for t, reason in bench.detections(message, since=fault_start) if reason == "timeout"]
     latency = timeouts[0] - last if timeouts else math.nan
-    found = ", ".join(f"{reason} at {t - bench.start:.3f} s" for t, reason in bench.detections(message, since=fault_start)[:3])
+    detections = bench.detections(message, since=fault_start)[:3]
+    found = ", ".join(f"{reason} at {t - bench.start:.3f} s" for t, reason in detections)
     lim.at_most(f"bench: {message} timed out after its last frame", "timeout_detection_max", latency,
                 detail=f"last frame at {last - bench.start:.3f} s; the monitor's detections: {found}")
     return last

@@ -33,7 +33,8 @@ RATIO = 1.0 / oracle.STEERING_RATIO   # road-wheel angle per hand-wheel (pinion)
 
 
 @pytest.mark.dut("SBW", "PLANT")
-@pytest.mark.req("SBW-CTL-01", "SBW-CTL-02", "SBW-OUT-01", "SBW-OUT-02", "PLANT-DYN-02", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
+@pytest.mark.req("SBW-CTL-01", "SBW-CTL-02", "SBW-OUT-01", "SBW-OUT-02", "PLANT-DYN-02", "COM-E2E-01", "COM-E2E-02",
+                 "COM-VAL-01")
 def test_sbw_step_50kmh(bench) -> None:
     lim = Limits(bench)
     u = start(bench, lim["step_speed"])

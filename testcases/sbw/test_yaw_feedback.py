@@ -66,7 +66,8 @@ def test_sbw_yaw_gain_across_speeds(bench, variant: str) -> None:
     rows.append(["spread (max − min) / G_r", "", "", f"{(max(plain_gains) - min(plain_gains)) / g_r:.1%}", "",
                  f"{(max(fb_gains) - min(fb_gains)) / g_r:.1%}"])
     bench.table(f"steady yaw rate per hand-wheel angle r/θ_h [1/s]: plain 15:1 car vs {variant} (G_r = {g_r:g} 1/s)",
-                ["speed [km/h]", "plain, docs/spec/formulas.md §5", "plain, measured", "plain vs G_r", f"{variant}, measured",
+                ["speed [km/h]", "plain, docs/spec/formulas.md §5", "plain, measured", "plain vs G_r",
+                 f"{variant}, measured",
                  f"{variant} vs G_r"], rows)
     speeds = list(SPEEDS_KMH)
     series = [Series("G_r (ideal steering ratio)", speeds, [g_r] * len(speeds)),
