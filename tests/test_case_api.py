@@ -1,0 +1,74 @@
+"""The `bench` fixture's scenario protocol comes from bench.toml's [scenario] (bench/ names no message), and
+the checks no campaign case happens to use (`always`) still do what their docstrings say."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import replace
+
+import pytest
+
+from bench.case import Case
+from bench.checks import StepLog
+from bench.config import RunSettings, ScenarioProtocol, load_config
+from bench.errors import BenchError
+from bench.results import CaseResult
+from bench.session import BenchSession
+
+
+def _session(**changes: object) -> Iterator[tuple[BenchSession, Case]]:
+    session = BenchSession(replace(load_config(), **changes), RunSettings())   # type: ignore[arg-type]
+    session.start()
+    try:
+        steps = StepLog(session.now)
+        result = CaseResult(nodeid="t", name="t", outcome="passed", steps=steps.steps)   # as bench.run does
+        yield session, Case(session, result, steps)
+    finally:
+        session.close()
+
+
+@pytest.fixture
+def on_bench() -> Iterator[tuple[BenchSession, Case]]:
+    yield from _session()
+
+
+def test_start_scenario_uses_the_configured_names(on_bench: tuple[BenchSession, Case]) -> None:
+    session, case = on_bench
+    protocol = session.project.scenario
+    assert protocol is not None
+    case.start_scenario(Vehicle="EV4WIS")
+    (command, id_signal), (ack, ack_signal) = protocol.command, protocol.ack
+    sent = session.runner.restbus.periodic[command].values[id_signal]            # type: ignore[union-attr]
+    assert sent >= 1 and case.value(ack, ack_signal) == sent
+    case.start_scenario(Vehicle="EV4WIS")                                          # the next id, acknowledged
+    assert case.value(ack, ack_signal) == sent % 255 + 1                           # ScenarioId: 8 bits, 0..255
+
+
+def test_the_timeout_is_the_configured_one() -> None:
+    """1 ms is shorter than the plant's acknowledgement (its status message's cycle): the error names the
+    configured timeout and acknowledgement signal."""
+    base = load_config().scenario
+    assert base is not None
+    for _, case in _session(scenario=ScenarioProtocol(base.command, base.ack, timeout=0.001)):
+        with pytest.raises(BenchError, match=rf"within 0\.001 s \({base.ack[0]}\.{base.ack[1]}\)"):
+            case.start_scenario(Vehicle="EV4WIS")
+
+
+def test_without_a_scenario_table_start_scenario_says_so() -> None:
+    for session, case in _session(scenario=None):
+        with pytest.raises(BenchError, match=r"has no \[scenario\] table") as error:
+            case.start_scenario()
+        assert str(session.project.path) in str(error.value)
+
+
+def test_always_holds_and_is_violated(on_bench: tuple[BenchSession, Case]) -> None:
+    session, case = on_bench
+    t0 = case.now
+    assert case.always("holds", lambda: True, 0.05)
+    assert case.now == pytest.approx(t0 + 0.05, abs=0.0015)                       # it ran the whole 50 ms
+    t1 = case.now
+    assert not case.always("violated", lambda: session.now() < t1 + 0.02, 0.1)
+    assert case.now == pytest.approx(t1 + 0.02, abs=0.0015)                       # it stopped at the violation
+    held, violated = case.result.steps[-2:]
+    assert (held.verdict, held.measured, held.expected) == ("pass", "held 0.05 s", "for 0.05 s")
+    assert violated.verdict == "fail" and violated.measured.startswith("violated at +0.02")   # type: ignore[union-attr]
