@@ -15,11 +15,14 @@ from __future__ import annotations
 
 import signal
 import time
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from pathlib import Path
 
 import pytest
+from pluggy import Result
 
+from bench import results_io
+from bench import shard as shards
 from bench.bus import check_channel
 from bench.busopts import BusOptions
 from bench.case import Case
@@ -28,17 +31,19 @@ from bench.config import ProjectConfig, RunSettings, load_config
 from bench.errors import BenchError
 from bench.faults import parse_fault
 from bench.marks import MARKER_HELP, CaseMarks, check_marks, read_marks, skip_reason, split_names
+from bench.options import add_pytest_options
 from bench.results import CaseRef, RequirementInfo, RunResult
-from bench.session import resolve_external
-from bench import results_io
 from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
+from bench.session import resolve_external
+from bench.shard import apply_shard
 
 _RUN_KEY = pytest.StashKey["BenchRun | None"]()
 _CASE_KEY = pytest.StashKey[Case]()
 _WALL0_KEY = pytest.StashKey[float]()
 _FACTS_KEY = pytest.StashKey["tuple[ProjectConfig, list[str]]"]()
 _DESELECTED_KEY = pytest.StashKey[list[CaseRef]]()
-_PENDING_KEY = pytest.StashKey[list[tuple[pytest.Item, pytest.TestReport, pytest.CallInfo]]]()
+_PENDING_KEY = pytest.StashKey[list[tuple[pytest.Item, pytest.TestReport, pytest.CallInfo[None]]]]()
+_SELECTED_KEY = pytest.StashKey[list[str]]()   # the case ids this process (or its workers) was given
 _last_finished: list[RunResult] = []
 PARTS_DIR = "parts"   # where pytest-xdist workers leave their part of the run for the controller
 
@@ -49,25 +54,19 @@ def finished_run() -> RunResult | None:
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    group = parser.getgroup("bench", "HIL CAN bench")
-    group.addoption("--bench-interface", default="virtual",
-                    help="python-can interface, or 'virtual' for the in-process virtual-time bus (default)")
-    group.addoption("--bench-channel", default=None, help="channel of the interface (e.g. vcan0)")
-    group.addoption("--bench-bitrate", type=int, default=None, metavar="BIT/S",
-                    help="nominal bitrate (default: bench.toml [bus] bitrate, else the databases' Baudrate)")
-    group.addoption("--bench-fd", action="store_true", default=None, dest="bench_fd", help="CAN FD")
-    group.addoption("--bench-no-fd", action="store_false", default=None, dest="bench_fd",
-                    help="classic CAN even where [bus] or the databases say CAN FD")
-    group.addoption("--bench-data-bitrate", type=int, default=None, metavar="BIT/S",
-                    help="CAN FD data-phase bitrate")
-    group.addoption("--bench-external", action="append", default=[], metavar="NODE",
-                    help="a node that is real (not simulated); 'all' = every node but the stimulus")
-    group.addoption("--bench-fault", action="append", default=[], metavar="SPEC",
-                    help="inject a fault for the whole run: KIND:TARGET[:PARAM]@START[-END] (bench.faults)")
-    group.addoption("--bench-out", default=None, help="folder for report.html, run.mcap, junit.xml")
-    group.addoption("--bench-config", default=None, help="bench.toml of the project")
-    group.addoption("--bench-dut", action="append", default=[], metavar="NODE",
-                    help="run only the cases that judge NODE (@pytest.mark.dut); repeatable")
+    """The `--bench-*` options, built from the one table the command line is built from (bench.options)."""
+    add_pytest_options(parser.getgroup("bench", "HIL CAN bench"))
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_cmdline_main(config: pytest.Config) -> Generator[None, int | pytest.ExitCode, int | pytest.ExitCode]:
+    """`--bench-shard K/N` becomes pytest-split's --splits/--group (least-duration balancing, durations from
+    `--bench-durations`, default .test_durations next to bench.toml); before pytest-split checks them."""
+    try:
+        apply_shard(config)
+    except BenchError as exc:
+        raise pytest.UsageError(str(exc)) from None
+    return (yield)
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -125,7 +124,7 @@ def _documents(project: ProjectConfig) -> str:
 
 
 @pytest.hookimpl(hookwrapper=True)
-def pytest_make_collect_report(collector: pytest.Collector) -> Iterator[None]:
+def pytest_make_collect_report(collector: pytest.Collector) -> Generator[None, Result[pytest.CollectReport], None]:
     """A collected case with a bad conformance marker makes its module (or class) a collection error that
     names the case and the value: pytest then runs no case at all."""
     outcome = yield
@@ -183,6 +182,18 @@ def _external(config: pytest.Config, project: ProjectConfig) -> set[str]:
         raise pytest.UsageError(str(exc)) from None
 
 
+def pytest_collection_finish(session: pytest.Session) -> None:
+    session.config.stash[_SELECTED_KEY] = [item.nodeid for item in session.items]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_node_collection_finished(node: object, ids: list[str]) -> None:
+    """The xdist controller collects nothing: its workers' collection (all alike) is the shard's."""
+    config = getattr(node, "config", None)
+    if config is not None and not config.stash.get(_SELECTED_KEY, None):
+        config.stash[_SELECTED_KEY] = list(ids)
+
+
 def pytest_deselected(items: list[pytest.Item]) -> None:
     """Every deselected bench case (--bench-dut, -k, -m): the conformance section lists it as not run."""
     for item in items:
@@ -222,6 +233,7 @@ def _run(config: pytest.Config) -> BenchRun:
             run.start()
         except BenchError as exc:   # a bus that cannot be opened: one line and stop, not an error per case
             pytest.exit(f"bench: {exc}", returncode=pytest.ExitCode.USAGE_ERROR)
+        assert run.session is not None   # started just above (or pytest.exit)
         run.session.faults.extend(faults)
         if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
             signal.signal(signal.SIGTERM, _terminate)
@@ -249,7 +261,7 @@ class FailedSteps(AssertionError):
 
 
 @pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None]:
     outcome = yield
     case = item.stash.get(_CASE_KEY, None)
     if case is not None and outcome.excinfo is None and case.result.failed_steps:
@@ -259,7 +271,8 @@ def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
 
 
 @pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Iterator[None]:
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
+                              ) -> Generator[None, Result[pytest.TestReport], None]:
     outcome = yield
     report: pytest.TestReport = outcome.get_result()
     if call.excinfo is not None and call.excinfo.errisinstance(FailedSteps):
@@ -273,7 +286,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Itera
     _record(run, item, report, call)
 
 
-def _record(run: BenchRun, item: pytest.Item, report: pytest.TestReport, call: pytest.CallInfo) -> None:
+def _record(run: BenchRun, item: pytest.Item, report: pytest.TestReport, call: pytest.CallInfo[None]) -> None:
     run.record_report(item.nodeid, item.name, report, call)
     result = run.cases.get(item.nodeid)
     if result is not None and not (result.duts or result.reqs):
@@ -300,9 +313,20 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         result = run.finish(aborted=aborted, part_of=part)
         out_dir = run.out_dir
     _last_finished.append(result)
+    _record_shard(config, out_dir)
     reporter = config.pluginmanager.get_plugin("terminalreporter")
     if reporter is not None:
         reporter.write_line(f"bench: report in {out_dir}")
+
+
+def _record_shard(config: pytest.Config, out_dir: Path) -> None:
+    """A shard's report folder gets its shard.json (what `bench report merge` checks the shards with)."""
+    if shards.current(config) is None:
+        return
+    project, _ = _facts(config)
+    record = shards.record(config, project.databases, config.stash.get(_SELECTED_KEY, []))
+    if record is not None:
+        record.dump(out_dir)
 
 
 def _run_for_skipped_cases(config: pytest.Config) -> BenchRun | None:

@@ -12,7 +12,7 @@ from rich.markup import escape
 
 from bench.errors import BenchError
 
-SUBCOMMANDS = ("run", "plant", "dbc", "log", "monitor", "replay")
+SUBCOMMANDS = ("run", "plant", "dbc", "log", "monitor", "replay", "report")
 
 
 def build_parser() -> argparse.ArgumentParser:

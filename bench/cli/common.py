@@ -1,4 +1,5 @@
-"""Options shared by the subcommands that reach a bus, declared once, and the checks they share.
+"""The option groups of the subcommands that reach a bus (each option is declared once, in bench.options),
+and the checks they share.
 
 A bad value is a `ConfigError` (one line, exit 2, printed by `bench.cli.main`), found before a bus is
 used or a case runs.
@@ -11,55 +12,27 @@ import os
 import tempfile
 from pathlib import Path
 
-from bench import fault_kinds
 from bench.bus import is_virtual
 from bench.busopts import BusOptions
 from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig
 from bench.errors import ConfigError
+from bench.options import add_cli_options
 from bench.session import resolve_bus_options
 
-
-def _bitrate(text: str) -> int:
-    try:
-        value = int(text, 10)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of bit/s") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number of bit/s")
-    return value
+BUS_OPTIONS = ("interface", "channel", "bitrate", "fd", "data-bitrate", "config")
+NODE_OPTIONS = ("external", "fault")
 
 
 def add_bus_options(parser: argparse.ArgumentParser, default_interface: str, channel_help: str = "") -> None:
-    """--interface, --channel, --bitrate, --fd/--no-fd, --data-bitrate, --config."""
-    bus = parser.add_argument_group("bus")
-    bus.add_argument("--interface", "-i", default=default_interface,
-                     help=f"python-can interface (pcan, kvaser, vector, socketcan, udp_multicast, ...), or "
-                          f"'virtual' for the in-process virtual-time bus (default: {default_interface})")
-    bus.add_argument("--channel", "-c", default=None,
-                     help=channel_help or "channel (e.g. PCAN_USBBUS1, 0, can0, a multicast group); "
-                                          "not for the virtual bus")
-    bus.add_argument("--bitrate", type=_bitrate, default=None, metavar="BIT/S",
-                     help="nominal bitrate (default: [bus] bitrate of bench.toml, else the databases' "
-                          "Baudrate attribute, the contract's bus); the virtual bus ignores it")
-    bus.add_argument("--fd", action=argparse.BooleanOptionalAction, default=None,
-                     help="CAN FD (default: [bus] fd, else on when the databases' BusType is CAN FD)")
-    bus.add_argument("--data-bitrate", type=_bitrate, default=None, metavar="BIT/S",
-                     help="CAN FD data-phase bitrate (needs --fd)")
-    bus.add_argument("--config", default=None,
-                     help="the project's bench.toml ([bus] table: further python-can arguments; "
-                          "default: found from here)")
+    """--interface, --channel, --bitrate, --fd/--no-fd, --data-bitrate, --config (declared in bench.options)."""
+    add_cli_options(parser, BUS_OPTIONS, defaults={"interface": default_interface},
+                    helps={"channel": channel_help} if channel_help else None)
 
 
 def add_node_options(parser: argparse.ArgumentParser) -> None:
-    """--external and --fault: which nodes are real, which faults the bench injects."""
-    parser.add_argument("--external", nargs="+", action="extend", default=[], metavar="NODE",
-                        help="nodes that are real, not simulated ('all' = every node but the stimulus)")
-    parser.add_argument("--fault", action="append", default=[], metavar="SPEC",
-                        help="inject a fault: KIND:TARGET[:PARAM]@[case+]START[-END] in s from the run's start, "
-                             "or with case+ from each case's start (an open END lasts to the end of the run or "
-                             "case); e.g. drop:MESSAGE@2-3, drop:MESSAGE@case+1-2, silence:NODE@case+0.5-; "
-                             f"{fault_kinds.help_text()} (docs/reliability.md)")
+    """--external and --fault: which nodes are real, which faults the bench injects (bench.options)."""
+    add_cli_options(parser, NODE_OPTIONS)
 
 
 def given_bus_options(args: argparse.Namespace) -> BusOptions:

@@ -34,7 +34,8 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser("log", help="inspect run logs (MCAP)", description=__doc__)
     actions = parser.add_subparsers(dest="log_command", required=True, metavar="ACTION")
     info = actions.add_parser("info", help="time span, frames, attachments and channels of a run log")
-    info.add_argument("file", type=Path, help="the run log (.mcap)")
+    info.add_argument("file", type=Path, help="the run log (.mcap), or a report folder (its logs; a merged "
+                                              "folder's through its index logs.json), or that index")
     info.set_defaults(handler=info_handler)
     export = actions.add_parser("export", help="write a run log's raw frames as BLF, ASC, candump or CSV",
                                 description="Write every raw frame of a run log (MCAP, also a killed run's) "
@@ -49,7 +50,11 @@ def register(subparsers: Any) -> None:
 
 def info_handler(args: argparse.Namespace) -> int:
     """Print a run log's summary; a LogError for a missing or non-MCAP file reaches the framework."""
-    show(summarise(args.file), Console())
+    from bench.report.merge import log_files  # a merged report's index of its shards' logs
+
+    console = Console()
+    for path in log_files(args.file):
+        show(summarise(path), console)
     return 0
 
 
@@ -79,7 +84,7 @@ def export(source: Path, output: Path, fmt: str) -> int:
         writer = writer_class(output)
     except OSError as exc:
         raise LogError(f"{output}: cannot write: {exc.strerror or exc}") from None
-    if fmt == "blf" and first is not None and first.t < BLF_UNIX_EPOCH_MIN:
+    if isinstance(writer, can.BLFWriter) and first is not None and first.t < BLF_UNIX_EPOCH_MIN:
         # Bench time is not a Unix time: BLF's header then says "no start time" (zero), so the frames must be
         # written relative to 0 too, or reading back would shift them by the first frame's time.
         writer.start_timestamp = 0.0
@@ -119,7 +124,8 @@ def show(summary: LogSummary, console: Console) -> None:
     if summary.start is None or summary.end is None:
         facts.add_row("Time", "no messages")
     else:
-        facts.add_row("Time", f"{summary.start:.6f} s … {summary.end:.6f} s (duration {summary.end - summary.start:.6f} s)")
+        facts.add_row("Time", f"{summary.start:.6f} s … {summary.end:.6f} s "
+                              f"(duration {summary.end - summary.start:.6f} s)")
     invalid = f"[red]{summary.invalid_frames} invalid[/]" if summary.invalid_frames else "0 invalid"
     facts.add_row("Frames", f"{summary.frames} ({invalid})")
     facts.add_row("Attachments", ", ".join(summary.attachments) or "none")

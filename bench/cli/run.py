@@ -13,15 +13,24 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from bench import options, shard
 from bench.bus import check_channel, is_virtual, probe_bus
 from bench.busopts import BusOptions
-from bench.cli.common import (InputProblems, add_bus_options, add_node_options, check_out_dir,
-                              given_bus_options)
+from bench.cli.common import (
+    BUS_OPTIONS,
+    NODE_OPTIONS,
+    InputProblems,
+    add_bus_options,
+    add_node_options,
+    check_out_dir,
+    given_bus_options,
+)
 from bench.codec import load_codebook
 from bench.config import ProjectConfig, load_config
 from bench.errors import BenchError
 from bench.faults import validate as validate_faults
 from bench.marks import split_names
+from bench.options import add_cli_options
 from bench.run import default_out_dir
 from bench.session import resolve_bus_options, resolve_external
 
@@ -29,23 +38,19 @@ OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "
                  "aborted": "bold magenta"}
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+#: `bench run`'s own options beyond the bus and node groups (declared in bench.options, like those).
+RUN_OPTIONS = ("keyword", "dut", "shard", "durations", "out", "force", "workers")
+#: Everything `bench run` hands to pytest (the plugin's --bench-* options and pytest's -k, -n).
+HANDED_TO_PYTEST = (*BUS_OPTIONS, *NODE_OPTIONS, *RUN_OPTIONS)
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser("run", help="run the test cases and write a report",
                             description="Run the test cases (default: testcases/ on the in-process "
                                         "virtual-time bus) and write report.html, run.mcap, junit.xml.")
     add_bus_options(parser, "virtual")
     add_node_options(parser)
-    parser.add_argument("-k", dest="keyword", default=None, help="only cases matching this pytest -k expression")
-    parser.add_argument("--dut", nargs="+", action="extend", default=[], metavar="NODE",
-                        help="only the cases that judge NODE (@pytest.mark.dut); the report's conformance section "
-                             "lists the others as deselected")
-    parser.add_argument("--out", default=None, help="output folder (default: a new folder under reports/); "
-                                                    "an existing non-empty one only with --force")
-    parser.add_argument("--force", "--overwrite", action="store_true",
-                        help="write into an existing --out folder that is not empty (its reports are replaced)")
-    parser.add_argument("-n", dest="workers", default=None, metavar="N",
-                        help="run the cases in N processes (pytest-xdist; 'auto' = one per core), each with its own "
-                             "in-process virtual bus and MCAP log; one merged report")
+    add_cli_options(parser, RUN_OPTIONS)
     parser.add_argument("paths", nargs="*", help="test files or folders (default: the project's testcases)")
     parser.set_defaults(handler=run)
 
@@ -130,6 +135,7 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
                         f"--interface {args.interface} is one shared bus")
     options = check(resolve_bus_options, project, given_bus_options(args), codebook)
     problems.extend(validate_faults(args.fault, codebook))
+    problems.extend(shard.check(args.shard, args.durations, project.path.parent))
     check(check_out_dir, out_dir, args.force)
     if not problems and interface_known:
         assert isinstance(options, BusOptions)
@@ -156,27 +162,9 @@ def run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out) if args.out else default_out_dir(project.reports)
     _check_before_running(project, args, out_dir)
     paths = args.paths or [str(project.testcases)]
+    args.config, args.out = str(project.path), str(out_dir)   # as resolved here, for the plugin
     pytest_args = [*paths, "-p", "no:terminal", "-p", "no:cacheprovider",
-                   "--rootdir", str(_rootdir(project, paths)), "--bench-out", str(out_dir),
-                   "--bench-interface", args.interface, "--bench-config", str(project.path)]
-    if args.channel:
-        pytest_args += ["--bench-channel", args.channel]
-    if args.bitrate is not None:
-        pytest_args += ["--bench-bitrate", str(args.bitrate)]
-    if args.fd is not None:
-        pytest_args += ["--bench-fd" if args.fd else "--bench-no-fd"]
-    if args.data_bitrate is not None:
-        pytest_args += ["--bench-data-bitrate", str(args.data_bitrate)]
-    for node in args.external:
-        pytest_args += ["--bench-external", node]
-    for node in args.dut:
-        pytest_args += ["--bench-dut", node]
-    for spec in args.fault:
-        pytest_args += ["--bench-fault", spec]
-    if args.keyword:
-        pytest_args += ["-k", args.keyword]
-    if args.workers:
-        pytest_args += ["-n", args.workers]
+                   "--rootdir", str(_rootdir(project, paths)), *options.pytest_args(args, HANDED_TO_PYTEST)]
     progress = _Progress(console)
     code = pytest.main(pytest_args, plugins=[progress])
     result = finished_run()

@@ -118,6 +118,8 @@ def _mcap_href(mcap_path: str, report_dir: Path) -> str:
     if not mcap_path:
         return ""
     target = Path(mcap_path)
+    if not target.is_absolute():   # the run writes the log's name relative to its report folder, not to the cwd
+        target = report_dir / target
     try:
         rel = os.path.relpath(target.resolve(), report_dir.resolve())
     except ValueError:  # other drive on Windows
