@@ -17,6 +17,7 @@ import threading
 import time
 import weakref
 from collections import deque
+from collections.abc import Iterator
 from typing import Any
 
 import can
@@ -54,6 +55,39 @@ def _copy(msg: can.Message, channel: Any, is_rx: bool) -> can.Message:
     copy.bitrate_switch = msg.bitrate_switch
     copy.error_state_indicator = msg.error_state_indicator
     return copy
+
+
+class VirtualFrame:
+    """A classic 11-bit data frame sent with `VirtualTimeBus.send_raw`: what a station reads of a frame
+    (the fields of can.Message it needs, as bench.socketcan_rx.RawFrame), one object shared by every
+    receiver, never changed; a python-can `recv` turns it into the receiver's own can.Message."""
+
+    __slots__ = ("timestamp", "arbitration_id", "data")
+    is_extended_id = False
+    is_error_frame = False
+
+    def __init__(self, timestamp: float, arbitration_id: int, data: bytes) -> None:
+        self.timestamp = timestamp
+        self.arbitration_id = arbitration_id
+        self.data = data
+
+
+def _message(frame: VirtualFrame, channel: Any, is_rx: bool) -> can.Message:
+    """A receiver's can.Message of a raw frame, as `_copy` makes one of a sent can.Message."""
+    msg = _new_message(can.Message)
+    msg.timestamp = frame.timestamp
+    msg.arbitration_id = frame.arbitration_id
+    msg.is_extended_id = False
+    msg.is_remote_frame = False
+    msg.is_error_frame = False
+    msg.channel = channel
+    msg.dlc = len(frame.data)
+    msg.data = bytearray(frame.data)
+    msg.is_fd = False
+    msg.is_rx = is_rx
+    msg.bitrate_switch = False
+    msg.error_state_indicator = False
+    return msg
 
 
 class _Inbox(deque):  # type: ignore[type-arg]
@@ -143,10 +177,52 @@ class VirtualTimeBus(can.BusABC):
             if inbox.waiters:
                 inbox.wake()
 
+    def send_raw(self, t: float, arbitration_id: int, data: bytes) -> None:
+        """Send a classic 11-bit data frame stamped `t` without a can.Message (the stations' hot path: one
+        shared VirtualFrame for every receiver; python-can's `recv` still gives each its own can.Message)."""
+        mine = self._inbox
+        if mine.closed:
+            raise can.CanOperationError(f"{self.channel_info} is shut down")
+        frame = VirtualFrame(t, arbitration_id, bytes(data))
+        for inbox in self._net.inboxes:
+            if inbox is mine:
+                if not self._own:
+                    continue
+                inbox.append(_message(frame, inbox.channel, False))
+            else:
+                inbox.append(frame)
+            if inbox.waiters:
+                inbox.wake()
+
+    def raw_frames(self, timeout: float, limit: int) -> Iterator[VirtualFrame | can.Message]:
+        """Up to `limit` pending frames as they were sent (a VirtualFrame or the receiver's can.Message copy,
+        both with the fields a station reads; python-can's filters are not applied): the first may be waited
+        for up to `timeout` s, the rest only if already here."""
+        inbox = self._inbox
+        count = 0
+        if not inbox and timeout > 0.0:
+            first, _ = self._recv_internal(timeout)
+            if first is None:
+                return
+            yield first
+            count = 1
+        while inbox and count < limit:
+            try:
+                frame = inbox.popleft()
+            except IndexError:   # another thread took it first
+                return
+            yield frame
+            count += 1
+        if count < limit and inbox.closed:   # as recv: a shut-down bus raises once it has nothing left
+            raise can.CanOperationError(f"{self.channel_info} is shut down")
+
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         inbox = self._inbox
         if inbox:
-            return inbox.popleft(), False
+            item = inbox.popleft()
+            if type(item) is VirtualFrame:
+                return _message(item, inbox.channel, True), False
+            return item, False
         if inbox.closed:
             raise can.CanOperationError(f"{self.channel_info} is shut down")
         if timeout is not None and timeout <= 0.0:
@@ -165,9 +241,12 @@ class VirtualTimeBus(can.BusABC):
             finally:
                 inbox.waiters -= 1
         try:
-            return inbox.popleft(), False
+            item = inbox.popleft()
         except IndexError:   # another thread took it first
             return None, False
+        if type(item) is VirtualFrame:
+            return _message(item, inbox.channel, True), False
+        return item, False
 
     def shutdown(self) -> None:
         super().shutdown()    # periodic tasks first, as python-can's virtual bus does
