@@ -96,9 +96,17 @@ class PlanarBody:
             self.vx, self.vy, self.omega, self._fresh = vx, vy, om, False
         if dt <= 0.0:
             return
+        self._move(vx, vy, om, dt)
+        # a = dv/dt + omega x v in the rotating body frame (omega clockwise = -z).
+        self.lat_accel = (vx - self.vx) / dt + om * vy
+        self.long_accel = (vy - self.vy) / dt - om * vx
+        self.vx, self.vy, self.omega = vx, vy, om
+
+    def _move(self, vx: float, vy: float, om: float, dt: float) -> None:
+        """Position and heading over the step from the trapezoid of the old and the new body velocities (vx, vy,
+        om: the new ones). Exact for constant body velocities: the mean of the rotating frame over the step is
+        R(heading + h) * sin(h)/h with h = omega dt / 2."""
         mvx, mvy, mom = 0.5 * (vx + self.vx), 0.5 * (vy + self.vy), 0.5 * (om + self.omega)
-        # Exact for constant body velocities: the mean of the rotating frame over the step is
-        # R(heading + h) * sin(h)/h with h = omega dt / 2.
         h = 0.5 * mom * dt
         s = 1.0 - h * h / 6.0 if abs(h) < 1e-4 else math.sin(h) / h
         mid = self.heading + h
@@ -106,10 +114,6 @@ class PlanarBody:
         self.x += (mvx * c + mvy * sn) * s * dt
         self.y += (-mvx * sn + mvy * c) * s * dt
         self.heading += mom * dt
-        # a = dv/dt + omega x v in the rotating body frame (omega clockwise = -z).
-        self.lat_accel = (vx - self.vx) / dt + om * vy
-        self.long_accel = (vy - self.vy) / dt - om * vx
-        self.vx, self.vy, self.omega = vx, vy, om
 
     # -- ground truth in bus units -----------------------------------------------------------------
     @property

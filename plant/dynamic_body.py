@@ -271,18 +271,6 @@ class VehicleBody(PlanarBody):
         self.long_accel = (u - self.vy) / dt - d.omega * d.w
         self.vx, self.vy, self.omega = d.w, u, d.omega
 
-    def _move(self, vx: float, vy: float, om: float, dt: float) -> None:
-        """Position and heading over the step from the trapezoid of old and new body velocities, exact for
-        constant body velocities (as PlanarBody.advance)."""
-        mvx, mvy, mom = 0.5 * (vx + self.vx), 0.5 * (vy + self.vy), 0.5 * (om + self.omega)
-        half = 0.5 * mom * dt
-        s = 1.0 - half * half / 6.0 if abs(half) < 1e-4 else math.sin(half) / half
-        mid = self.heading + half
-        c, sn = math.cos(mid), math.sin(mid)
-        self.x += (mvx * c + mvy * sn) * s * dt
-        self.y += (-mvx * sn + mvy * c) * s * dt
-        self.heading += mom * dt
-
 
 class EvBodyNode(BodyNode):
     """The EV's PLANT node on the switching body: plant/body.py's BodyNode (scenario reset, ground truth)

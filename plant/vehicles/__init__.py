@@ -31,6 +31,13 @@ def param(unit: str) -> Any:
     return field(metadata={"unit": unit})
 
 
+def require_positive(params: object, signed: frozenset[str] = frozenset()) -> None:
+    """ValueError naming the first parameter field (other than `signed`) that is not > 0."""
+    for f in fields(params):  # type: ignore[arg-type]
+        if "unit" in f.metadata and f.name not in signed and not getattr(params, f.name) > 0.0:
+            raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(params, f.name)!r}")
+
+
 @dataclass(frozen=True)
 class Ev4wisParams:
     """docs/spec/vehicles.md A: the 4WIS steer-by-wire EV of [P0] (SI units unless the name says so)."""
@@ -59,9 +66,7 @@ class Ev4wisParams:
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            if "unit" in f.metadata and not getattr(self, f.name) > 0.0:
-                raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(self, f.name)!r}")
+        require_positive(self)
 
     @property
     def geometry(self) -> Geometry:
@@ -140,10 +145,7 @@ class AbsParams:
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        signed = {"lateral_e"}    # the only field that may be zero or negative
-        for f in fields(self):
-            if "unit" in f.metadata and f.name not in signed and not getattr(self, f.name) > 0.0:
-                raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(self, f.name)!r}")
+        require_positive(self, signed=frozenset({"lateral_e"}))    # the only field that may be zero or negative
         if self.lateral_e > 1.0:
             raise ValueError(f"key 'parameters.lateral_e' must be at most 1 (Magic Formula E), got {self.lateral_e!r}")
         if not self.v_l0 < self.v_l1:
@@ -229,9 +231,7 @@ class SbwParams:
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            if "unit" in f.metadata and not getattr(self, f.name) > 0.0:
-                raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(self, f.name)!r}")
+        require_positive(self)
         if self.control_rate < 1000.0:
             raise ValueError(f"key 'parameters.control_rate' must be at least 1000 Hz (issue 4), "
                              f"got {self.control_rate!r}")
