@@ -179,7 +179,7 @@ def pytest_args(args: argparse.Namespace, names: Iterable[str]) -> list[str]:
         spec = BY_NAME[name]
         value = getattr(args, spec.dest, None)
         flag = spec.pytest_name if spec.plugin else spec.passthrough
-        if flag is None or value is None or value is False or value == []:
+        if flag is None or value is None or value == [] or (spec.kind == "flag" and not value):
             continue
         if spec.kind == "switch":
             out.append(spec.pytest_name if value else f"--bench-no-{spec.name}")

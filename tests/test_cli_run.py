@@ -92,3 +92,60 @@ def test_progress_counts_the_cases_with_workers(tmp_path: Path) -> None:
     assert sorted(int(done) for done, _ in counters) == [1, 2, 3], result.stdout
     assert {total for _, total in counters} == {"3"}
     assert "bench: 3 cases" in result.stdout
+
+
+# -- each run option declared once (issue 17): bench.options builds both sides ----------------------------------
+class _PytestGroup:
+    """pytest's option group is argparse underneath: the plugin's declarations, onto a plain parser."""
+
+    def __init__(self) -> None:
+        import argparse
+
+        self.parser = argparse.ArgumentParser()
+
+    def addoption(self, *flags: str, **kwargs: object) -> None:
+        self.parser.add_argument(*flags, **kwargs)  # type: ignore[arg-type]
+
+
+def test_every_option_bench_run_hands_on_reaches_the_plugin_unchanged() -> None:
+    """Each option given on `bench run`'s command line arrives with the same value in the plugin's options."""
+    from bench import options
+    from bench.cli import build_parser
+    from bench.cli.run import HANDED_TO_PYTEST
+
+    argv = ["run", "--interface", "udp_multicast", "--channel", "239.0.0.1", "--bitrate", "250000", "--no-fd",
+            "--data-bitrate", "2000000", "--config", "x/bench.toml", "--external", "VCU", "SBW", "--fault",
+            "drop:MESSAGE@1-2", "--fault", "silence:NODE@case+0.5-", "--dut", "VCU", "--shard", "2/3",
+            "--durations", "d.json", "--out", "o"]
+    args = build_parser().parse_args(argv)
+    group = _PytestGroup()
+    options.add_pytest_options(group)
+    plugin, rest = group.parser.parse_known_args(options.pytest_args(args, HANDED_TO_PYTEST))
+    assert rest == []
+    for spec in options.OPTIONS:
+        if spec.plugin:
+            assert getattr(plugin, spec.pytest_dest) == getattr(args, spec.dest), spec.name
+    assert plugin.bench_fd is False and plugin.bench_shard == (2, 3) and plugin.bench_external == ["VCU", "SBW"]
+
+
+def test_pytest_only_options_are_handed_to_pytest_itself() -> None:
+    from bench import options
+    from bench.cli import build_parser
+    from bench.cli.run import HANDED_TO_PYTEST
+
+    args = build_parser().parse_args(["run", "-k", "pivot and not slow", "-n", "2", "--force"])
+    handed = options.pytest_args(args, HANDED_TO_PYTEST)
+    assert handed[-4:] == ["-k", "pivot and not slow", "-n", "2"]
+    assert handed[:2] == ["--bench-interface", "virtual"] and "--force" not in handed
+
+
+@pytest.mark.parametrize("command", ["plant", "monitor", "replay"])
+def test_bus_options_of_the_other_commands_come_from_the_same_table(command: str) -> None:
+    """plant, monitor and replay share the table's bus options (their default interface is udp_multicast)."""
+    from bench.cli import build_parser
+
+    extra = ["log.mcap"] if command == "replay" else []
+    args = build_parser().parse_args([command, *extra, "-c", "239.0.0.1", "--bitrate", "125000", "--fd"])
+    assert (args.interface, args.channel, args.bitrate, args.fd) == ("udp_multicast", "239.0.0.1", 125000, True)
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([command, *extra, "--bitrate", "fast"])

@@ -140,3 +140,20 @@ def test_bad_config_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[st
                       '[bus]\nbitrate = -5\n')
     [line] = errors(capsys, ["--config", str(config), "--out", str(tmp_path / "out")])
     assert str(config) in line and "[bus] bitrate" in line
+
+
+# -- --shard and --durations (issue 18) ------------------------------------------------------------------------
+def test_durations_without_shard(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    [line] = errors(capsys, ["--durations", str(tmp_path / "d.json"), "--out", str(tmp_path / "out")])
+    assert "--durations: only with --shard K/N" in line
+
+
+def test_missing_durations_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    [line] = errors(capsys, ["--shard", "1/2", "--durations", str(tmp_path / "d.json"), "--out", str(tmp_path / "o")])
+    assert f"--durations {tmp_path / 'd.json'}: no such file" in line
+
+
+def test_durations_file_that_is_not_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "d.json").write_text("testcases/x.py::test_y 1.5\n")
+    [line] = errors(capsys, ["--shard", "1/2", "--durations", str(tmp_path / "d.json"), "--out", str(tmp_path / "o")])
+    assert "not a durations file" in line
