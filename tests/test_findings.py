@@ -6,13 +6,17 @@ from __future__ import annotations
 
 import logging
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import can
 import pytest
 
 from bench import periodic
+from bench.bus import VirtualTimeBus
+from bench.codec import load_codebook
 from bench.config import RunSettings, load_config
 from bench.findings import MAX_FINDINGS, FindingCollector
 from bench.restbus import Restbus
@@ -49,46 +53,44 @@ def test_collector_is_bounded() -> None:
     assert sum(f.count for f in findings) == MAX_FINDINGS + 50 and findings[-1].count == 51
 
 
-class _Refusing:
-    """Wraps a bus: every send of one identifier fails as a full transmit queue would."""
+def test_refused_frames_are_a_warning_and_a_finding(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                     caplog: pytest.LogCaptureFixture) -> None:
+    """A station whose driver refuses frames (every frame of one message, as a full transmit queue would): one
+    warning at the first, the count at the end, both in the report (HTML, JUnit property, results.json)."""
+    refused_id = load_codebook(load_config().databases)["DRV_Steering"].frame_id
+    refused: list[float] = []
 
-    def __init__(self, bus: can.BusABC, frame_id: int) -> None:
-        self._bus, self._id, self.refused = bus, frame_id, 0
+    def refusing(original: Callable[..., None]) -> Callable[..., None]:
+        def send(self: VirtualTimeBus, *args: Any, **kwargs: Any) -> None:
+            frame_id = args[0].arbitration_id if isinstance(args[0], can.Message) else args[1]
+            if frame_id == refused_id:
+                refused.append(frame_id)
+                raise can.CanOperationError("transmit buffer full")
+            original(self, *args, **kwargs)
+        return send
 
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        if msg.arbitration_id == self._id:
-            self.refused += 1
-            raise can.CanOperationError("transmit buffer full")
-        self._bus.send(msg, timeout)
-
-    def __getattr__(self, name: str) -> object:
-        return getattr(self._bus, name)
-
-
-def test_refused_frames_are_a_warning_and_a_finding(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    """A station whose driver refuses frames: one warning at the first, the count at the end, both in the
-    report (HTML, JUnit property, results.json)."""
+    # both ways a station may send on the virtual bus, patched before the stations take them
+    monkeypatch.setattr(VirtualTimeBus, "send", refusing(VirtualTimeBus.send))
+    if hasattr(VirtualTimeBus, "send_raw"):
+        monkeypatch.setattr(VirtualTimeBus, "send_raw", refusing(VirtualTimeBus.send_raw))
     run = BenchRun(load_config(), RunSettings(), tmp_path)
-    run.start()
-    assert run.session is not None and run.session.runner is not None
-    runner = run.session.runner
-    frame_id = runner.restbus.codebook["DRV_Steering"].frame_id
-    refusing = _Refusing(runner.bus, frame_id)
-    runner.bus = refusing   # type: ignore[assignment]
     with caplog.at_level(logging.WARNING, logger="bench"):
         try:
+            run.start()
+            assert run.session is not None and run.session.runner is not None
             run.session.run_until(0.2)
         finally:
             result = run.finish()
-    assert refusing.refused >= 10                           # DRV_Steering every 10 ms for 0.2 s
-    assert runner.send_errors == refusing.refused
+    assert run.session.runner is not None
+    assert len(refused) >= 10                                # DRV_Steering every 10 ms for 0.2 s
+    assert run.session.runner.send_errors == len(refused)
     warnings = [r for r in caplog.records if r.name == "bench.station" and r.levelno == logging.WARNING]
-    assert len(warnings) == 1 and f"0x{frame_id:03X}" in warnings[0].getMessage()
+    assert len(warnings) == 1 and f"0x{refused_id:03X}" in warnings[0].getMessage()
     texts = [f.message for f in result.findings]
-    assert any("refused a frame" in t and f"0x{frame_id:03X}" in t for t in texts), texts
-    assert any(f"{refusing.refused} frames could not be sent" in t for t in texts), texts
+    assert any("refused a frame" in t and f"0x{refused_id:03X}" in t for t in texts), texts
+    assert any(f"{len(refused)} frames could not be sent" in t for t in texts), texts
     html = (tmp_path / "report.html").read_text(encoding="utf-8")
-    assert 'id="findings"' in html and f"{refusing.refused} frames could not be sent" in html
+    assert 'id="findings"' in html and f"{len(refused)} frames could not be sent" in html
     props = [p.get("value") for p in ET.parse(tmp_path / "junit.xml").getroot().iter("property")
              if p.get("name") == "finding"]
     assert any("could not be sent" in (v or "") for v in props)
