@@ -32,18 +32,21 @@ Set BENCH_KERNEL_PERIODIC=0 in the environment to keep every message on the tick
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import struct
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import can
 
 from bench import e2e
 from bench.restbus import Restbus
-from bench.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, plain_socketcan
+from bench.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, SO_TIMESTAMPNS, FastReceiver, plain_socketcan
+
+log = logging.getLogger(__name__)
 
 STABLE_CYCLES = 3        # unchanged cycles before a message is handed to the kernel
 CHANGES_TO_STOP = 3      # consecutive changed cycles that send it back to the tick scheduler
@@ -53,13 +56,13 @@ ECHO_WAIT_S = 0.02       # longest wait, at a hand-over, for the echo of the ker
 MIN_CYCLE_S = 4 * STOP_MARGIN_S
 FRAME_LENGTH = 8         # the contract's frames (E2E bytes 6 and 7)
 ENV_SWITCH = "BENCH_KERNEL_PERIODIC"
+ECHO_READ_LIMIT = 1 << 16   # frames one look at the echo socket takes at most (it is read every tick)
 
 # linux/can.h and linux/can/raw.h (Python's socket module lacks CAN_INV_FILTER)
 CAN_INV_FILTER = 0x20000000
 CAN_SFF_MASK = 0x7FF
 CAN_RAW_JOIN_FILTERS = 6
 _FILTER = struct.Struct("=II")
-_FRAME = struct.Struct("=IB3x8s")
 _EXACT_STANDARD = CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG   # mask: this 11-bit data frame and no other
 _clock = time.monotonic   # the kernel's BCM timers run on CLOCK_MONOTONIC too
 
@@ -115,26 +118,33 @@ class KernelPeriodic:
         self.enabled = True
         self.started = self.modified = self.stopped = 0
         self.error = ""
-        self.pending_echoes: list[tuple[int, bytes]] = []
+        self.pending_echoes: list[tuple[int, bytes, float]] = []
+        # The per-tick look's clock (time.monotonic's scale): the station gives the wall clock's latest read,
+        # so that a tick costs no extra read; None: a read of _clock.
+        self.clock: Callable[[], float] | None = None
         self.echo = _raw_socket()
         try:
             self.echo.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER, b"")   # nothing until a task starts
+            self.echo.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)   # the log's time: the kernel's send
             self.echo.bind((bus.channel,))
             self.echo.setblocking(False)
             bus.socket.setsockopt(socket.SOL_CAN_RAW, CAN_RAW_JOIN_FILTERS, struct.pack("=i", 1))
         except OSError:
             self.echo.close()
             raise
+        self._echo_rx = FastReceiver(self.echo)
 
     @classmethod
-    def attach(cls, bus: can.BusABC, restbus: Restbus) -> "KernelPeriodic | None":
+    def attach(cls, bus: can.BusABC, restbus: Restbus) -> KernelPeriodic | None:
         """A KernelPeriodic for a socketcan bus without filters of its own (unless switched off by
         BENCH_KERNEL_PERIODIC=0); None for every other bus or when the kernel refuses the sockets."""
         if not plain_socketcan(bus) or os.environ.get(ENV_SWITCH, "1") == "0":
             return None
         try:
             return cls(bus, restbus)
-        except OSError:
+        except OSError as exc:
+            log.warning("kernel periodic sending unavailable on %s (%s): the restbus sends every frame itself",
+                        getattr(bus, "channel", bus), exc)
             return None
 
     # -- send side (the station's tick) -------------------------------------------------------------
@@ -169,7 +179,7 @@ class KernelPeriodic:
         changes) is deleted at its next quiet moment."""
         if not self.tasks:
             return
-        now = _clock()
+        now = _clock() if self.clock is None else self.clock()
         for task in list(self.tasks.values()):
             if (faulty or not task.slot.enabled) and not task.stopping:
                 task.stopping, task.next_check = True, now
@@ -181,6 +191,10 @@ class KernelPeriodic:
         index = int((now - task.t0) / period) + 1          # the kernel's next frame
         t_next = task.t0 + index * period
         if task.stopping:
+            if self.clock is not None:   # the margins need the present, not the tick's latest read (rare)
+                now = _clock()
+                index = int((now - task.t0) / period) + 1
+                t_next = task.t0 + index * period
             if STOP_MARGIN_S <= now - (t_next - period) and t_next - now >= STOP_MARGIN_S:
                 self._stop(task)
             else:
@@ -194,21 +208,24 @@ class KernelPeriodic:
             except Exception:                      # a bad value: the restbus' own build stops the sender at due
                 data = None
             slot.counter = counter
+            stopping = False
             if data is not None and (_payload(data) if slot.codec.e2e else data) != task.payload:
-                self._changed(task, data)
+                stopping = self._changed(task, data)
             else:
                 task.changes = 0
-            if task.stopping:
+            if stopping:
                 task.next_check = now
                 return
             index += 1
         task.next_check = task.t0 + index * period - PRECHECK_S
 
-    def _changed(self, task: _Task, data: bytes) -> None:
+    def _changed(self, task: _Task, data: bytes) -> bool:
+        """Rewrite the task's frames; whether the task is now to stop."""
         task.changes += 1
         self._modify(task, data)
         if task.changes >= CHANGES_TO_STOP:
             task.stopping, task.next_check = True, _clock()
+        return task.stopping
 
     def _frames(self, slot: Any, frame_id: int, data: bytes, base: int) -> list[can.Message]:
         if slot.codec.e2e:
@@ -281,6 +298,9 @@ class KernelPeriodic:
             self.pending_echoes += list(self._read_echoes())
 
     def _disable(self, why: str) -> None:
+        if self.enabled:   # said once: from now on the restbus sends every frame itself
+            log.warning("kernel periodic sending off on %s: %s; the restbus sends every frame itself",
+                        getattr(self.bus, "channel", self.bus), why)
         self.enabled = False
         self.error = why
 
@@ -293,27 +313,21 @@ class KernelPeriodic:
         self.bus.socket.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER, b"".join(inverted))
 
     # -- receive side (the station's tick) ------------------------------------------------------------
-    def echoes(self) -> Iterator[tuple[int, bytes]]:
-        """The frames the kernel sent since the last call, as (identifier, data), in order."""
+    def echoes(self) -> Iterator[tuple[int, bytes, float]]:
+        """The frames the kernel sent since the last call, as (identifier, data, receive timestamp), in order."""
         if self.pending_echoes:
             pending, self.pending_echoes = self.pending_echoes, []
             yield from pending
         yield from self._read_echoes()
 
-    def _read_echoes(self) -> Iterator[tuple[int, bytes]]:
+    def _read_echoes(self) -> Iterator[tuple[int, bytes, float]]:
         """What the echo socket holds now (noting each task's last AliveCounter)."""
         if not self.tasks:
             return      # the echo socket's filter is empty
-        recv, tasks = self.echo.recv, self.tasks
-        while True:
-            try:
-                raw = recv(16)
-            except (BlockingIOError, InterruptedError):
-                return
-            can_id, length, data = _FRAME.unpack(raw)
-            frame_id = can_id & CAN_SFF_MASK
-            data = data[:length]
+        tasks = self.tasks
+        for frame in self._echo_rx.frames(0.0, ECHO_READ_LIMIT):
+            frame_id, data = frame.arbitration_id, frame.data
             task = tasks.get(frame_id)
-            if task is not None and length == FRAME_LENGTH and task.slot.codec.e2e:
+            if task is not None and len(data) == FRAME_LENGTH and task.slot.codec.e2e:
                 task.last_counter = e2e.counter_of(data)
-            yield frame_id, data
+            yield frame_id, data, frame.timestamp

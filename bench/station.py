@@ -7,6 +7,7 @@ default both run in one process on the virtual-time bus.
 
 from __future__ import annotations
 
+import logging
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
 
@@ -18,8 +19,9 @@ from bench.monitor import Monitor
 from bench.node import Behaviour
 from bench.periodic import KernelPeriodic
 from bench.restbus import Restbus
-from bench.socketcan_rx import FastReceiver
+from bench.socketcan_rx import FastReceiver, RawFrame
 
+log = logging.getLogger(__name__)
 
 ECHO_WINDOW = 4
 BABBLE_ECHO_WINDOW = 256   # a babbling node sends many identical frames per tick (flood: PARAM per ms)
@@ -33,12 +35,12 @@ class _StationIO:
 
     __slots__ = ("_station",)
 
-    def __init__(self, station: "Station") -> None:
+    def __init__(self, station: Station) -> None:
         self._station = station
 
     @property
     def now(self) -> float:
-        return self._station.now()
+        return self._station.t
 
     def send_values(self, message: str, **signals: float) -> None:
         self._station.restbus.set_unchecked(message, signals)
@@ -56,11 +58,13 @@ class _StationIO:
         if message in restbus.periodic:
             restbus.resume_sending(message)
 
+    # A behaviour lives in the tick's time (the time it steps to): received frames time out against it, without
+    # a clock read per question (a plant asks several per tick; each read is a system call in a UML guest).
     def latest(self, message: str) -> Mapping[str, float] | None:
-        return self._station.monitor.latest(message, self._station.now())
+        return self._station.monitor.latest(message, self._station.t)
 
     def timed_out(self, message: str) -> bool:
-        return self._station.monitor.timed_out(message, self._station.now())
+        return self._station.monitor.timed_out(message, self._station.t)
 
     def invalid(self, message: str) -> bool:
         return self._station.monitor.invalid(message)
@@ -69,14 +73,17 @@ class _StationIO:
 class Station:
     def __init__(self, name: str, bus: can.BusABC, restbus: Restbus, monitor: Monitor,
                  now: Callable[[], float], behaviours: Sequence[Behaviour] = (),
-                 stamp: Callable[[float, float], float] | None = None, *, every_tick: bool = True) -> None:
+                 stamp: Callable[[float], float] | None = None, *, every_tick: bool = True,
+                 recent_monotonic: Callable[[], float] | None = None) -> None:
         self.name = name
         self.bus = bus
         self.restbus = restbus
         self.monitor = monitor
         self.now = now
-        # Real time: bench time of a received frame from its receive timestamp (bench.clock.WallClock.stamp),
-        # so a late station still measures the bus's timing, not its own lateness. None: the time of reading.
+        self.t = 0.0       # bench time of the tick in progress (or the last one): what its behaviours see
+        # Real time: bench time of a received frame from its receive timestamp (bench.clock.WallClock.stamp,
+        # checked against the clock's latest read), so a late station still measures the bus's timing, not its
+        # own lateness, and a frame costs no clock read. None: the time of reading.
         self.stamp = stamp
         self._last_rx = float("-inf")
         # A plant's models integrate every tick; a runner's timers and restbus are due-based and may skip
@@ -97,15 +104,32 @@ class Station:
             p.codec.frame_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
         # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (bench/periodic.py)
         self.kernel = KernelPeriodic.attach(bus, restbus)
+        if self.kernel is not None and recent_monotonic is not None:
+            self.kernel.clock = recent_monotonic   # its per-tick look uses the clock's latest read
         # socketcan: frames read from the bus's socket without a can.Message each (bench/socketcan_rx.py)
         self._fast = FastReceiver.attach(bus)
+        self._send_fast = self._fast is not None and self._fast.native
+        # the in-process virtual bus: frames as bytes, no can.Message each (bench/bus.py send_raw, raw_frames)
+        self._send_raw = getattr(bus, "send_raw", None)
+        self._raw_frames = getattr(bus, "raw_frames", None)
+
+    def selectable(self) -> int | None:
+        """The socket (descriptor) a select() may wait on for this station's frames; None when its bus has
+        none the station reads directly."""
+        return self._fast.fileno() if self._fast is not None and self._fast.native else None
 
     def poll(self, timeout: float = 0.0, limit: int = POLL_BATCH) -> int:
         """Receive up to `limit` pending frames into the monitor (the first recv may wait up to timeout).
         Returns how many were read: `limit` means more may be waiting."""
         monitor, echoes, stamp, now = self.monitor, self._echoes, self.stamp, self.now
         fast = self._fast
-        frames = fast.frames(timeout, limit) if fast is not None else self._recv(timeout, limit)
+        frames: Iterator[RawFrame | can.Message]
+        if fast is not None:
+            frames = fast.frames(timeout, limit)
+        elif self._raw_frames is not None:
+            frames = self._raw_frames(timeout, limit)
+        else:
+            frames = self._recv(timeout, limit)
         count = 0
         for msg in frames:
             count += 1
@@ -117,7 +141,7 @@ class Station:
                 if stamp is None:
                     t = now()
                 else:   # one socket delivers in order: a stamp never goes back (one of another base could)
-                    t = self._last_rx = max(self._last_rx, stamp(msg.timestamp, now()))
+                    t = self._last_rx = max(self._last_rx, stamp(msg.timestamp))
                 monitor.on_frame(t, msg.arbitration_id, data, "rx", msg.is_extended_id, msg.is_error_frame)
         return count
 
@@ -134,6 +158,7 @@ class Station:
             msg = bus.recv(0.0)
 
     def tick(self, tick: int, t: float, dt: float) -> None:
+        self.t = t
         self.poll(0.0)
         io = self.io
         for behaviour in self.behaviours:
@@ -143,9 +168,10 @@ class Station:
             self._tick_faults(faults, t, dt)
         kernel = self.kernel
         if kernel is not None:   # bench/periodic.py
-            for frame_id, data in kernel.echoes():   # what the kernel sent for this station: logged as tx
+            stamp = self.stamp
+            for frame_id, data, timestamp in kernel.echoes():   # what the kernel sent for this station: tx
                 self.sent += 1
-                self.monitor.on_frame(self.now(), frame_id, data, "tx")
+                self.monitor.on_frame(self.now() if stamp is None else stamp(timestamp), frame_id, data, "tx")
             faulty = faults is not None and faults.any
             kernel.check(faulty)
             for frame_id, data in self.restbus.due(tick):
@@ -178,12 +204,19 @@ class Station:
                 self._transmit(t, frame_id, data, is_error)
 
     def _transmit(self, t: float, frame_id: int, data: bytes, is_error: bool = False) -> None:
-        msg = can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
-                          is_fd=False, is_error_frame=is_error)
         try:
-            self.bus.send(msg)
+            if self._send_fast and not is_error and self._fast is not None:
+                self._fast.send_frame(frame_id, data)     # one send(): no can.Message, no select, no clock read
+            elif self._send_raw is not None and not is_error:
+                self._send_raw(t, frame_id, data)
+            else:
+                self.bus.send(can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
+                                          is_fd=False, is_error_frame=is_error))
         except can.CanError as exc:
             self.send_errors += 1   # a full queue or bus-off: the frame never reached the bus
+            if self.send_errors == 1:   # the first one now; the count at the end of the run (bench.run)
+                log.warning("%s station: the bus driver refused a frame (0x%03X at %.3f s): %s; the frame was "
+                            "not sent", self.name, frame_id, t, exc)
             self.monitor.note_send_failure(t, frame_id, str(exc))
             return
         self.sent += 1
@@ -193,7 +226,3 @@ class Station:
                 echoes = self._echoes[frame_id] = deque(maxlen=BABBLE_ECHO_WINDOW)
             echoes.append(data)
         self.monitor.on_frame(t, frame_id, data, "tx", False, is_error)
-
-    def reset_behaviours(self) -> None:
-        for behaviour in self.behaviours:
-            behaviour.reset()

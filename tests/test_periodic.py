@@ -319,8 +319,10 @@ def test_real_bcm_on_vcan(codebook: Codebook) -> None:
         assert kernel.started >= 3 and kernel.stopped >= 1
         for task in list(kernel.tasks.values()):   # the kernel would send on: stop it, then read what it sent
             task.task.stop()
-        for frame_id, data in kernel.echoes():
+        before_read = time.time()
+        for frame_id, data, stamp in kernel.echoes():
             station.monitor.on_frame(time.monotonic() - t0, frame_id, data, "tx")
+            assert before_read - 1.0 < stamp <= before_read, "the echo's kernel receive time (SO_TIMESTAMPNS)"
         watch(0.05)
         for frame_id, frames in seen.items():
             for a, b in zip(frames, frames[1:]):

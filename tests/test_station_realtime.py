@@ -171,14 +171,17 @@ def test_a_late_runner_goes_to_the_wall_clock_a_late_plant_replays_every_tick(co
         class Counting:
             nodes = ()
 
+            def __init__(self, steps: list[float]) -> None:
+                self.steps = steps
+
             def reset(self) -> None:
                 pass
 
             def step(self, io: object, t: float, dt: float) -> None:
-                steps.append(t)
+                self.steps.append(t)
 
         bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
-        station = Station("s", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, [Counting()],
+        station = Station("s", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, [Counting(steps)],
                           clock.stamp, every_tick=every_tick)
         scheduler = Scheduler([station], clock)
         clock.start()
@@ -210,3 +213,85 @@ def test_a_real_time_run_reads_what_waits_before_it_returns(codebook) -> None:
                       clock.stamp, every_tick=False)
     Scheduler([station], clock).run_until(0.0)
     assert CATCH_UP_FRAMES <= station.monitor.frames < CATCH_UP_FRAMES + POLL_BATCH
+
+
+# -- clock reads: each is a system call in a User-mode Linux guest (16-52 us), so they are counted -------------
+class _CountingMonotonic:
+    def __init__(self) -> None:
+        self.real = time.monotonic
+        self.calls = 0
+
+    def __call__(self) -> float:
+        self.calls += 1
+        return self.real()
+
+
+def test_a_stamp_is_checked_against_the_latest_read_without_a_new_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    from bench.clock import STAMP_LEAD
+
+    clock = WallClock()
+    clock.start()
+    time.sleep(0.02)
+    now = clock.now()
+    counting = _CountingMonotonic()
+    monkeypatch.setattr(time, "monotonic", counting)
+    epoch0 = clock.epoch_ns / 1e9
+    assert clock.stamp(epoch0 + now - 0.005) == pytest.approx(now - 0.005, abs=1e-6)   # received before the read
+    assert clock.stamp(epoch0 + now + 0.004) == pytest.approx(now + 0.004, abs=1e-6)   # since the read (a tick's work)
+    assert counting.calls == 0
+    # beyond the lead: perhaps the latest read is old (a long pause); a fresh read decides
+    assert clock.stamp(epoch0 + now + STAMP_LEAD + 5.0) == pytest.approx(clock.recent())
+    assert counting.calls == 1   # the fresh read (clock.recent() reads nothing)
+    assert clock.recent() >= now
+
+
+def test_behaviours_see_the_tick_s_time_and_a_plant_tick_reads_the_clock_about_once(
+        codebook, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A plant-like station asks for several messages every tick: the answers are timed against the tick's
+    time, and the whole tick loop reads the clock at most about twice per tick (it waits for each deadline)."""
+    from bench.clock import Scheduler
+
+    seen: list[tuple[float, float]] = []
+
+    class Asking:
+        nodes = ()
+
+        def reset(self) -> None:
+            pass
+
+        def step(self, io, t: float, dt: float) -> None:
+            for _ in range(8):
+                io.latest("VCU_WheelCmd_FL")
+                io.timed_out("VCU_WheelCmd_FL")
+            seen.append((t, io.now))
+
+    clock = WallClock()
+    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
+    station = Station("plant", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, [Asking()],
+                      clock.stamp)
+    scheduler = Scheduler([station], clock)
+    counting = _CountingMonotonic()
+    clock.start()
+    monkeypatch.setattr(time, "monotonic", counting)
+    scheduler.run_until(0.05)
+    monkeypatch.setattr(time, "monotonic", counting.real)
+    assert len(seen) == 50 and all(now == t for t, now in seen)
+    # on time: one read to know the wait, one (or a few) after it; 16 questions per tick cost none
+    assert counting.calls <= 4 * 50, counting.calls
+
+
+def test_a_late_plant_reads_the_clock_once_per_tick(codebook, monkeypatch: pytest.MonkeyPatch) -> None:
+    from bench.clock import Scheduler
+
+    clock = WallClock()
+    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
+    station = Station("plant", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, (), clock.stamp)
+    scheduler = Scheduler([station], clock)
+    clock.start()
+    time.sleep(0.2)                              # 200 ticks late: no tick waits
+    counting = _CountingMonotonic()
+    monkeypatch.setattr(time, "monotonic", counting)
+    scheduler.run_until(0.1)
+    monkeypatch.setattr(time, "monotonic", counting.real)
+    assert scheduler.tick == 100
+    assert counting.calls == 100, counting.calls
