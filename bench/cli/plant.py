@@ -24,7 +24,7 @@ STATUS_PERIOD = 5.0   # s between status lines
 INVALID_SHOWN = 3     # invalid frames described per status line
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser("plant", help="run the plant and the simulated ECUs on a bus in real time",
                             description="Run the plant and every simulated ECU on a bus in real time "
                                         "until SIGINT/SIGTERM or --duration.")
