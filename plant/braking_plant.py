@@ -44,13 +44,6 @@ CRUISE_RELEASE_BAR = 0.5
 #: ECU updates its outputs (plant/ecus/abs.py), so truth and estimate are compared at the same instant; every
 #: PLANT message has a cycle of 10 ms or more (dbc/bench.dbc)
 PUBLISH_MS = 10
-#: DBC ranges of the [P4] truth messages (dbc/bench.dbc; checked by tests/test_abs_estimator.py)
-TRUTH_SPEED = (0.0, 250.0)          # PLANT_AbsVehicle.VehicleSpeed, km/h
-TRUTH_ANGLE = (-90.0, 90.0)         # PLANT_AbsVehicle.FrontWheelAngle, deg
-TRUTH_PRESSURE = (0.0, 400.0)       # PLANT_AbsVehicle.MasterPressure, PLANT_AbsWheel_xx.BrakePressure, bar
-TRUTH_WHEEL_SPEED = (0.0, 600.0)    # PLANT_AbsWheel_xx.WheelSpeed, km/h
-TRUTH_SLIP = (-1.0, 1.0)            # PLANT_AbsWheel_xx.Slip
-TRUTH_LOAD = (0.0, 12750.0)         # PLANT_AbsWheel_xx.NormalLoad, N
 WHEEL_MESSAGES = tuple(f"PLANT_AbsWheel_{c}" for c in CORNERS)
 
 
@@ -185,12 +178,12 @@ class BrakingPlantNode:
                        LatAccel=clamp(-veh.lat_accel, ranges.PLANT_ACCEL),
                        LongAccel=clamp(veh.long_accel, ranges.PLANT_ACCEL))
         self.scenario.acknowledge(io, t)
-        io.send_values("PLANT_AbsVehicle", VehicleSpeed=clamp(veh.speed * KMH, TRUTH_SPEED),
-                       FrontWheelAngle=clamp(-veh.delta * _DEG, TRUTH_ANGLE),
-                       MasterPressure=clamp(hyd.master, TRUTH_PRESSURE), ValveBypass=1 if hyd.bypass else 0)
+        io.send_values("PLANT_AbsVehicle", VehicleSpeed=clamp(veh.speed * KMH, ranges.PLANT_ABS_SPEED),
+                       FrontWheelAngle=clamp(-veh.delta * _DEG, ranges.PLANT_ABS_ANGLE),
+                       MasterPressure=clamp(hyd.master, ranges.PLANT_ABS_PRESSURE), ValveBypass=1 if hyd.bypass else 0)
         speeds = veh.wheel_speeds_kmh()
         for i, message in enumerate(WHEEL_MESSAGES):
-            io.send_values(message, WheelSpeed=clamp(speeds[i], TRUTH_WHEEL_SPEED),
-                           Slip=clamp(-veh.kappa[i], TRUTH_SLIP),
-                           BrakePressure=clamp(hyd.pressures[i], TRUTH_PRESSURE),
-                           NormalLoad=clamp(veh.fz[i], TRUTH_LOAD))
+            io.send_values(message, WheelSpeed=clamp(speeds[i], ranges.PLANT_ABS_WHEEL_SPEED),
+                           Slip=clamp(-veh.kappa[i], ranges.PLANT_ABS_SLIP),
+                           BrakePressure=clamp(hyd.pressures[i], ranges.PLANT_ABS_PRESSURE),
+                           NormalLoad=clamp(veh.fz[i], ranges.PLANT_ABS_LOAD))

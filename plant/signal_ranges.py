@@ -28,14 +28,39 @@ PLANT_YAW_RATE = (-327.68, 327.67)          # PLANT_Motion.YawRate, deg/s
 PLANT_SIDESLIP = (-180.0, 180.0)            # PLANT_Dynamics.Sideslip, deg
 PLANT_ACCEL = (-32.768, 32.767)             # PLANT_Dynamics.LatAccel/LongAccel, m/s^2
 PLANT_TIME = (0.0, 100000.0)                # PLANT_Status.PlantTime, s
+# the SBW ECU (dbc/chassis.dbc)
+SBW_HAND_WHEEL_ANGLE = (-900.0, 900.0)      # SBW_HandWheel.HandWheelAngle, deg
+SBW_DRIVER_TORQUE = (-50.0, 50.0)           # SBW_HandWheel.DriverTorque, N·m
+SBW_ROAD_FEEL_TORQUE = (-20.0, 20.0)        # SBW_HandWheel.RoadFeelTorque, N·m
+SBW_ROAD_FEEL_CURRENT = (-50.0, 50.0)       # SBW_HandWheel.RoadFeelMotorCurrent, A
+SBW_PINION_ANGLE = (-900.0, 900.0)          # SBW_Pinion.PinionAngle and PinionAngleTarget, deg
+SBW_STEER_MOTOR_CURRENT = (-60.0, 60.0)     # SBW_Pinion.SteerMotorCurrent, A
+SBW_RACK_FORCE = (-12000.0, 12000.0)        # SBW_Pinion.RackForce, N
+# the SBW's ground truth (dbc/bench.dbc)
+PLANT_SBW_ANGLE = (-2000.0, 2000.0)         # PLANT_SbwAngles.HandWheelAngle/PinionAngle, deg
+PLANT_SBW_TORQUE = (-65.0, 65.0)            # PLANT_SbwTorques.DriverTorque/RoadFeelTorque/AligningTorque, N·m
+PLANT_SBW_SENSOR_ANGLE = (-3000.0, 3000.0)  # PLANT_SbwSensors.HandWheelSensor/PinionSensor, deg
+# the ABS ECU (dbc/chassis.dbc)
+ABS_WHEEL_SPEED = (0.0, 204.75)             # ABS_WheelSpeeds.WheelSpeedxx, km/h
+ABS_REF_SPEED = (0.0, 250.0)                # ABS_SteerState.RefVehicleSpeed, km/h
+ABS_ANGLE = (-90.0, 90.0)                   # ABS_SteerState.FrontWheelAngleEst, deg
+# the braking car's ground truth of [P4] (dbc/bench.dbc)
+PLANT_ABS_SPEED = (0.0, 250.0)              # PLANT_AbsVehicle.VehicleSpeed, km/h
+PLANT_ABS_ANGLE = (-90.0, 90.0)             # PLANT_AbsVehicle.FrontWheelAngle, deg
+PLANT_ABS_PRESSURE = (0.0, 400.0)           # PLANT_AbsVehicle.MasterPressure, PLANT_AbsWheel_xx.BrakePressure, bar
+PLANT_ABS_WHEEL_SPEED = (0.0, 600.0)        # PLANT_AbsWheel_xx.WheelSpeed, km/h
+PLANT_ABS_SLIP = (-1.0, 1.0)                # PLANT_AbsWheel_xx.Slip
+PLANT_ABS_LOAD = (0.0, 12750.0)             # PLANT_AbsWheel_xx.NormalLoad, N
+
+_WHEELS = ("FL", "FR", "RL", "RR")
 
 #: (message, signal) -> bounds, for the cross-check against the DBC.
 BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
-    **{(f"VCU_WheelCmd_{c}", "SteerAngleCmd"): STEER_ANGLE_CMD for c in ("FL", "FR", "RL", "RR")},
-    **{(f"VCU_WheelCmd_{c}", "WheelSpeedCmd"): WHEEL_SPEED_CMD for c in ("FL", "FR", "RL", "RR")},
-    **{(f"WHL_Status_{c}", "SteerAngle"): STEER_ANGLE for c in ("FL", "FR", "RL", "RR")},
-    **{(f"WHL_Status_{c}", "WheelSpeed"): WHEEL_SPEED for c in ("FL", "FR", "RL", "RR")},
-    **{(f"WHL_Status_{c}", "SteerMotorCurrent"): STEER_MOTOR_CURRENT for c in ("FL", "FR", "RL", "RR")},
+    **{(f"VCU_WheelCmd_{c}", "SteerAngleCmd"): STEER_ANGLE_CMD for c in _WHEELS},
+    **{(f"VCU_WheelCmd_{c}", "WheelSpeedCmd"): WHEEL_SPEED_CMD for c in _WHEELS},
+    **{(f"WHL_Status_{c}", "SteerAngle"): STEER_ANGLE for c in _WHEELS},
+    **{(f"WHL_Status_{c}", "WheelSpeed"): WHEEL_SPEED for c in _WHEELS},
+    **{(f"WHL_Status_{c}", "SteerMotorCurrent"): STEER_MOTOR_CURRENT for c in _WHEELS},
     ("VCU_VehicleState", "VehicleSpeed"): VEHICLE_SPEED,
     ("VCU_VehicleState", "YawRateTarget"): YAW_RATE_TARGET,
     ("VCU_VehicleState", "CurvatureAngle"): CURVATURE_ANGLE,
@@ -53,6 +78,31 @@ BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
     ("PLANT_Dynamics", "LatAccel"): PLANT_ACCEL,
     ("PLANT_Dynamics", "LongAccel"): PLANT_ACCEL,
     ("PLANT_Status", "PlantTime"): PLANT_TIME,
+    ("SBW_HandWheel", "HandWheelAngle"): SBW_HAND_WHEEL_ANGLE,
+    ("SBW_HandWheel", "DriverTorque"): SBW_DRIVER_TORQUE,
+    ("SBW_HandWheel", "RoadFeelTorque"): SBW_ROAD_FEEL_TORQUE,
+    ("SBW_HandWheel", "RoadFeelMotorCurrent"): SBW_ROAD_FEEL_CURRENT,
+    ("SBW_Pinion", "PinionAngle"): SBW_PINION_ANGLE,
+    ("SBW_Pinion", "PinionAngleTarget"): SBW_PINION_ANGLE,
+    ("SBW_Pinion", "SteerMotorCurrent"): SBW_STEER_MOTOR_CURRENT,
+    ("SBW_Pinion", "RackForce"): SBW_RACK_FORCE,
+    ("PLANT_SbwAngles", "HandWheelAngle"): PLANT_SBW_ANGLE,
+    ("PLANT_SbwAngles", "PinionAngle"): PLANT_SBW_ANGLE,
+    ("PLANT_SbwTorques", "DriverTorque"): PLANT_SBW_TORQUE,
+    ("PLANT_SbwTorques", "RoadFeelTorque"): PLANT_SBW_TORQUE,
+    ("PLANT_SbwTorques", "AligningTorque"): PLANT_SBW_TORQUE,
+    ("PLANT_SbwSensors", "HandWheelSensor"): PLANT_SBW_SENSOR_ANGLE,
+    ("PLANT_SbwSensors", "PinionSensor"): PLANT_SBW_SENSOR_ANGLE,
+    **{("ABS_WheelSpeeds", f"WheelSpeed{w}"): ABS_WHEEL_SPEED for w in _WHEELS},
+    ("ABS_SteerState", "RefVehicleSpeed"): ABS_REF_SPEED,
+    ("ABS_SteerState", "FrontWheelAngleEst"): ABS_ANGLE,
+    ("PLANT_AbsVehicle", "VehicleSpeed"): PLANT_ABS_SPEED,
+    ("PLANT_AbsVehicle", "FrontWheelAngle"): PLANT_ABS_ANGLE,
+    ("PLANT_AbsVehicle", "MasterPressure"): PLANT_ABS_PRESSURE,
+    **{(f"PLANT_AbsWheel_{w}", "WheelSpeed"): PLANT_ABS_WHEEL_SPEED for w in _WHEELS},
+    **{(f"PLANT_AbsWheel_{w}", "Slip"): PLANT_ABS_SLIP for w in _WHEELS},
+    **{(f"PLANT_AbsWheel_{w}", "BrakePressure"): PLANT_ABS_PRESSURE for w in _WHEELS},
+    **{(f"PLANT_AbsWheel_{w}", "NormalLoad"): PLANT_ABS_LOAD for w in _WHEELS},
 }
 
 

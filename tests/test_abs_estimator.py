@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from plant import braking_plant
+from plant import signal_ranges as ranges
 from plant.ecus import abs as abs_ecu
 from plant.ecus.abs import estimator_config
 from plant.ecus.abs_estimator import (
@@ -216,18 +216,18 @@ def test_mirrored_ranges_match_the_dbcs() -> None:
     chassis, bench = cantools.database.load_file(CHASSIS_DBC), cantools.database.load_file(BENCH_DBC)
     for w in ("FL", "FR", "RL", "RR"):
         s = _signal(chassis, "ABS_WheelSpeeds", f"WheelSpeed{w}")
-        assert (s.minimum, s.maximum) == abs_ecu.WHEEL_SPEED_RANGE
+        assert (s.minimum, s.maximum) == ranges.ABS_WHEEL_SPEED
         assert s.scale == PARAMS.sensor_quantum
-        for sig, rng in (("WheelSpeed", braking_plant.TRUTH_WHEEL_SPEED), ("Slip", braking_plant.TRUTH_SLIP),
-                         ("BrakePressure", braking_plant.TRUTH_PRESSURE), ("NormalLoad", braking_plant.TRUTH_LOAD)):
+        for sig, rng in (("WheelSpeed", ranges.PLANT_ABS_WHEEL_SPEED), ("Slip", ranges.PLANT_ABS_SLIP),
+                         ("BrakePressure", ranges.PLANT_ABS_PRESSURE), ("NormalLoad", ranges.PLANT_ABS_LOAD)):
             s = _signal(bench, f"PLANT_AbsWheel_{w}", sig)
             assert (s.minimum, s.maximum) == rng, sig
     s = _signal(chassis, "ABS_SteerState", "RefVehicleSpeed")
-    assert (s.minimum, s.maximum) == abs_ecu.REF_SPEED_RANGE
+    assert (s.minimum, s.maximum) == ranges.ABS_REF_SPEED
     s = _signal(chassis, "ABS_SteerState", "FrontWheelAngleEst")
-    assert (s.minimum, s.maximum) == abs_ecu.ANGLE_RANGE
-    for sig, rng in (("VehicleSpeed", braking_plant.TRUTH_SPEED), ("FrontWheelAngle", braking_plant.TRUTH_ANGLE),
-                     ("MasterPressure", braking_plant.TRUTH_PRESSURE)):
+    assert (s.minimum, s.maximum) == ranges.ABS_ANGLE
+    for sig, rng in (("VehicleSpeed", ranges.PLANT_ABS_SPEED), ("FrontWheelAngle", ranges.PLANT_ABS_ANGLE),
+                     ("MasterPressure", ranges.PLANT_ABS_PRESSURE)):
         s = _signal(bench, "PLANT_AbsVehicle", sig)
         assert (s.minimum, s.maximum) == rng, sig
     assert chassis.get_message_by_name("ABS_SteerState").cycle_time == abs_ecu.OUTPUT_PERIOD_MS

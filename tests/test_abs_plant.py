@@ -13,12 +13,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plant import braking_plant, signal_ranges
+from plant import signal_ranges
 from plant.assemblies.aclass_abs import build
 from plant.brakes import BrakeHydraulics, Valve
 from plant.braking_plant import vehicle_spec
 from plant.braking_vehicle import BrakingVehicle
-from plant.ecus import abs as abs_ecu
 from plant.ecus.abs import AbsEcu, AbsFault
 from plant.factory import assemble
 from plant.sensors import WheelSpeedSensors
@@ -147,12 +146,7 @@ def test_sensors_quantise_are_seeded_and_have_the_configured_noise() -> None:
 class FakeIO:
     """Latest values per message; every sent value must be finite and inside the DBC range mirrored in plant/."""
 
-    RANGES = {**signal_ranges.BY_SIGNAL,
-              **{("ABS_WheelSpeeds", f"WheelSpeed{w}"): abs_ecu.WHEEL_SPEED_RANGE for w in "FL FR RL RR".split()},
-              ("ABS_SteerState", "RefVehicleSpeed"): abs_ecu.REF_SPEED_RANGE,
-              ("ABS_SteerState", "FrontWheelAngleEst"): abs_ecu.ANGLE_RANGE,
-              ("PLANT_AbsVehicle", "VehicleSpeed"): braking_plant.TRUTH_SPEED,
-              ("PLANT_AbsVehicle", "FrontWheelAngle"): braking_plant.TRUTH_ANGLE}
+    RANGES = signal_ranges.BY_SIGNAL
 
     def __init__(self) -> None:
         self.t = 0.0

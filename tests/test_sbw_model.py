@@ -15,9 +15,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.node import Behaviour
+from plant import signal_ranges as ranges
 from plant.assemblies import aclass
 from plant.driver import ANGLE, OFF, TORQUE, SteeringRobot
-from plant.ecus import sbw as ecu_module
 from plant.ecus.sbw import SbwEcu, SbwFault, SteeringMode
 from plant.factory import assemble
 from plant.sbw import SbwMechanics, SbwSensors, SensorFault
@@ -62,7 +62,7 @@ class FakeIO:
         pass
 
 
-BOUNDS = {**ecu_module.BY_SIGNAL, **aclass.BY_SIGNAL}
+BOUNDS = ranges.BY_SIGNAL
 
 
 class Rig:

@@ -47,21 +47,6 @@ _KMH = 3.6
 NAME, CODE = "ACLASS", 1     # BENCH_Control.Vehicle value table
 PARAMETERS = (PARAMETER_FILES["ACLASS"], PARAMETER_FILES["SBW"])
 
-# bench.dbc ranges of the SBW ground truth (tests/test_sbw_model.py checks them against the file)
-TRUTH_ANGLE = (-2000.0, 2000.0)          # PLANT_SbwAngles.HandWheelAngle/PinionAngle, deg
-TRUTH_TORQUE = (-65.0, 65.0)             # PLANT_SbwTorques.DriverTorque/RoadFeelTorque/AligningTorque, N·m
-SENSOR_ANGLE = (-3000.0, 3000.0)         # PLANT_SbwSensors.HandWheelSensor/PinionSensor, deg
-WHEEL_SPEED = (0.0, 204.75)              # ABS_WheelSpeeds.WheelSpeedxx, km/h (chassis.dbc)
-BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
-    ("PLANT_SbwAngles", "HandWheelAngle"): TRUTH_ANGLE,
-    ("PLANT_SbwAngles", "PinionAngle"): TRUTH_ANGLE,
-    ("PLANT_SbwTorques", "DriverTorque"): TRUTH_TORQUE,
-    ("PLANT_SbwTorques", "RoadFeelTorque"): TRUTH_TORQUE,
-    ("PLANT_SbwTorques", "AligningTorque"): TRUTH_TORQUE,
-    ("PLANT_SbwSensors", "HandWheelSensor"): SENSOR_ANGLE,
-    ("PLANT_SbwSensors", "PinionSensor"): SENSOR_ANGLE,
-    **{("ABS_WheelSpeeds", f"WheelSpeed{w}"): WHEEL_SPEED for w in ("FL", "FR", "RL", "RR")},
-}
 
 #: What this vehicle's network carries from the plant's side (plant/factory.py stops the rest): the SBW ECU,
 #: the IMU, the ABS node (wheel speeds; ABS_SteerState at its start values), the body's and the SBW's ground truth.
@@ -200,13 +185,14 @@ class AclassPlant:
             return
         s = self.sensors
         mech.read(s)
-        io.send_values("PLANT_SbwAngles", HandWheelAngle=clamp(mech.theta_h * _DEG, TRUTH_ANGLE),
-                       PinionAngle=clamp(mech.theta_p * _DEG, TRUTH_ANGLE))
-        io.send_values("PLANT_SbwTorques", DriverTorque=clamp(mech.driver_torque, TRUTH_TORQUE),
-                       RoadFeelTorque=clamp(mech.road_feel_torque, TRUTH_TORQUE),
-                       AligningTorque=clamp(mech.aligning_torque, TRUTH_TORQUE))
-        io.send_values("PLANT_SbwSensors", HandWheelSensor=clamp(s.hand_wheel * _DEG, SENSOR_ANGLE),
-                       PinionSensor=clamp(s.pinion * _DEG, SENSOR_ANGLE))
+        io.send_values("PLANT_SbwAngles", HandWheelAngle=clamp(mech.theta_h * _DEG, ranges.PLANT_SBW_ANGLE),
+                       PinionAngle=clamp(mech.theta_p * _DEG, ranges.PLANT_SBW_ANGLE))
+        io.send_values("PLANT_SbwTorques", DriverTorque=clamp(mech.driver_torque, ranges.PLANT_SBW_TORQUE),
+                       RoadFeelTorque=clamp(mech.road_feel_torque, ranges.PLANT_SBW_TORQUE),
+                       AligningTorque=clamp(mech.aligning_torque, ranges.PLANT_SBW_TORQUE))
+        sensor_range = ranges.PLANT_SBW_SENSOR_ANGLE
+        io.send_values("PLANT_SbwSensors", HandWheelSensor=clamp(s.hand_wheel * _DEG, sensor_range),
+                       PinionSensor=clamp(s.pinion * _DEG, sensor_range))
 
 
 class WheelSpeedSensors:
@@ -238,7 +224,7 @@ class WheelSpeedSensors:
         for name, x, y, steered in self.positions:
             vx, vy = u - r * y, v + r * x
             speed = vx * c + vy * s if steered else vx
-            out[f"WheelSpeed{name}"] = ranges.clamp(abs(speed) * _KMH, WHEEL_SPEED)
+            out[f"WheelSpeed{name}"] = ranges.clamp(abs(speed) * _KMH, ranges.ABS_WHEEL_SPEED)
         io.send_values("ABS_WheelSpeeds", **out)
 
 

@@ -42,6 +42,7 @@ from enum import IntEnum
 from typing import Protocol
 
 from bench.node import NodeIO
+from plant import signal_ranges as ranges
 from plant.brakes import Valve
 from plant.ecus.abs_control import ControlConfig, WheelController
 from plant.ecus.abs_estimator import STRAIGHT, Estimate, EstimatorConfig, TurnStateEstimator
@@ -50,10 +51,6 @@ from plant.vehicles import AbsParams, AclassParams
 KMH = 3.6
 OUTPUT_PERIOD_MS = 10            # ABS_WheelSpeeds / ABS_SteerState cycle (dbc/chassis.dbc)
 ACCEL_WINDOW = 4                 # control periods over which the wheel acceleration is differenced (20 ms)
-#: DBC ranges of what this node sends (dbc/chassis.dbc; checked by tests/test_abs_estimator.py)
-WHEEL_SPEED_RANGE = (0.0, 204.75)
-REF_SPEED_RANGE = (0.0, 250.0)
-ANGLE_RANGE = (-90.0, 90.0)
 SENSOR_LOST_KMH, SENSOR_OTHERS_KMH, SENSOR_LOST_S = 1.0, 20.0, 0.5
 #: select-low on the rear axle: DECREASE wins over HOLD, HOLD over INCREASE
 _SELECT_LOW_RANK = {Valve.INCREASE: 0, Valve.HOLD: 1, Valve.DECREASE: 2}
@@ -161,9 +158,9 @@ class AbsEcu:
         pedals = io.latest("DRV_Pedals")
         speeds = self.hardware.read_sensors(period)
         fault = AbsFault.OK
-        if not all(math.isfinite(v) and WHEEL_SPEED_RANGE[0] <= v <= WHEEL_SPEED_RANGE[1] for v in speeds):
+        if not all(math.isfinite(v) and ranges.ABS_WHEEL_SPEED[0] <= v <= ranges.ABS_WHEEL_SPEED[1] for v in speeds):
             fault = AbsFault.WHEEL_SPEED_INVALID
-            speeds = [_clamp(v, WHEEL_SPEED_RANGE) for v in speeds]
+            speeds = [_clamp(v, ranges.ABS_WHEEL_SPEED) for v in speeds]
         self.speeds = speeds
         self._history.append(speeds)
         braking = pedals is not None and brake_demand(pedals, p.pedal_to_pressure) >= p.brake_switch_pressure
@@ -237,7 +234,7 @@ class AbsEcu:
             turn, ref, angle = 0, sorted(speeds)[1], 0.0
         io.send_values("ABS_WheelSpeeds", WheelSpeedFL=speeds[0], WheelSpeedFR=speeds[1],
                        WheelSpeedRL=speeds[2], WheelSpeedRR=speeds[3])
-        io.send_values("ABS_SteerState", RefVehicleSpeed=_clamp(ref, REF_SPEED_RANGE),
-                       FrontWheelAngleEst=_clamp(angle, ANGLE_RANGE), TurnDirection=turn,
+        io.send_values("ABS_SteerState", RefVehicleSpeed=_clamp(ref, ranges.ABS_REF_SPEED),
+                       FrontWheelAngleEst=_clamp(angle, ranges.ABS_ANGLE), TurnDirection=turn,
                        AbsActive=1 if active else 0, PressureStateFL=states[0], PressureStateFR=states[1],
                        PressureStateRL=states[2], PressureStateRR=states[3], AbsFault=int(self.fault))

@@ -56,24 +56,6 @@ _KMH = 1.0 / 3.6
 TORQUE_RATE_FILTER = 5e-4   # s, first-order filter of the driver-torque rate (chosen: a real sensor is noisy)
 ADDITIONAL_ANGLE_FILTER = 0.02   # s, first-order filter of the feedback's additional angle (chosen)
 
-# DBC ranges of what the SBW sends (dbc/chassis.dbc; tests/test_sbw_model.py checks them against the file).
-HAND_WHEEL_ANGLE = (-900.0, 900.0)        # SBW_HandWheel.HandWheelAngle, deg
-DRIVER_TORQUE = (-50.0, 50.0)             # SBW_HandWheel.DriverTorque, N·m
-ROAD_FEEL_TORQUE = (-20.0, 20.0)          # SBW_HandWheel.RoadFeelTorque, N·m
-ROAD_FEEL_CURRENT = (-50.0, 50.0)         # SBW_HandWheel.RoadFeelMotorCurrent, A
-PINION_ANGLE = (-900.0, 900.0)            # SBW_Pinion.PinionAngle and PinionAngleTarget, deg
-STEER_MOTOR_CURRENT = (-60.0, 60.0)       # SBW_Pinion.SteerMotorCurrent, A
-RACK_FORCE = (-12000.0, 12000.0)          # SBW_Pinion.RackForce, N
-BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
-    ("SBW_HandWheel", "HandWheelAngle"): HAND_WHEEL_ANGLE,
-    ("SBW_HandWheel", "DriverTorque"): DRIVER_TORQUE,
-    ("SBW_HandWheel", "RoadFeelTorque"): ROAD_FEEL_TORQUE,
-    ("SBW_HandWheel", "RoadFeelMotorCurrent"): ROAD_FEEL_CURRENT,
-    ("SBW_Pinion", "PinionAngle"): PINION_ANGLE,
-    ("SBW_Pinion", "PinionAngleTarget"): PINION_ANGLE,
-    ("SBW_Pinion", "SteerMotorCurrent"): STEER_MOTOR_CURRENT,
-    ("SBW_Pinion", "RackForce"): RACK_FORCE,
-}
 
 
 class SbwFault(IntEnum):
@@ -314,13 +296,13 @@ class SbwEcu:
     def _publish(self, io: NodeIO) -> None:
         clamp = ranges.clamp                        # NaN-safe: a NaN (never expected) is sent as 0
         io.send_values("SBW_HandWheel",
-                       HandWheelAngle=clamp(self.hand_wheel * _DEG, HAND_WHEEL_ANGLE),
-                       DriverTorque=clamp(self.driver_torque, DRIVER_TORQUE),
-                       RoadFeelTorque=clamp(self.kt_c * self.road_feel_current, ROAD_FEEL_TORQUE),
-                       RoadFeelMotorCurrent=clamp(self.road_feel_current, ROAD_FEEL_CURRENT))
+                       HandWheelAngle=clamp(self.hand_wheel * _DEG, ranges.SBW_HAND_WHEEL_ANGLE),
+                       DriverTorque=clamp(self.driver_torque, ranges.SBW_DRIVER_TORQUE),
+                       RoadFeelTorque=clamp(self.kt_c * self.road_feel_current, ranges.SBW_ROAD_FEEL_TORQUE),
+                       RoadFeelMotorCurrent=clamp(self.road_feel_current, ranges.SBW_ROAD_FEEL_CURRENT))
         io.send_values("SBW_Pinion",
-                       PinionAngle=clamp(self.pinion * _DEG, PINION_ANGLE),
-                       PinionAngleTarget=clamp((self.hand_wheel + self.offset) * _DEG, PINION_ANGLE),
-                       SteerMotorCurrent=clamp(self.steer_current, STEER_MOTOR_CURRENT),
-                       RackForce=clamp(self.rack_force, RACK_FORCE),
+                       PinionAngle=clamp(self.pinion * _DEG, ranges.SBW_PINION_ANGLE),
+                       PinionAngleTarget=clamp((self.hand_wheel + self.offset) * _DEG, ranges.SBW_PINION_ANGLE),
+                       SteerMotorCurrent=clamp(self.steer_current, ranges.SBW_STEER_MOTOR_CURRENT),
+                       RackForce=clamp(self.rack_force, ranges.SBW_RACK_FORCE),
                        SbwFault=int(self.fault))
