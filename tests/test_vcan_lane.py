@@ -1,14 +1,16 @@
-"""`bench plant` as its own process on a SocketCAN vcan0, judged by an independent python-can receiver.
+"""The vcan lane: `bench plant` as its own process on a SocketCAN vcan0, and the lane script's own checks.
 
-Runs where the kernel has vcan0: in the vcan lane (scripts/vcan-lane --command, which .ci/run runs in a QEMU
-guest on machines without SocketCAN) and on any Linux host with vcan0 up. Elsewhere it skips, except inside
-the lane (VCAN_CHANNEL set), where a missing vcan0 is a failure: the lane must never pass by skipping.
+The plant test runs where the kernel has vcan0: in the vcan lane (scripts/vcan-lane --command, which .ci/run runs
+in a User-mode Linux guest on machines without SocketCAN) and on any Linux host with vcan0 up. Elsewhere it
+skips, except inside the lane (VCAN_CHANNEL set), where a missing vcan0 is a failure: the lane must never pass
+by skipping. What it checks, from the kernel's receive timestamps of a receiver that only collects (and judges
+after): every frame of the plant keeps the contract (docs/spec/k-matrix.md: AliveCounter +1 per frame,
+CRC-8/SAE-J1850 over identifier and data, tests/reference.py), every message of the vehicle's network is there
+at its DBC cycle time (p50 within 5 %, as Case.check_cycle_times), no frame of another vehicle's network is on
+the bus, and the plant's own status line reports no invalid frame.
 
-What is checked, from the kernel's receive timestamps of a receiver that only collects (and judges after):
-every frame of the plant keeps the contract (docs/spec/k-matrix.md: AliveCounter +1 per frame, CRC-8/SAE-J1850 over
-identifier and data, tests/reference.py), every message of the vehicle's network is there at its DBC cycle
-time (p50 within 5 %, as Case.check_cycle_times), no frame of another vehicle's network is on the bus, and the
-plant's own status line reports no invalid frame.
+The other tests run on the host (not in the lane): the lanes' selections name cases, and the report check
+(scripts/vcan-lane check_report) accepts the invalid frames of a fault case and flags them anywhere else.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import signal
 import statistics
 import subprocess
 import sys
+from pathlib import Path
 
 import can
 import pytest
@@ -26,19 +29,21 @@ from bench.config import load_config
 from plant.factory import messages_of, vehicles
 from tests.reference import contract_checksum
 from tests.repo import ROOT
-from tests.vcan import CHANNEL, IN_LANE, has_vcan
+from tests.vcan import CHANNEL, IN_LANE, has_vcan, load_lane_script
 
 WARM_UP_S = 2.0     # s after the plant's first frame before judging (its BCM tasks start after 3 cycles)
 WINDOW_S = 6.0      # s of bus judged
 
 
-if not has_vcan():
-    if IN_LANE:
-        raise RuntimeError(f"the vcan lane set VCAN_CHANNEL={CHANNEL}, but this kernel has no such SocketCAN "
-                           "interface")
-    pytest.skip(f"needs SocketCAN and {CHANNEL} (the vcan lane runs it: scripts/vcan-lane)", allow_module_level=True)
+if IN_LANE and not has_vcan():
+    raise RuntimeError(f"the vcan lane set VCAN_CHANNEL={CHANNEL}, but this kernel has no such SocketCAN interface")
+
+needs_vcan = pytest.mark.skipif(not has_vcan(), reason=f"needs SocketCAN and {CHANNEL} (the vcan lane runs it: "
+                                                        "scripts/vcan-lane)")
+on_host = pytest.mark.skipif(IN_LANE, reason="the lane script's host-side logic; not run inside the lane")
 
 
+@needs_vcan
 def test_plant_process_keeps_the_contract_on_vcan() -> None:
     codebook = load_codebook(load_config().databases)
     receiver = can.Bus(interface="socketcan", channel=CHANNEL, receive_own_messages=False)
@@ -85,3 +90,56 @@ def test_plant_process_keeps_the_contract_on_vcan() -> None:
             assert abs(p50 - codec.cycle_time) <= 0.05 * codec.cycle_time, \
                 f"{codec.name}: p50 {p50 * 1000:.2f} ms, DBC {codec.cycle_time * 1000:g} ms"
             assert len(msgs) >= 0.9 * WINDOW_S / codec.cycle_time, f"{codec.name}: {len(msgs)} frames"
+
+
+@on_host
+def test_every_lane_selects_test_files() -> None:
+    """Each lane's selection (globs, in one place of the script) names test files: a moved campaign fails here,
+    not as an empty lane."""
+    lane = load_lane_script()
+    assert set(lane.LANES) == {"in-process", "plant-process", "example-vcu"}
+    for name, spec in lane.LANES.items():
+        paths = lane.lane_selection(spec)
+        assert bool(paths) == bool(spec.selection), name
+        for path in map(Path, paths):
+            files = [path] if path.is_file() else list(path.rglob("test_*.py"))
+            assert files, f"{name}: {path} holds no test file"
+
+
+@pytest.fixture(scope="module")
+def fault_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A bench run (virtual bus) of one fault case: a counter jump on DRV_MotionRequest makes invalid frames."""
+    out = tmp_path_factory.mktemp("lane") / "fault-run"
+    result = subprocess.run([sys.executable, "-m", "bench", "run", "-k", "counter_jump", "--out", str(out)],
+                            cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    return out
+
+
+@on_host
+def test_report_check_accepts_the_invalid_frames_of_a_fault_case(fault_run: Path) -> None:
+    lane = load_lane_script()
+    facts = lane.read_log_facts(fault_run / "run.mcap")
+    assert facts.complete and facts.cases == 1
+    assert sum(facts.invalid.values()) > 0, "the counter jump made no invalid frame"
+    assert set(facts.invalid) <= facts.fault_cases
+    assert lane.check_report(fault_run) == []
+
+
+@on_host
+def test_report_check_flags_invalid_frames_outside_fault_cases(fault_run: Path,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same log read as if no case had injected a fault: each of its invalid frames is then a problem."""
+    lane = load_lane_script()
+    facts = lane.read_log_facts(fault_run / "run.mcap")
+    facts.fault_cases.clear()
+    monkeypatch.setattr(lane, "read_log_facts", lambda path: facts)
+    problems = lane.check_report(fault_run)
+    (case, count), = facts.invalid.items()
+    assert problems == [f"{count} invalid frames in {case} (no fault injected there; first: {facts.first[case]})"]
+
+
+@on_host
+def test_report_check_lists_missing_reports(tmp_path: Path) -> None:
+    assert load_lane_script().check_report(tmp_path) == [
+        "missing or empty report.html", "missing or empty run.mcap", "missing or empty junit.xml"]

@@ -6,8 +6,13 @@ interface is missing, so that the lane never passes empty.
 
 from __future__ import annotations
 
+import importlib.machinery
+import importlib.util
 import os
 import socket
+import sys
+from pathlib import Path
+from types import ModuleType
 
 CHANNEL = os.environ.get("VCAN_CHANNEL", "vcan0")
 IN_LANE = "VCAN_CHANNEL" in os.environ
@@ -21,3 +26,18 @@ def has_vcan(channel: str = CHANNEL) -> bool:
         return False
     sock.close()
     return os.path.exists(f"/sys/class/net/{channel}")
+
+
+def load_lane_script() -> ModuleType:
+    """scripts/vcan-lane as a module (its file name has no .py), for the tests of its host-side logic."""
+    name = "vcan_lane"
+    if name in sys.modules:
+        return sys.modules[name]
+    path = Path(__file__).resolve().parent.parent / "scripts" / "vcan-lane"
+    loader = importlib.machinery.SourceFileLoader(name, str(path))
+    spec = importlib.util.spec_from_loader(name, loader)
+    assert spec is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module       # dataclasses look their module up while the file executes
+    loader.exec_module(module)
+    return module
