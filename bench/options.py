@@ -39,6 +39,7 @@ class OptionSpec:
     many: bool = False                           # list: several values after one flag on the command line
     plugin: bool = True                          # the pytest plugin declares --bench-NAME
     passthrough: str | None = None               # plugin=False: the pytest option `bench run` hands it to
+    plugin_help: str | None = None               # the plugin's help where the command line's would mislead
 
     @property
     def dest(self) -> str:
@@ -117,7 +118,8 @@ OPTIONS: tuple[OptionSpec, ...] = (
                             "default: .test_durations next to bench.toml; docs/ci.md says how to refresh it)",
                metavar="FILE"),
     OptionSpec("out", "output folder (default: a new folder under reports/); an existing non-empty one only "
-                      "with --force"),
+                      "with --force", plugin_help="folder for report.html, run.mcap, junit.xml (default: a new "
+                                                  "folder under reports/)"),
     OptionSpec("force", "write into an existing --out folder that is not empty (its reports are replaced)",
                kind="flag", aliases=("--overwrite",), plugin=False),
     OptionSpec("workers", "run the cases in N processes (pytest-xdist; 'auto' = one per core), each with its own "
@@ -134,18 +136,32 @@ def _help(spec: OptionSpec, default: Any, text: str | None) -> str:
     return (text or spec.help).replace("{default}", str(default))
 
 
+def _value_kwargs(spec: OptionSpec) -> dict[str, Any]:
+    """type, choices and metavar of an option that takes values (both sides alike)."""
+    if spec.kind not in ("value", "list"):
+        return {}
+    out: dict[str, Any] = {}
+    if spec.type is not None:
+        out["type"] = spec.type
+    if spec.choices:
+        out["choices"] = list(spec.choices)
+    if spec.metavar:
+        out["metavar"] = spec.metavar
+    return out
+
+
 # -- the command line ----------------------------------------------------------------------------------
 def add_cli_options(parser: argparse.ArgumentParser, names: Iterable[str], *,
                     defaults: Mapping[str, Any] | None = None, helps: Mapping[str, str] | None = None) -> None:
     """Declare the named options on an argparse parser (bus options in a "bus" section). `defaults` and
     `helps` adapt an option to a command (e.g. `plant` defaults to udp_multicast)."""
-    groups: dict[str, Any] = {}
+    bus: Any = None
     for name in names:
         spec = BY_NAME[name]
         default = (defaults or {}).get(name, spec.default)
-        target = parser
+        target: Any = parser
         if spec.group == "bus":
-            target = groups.get("bus") or groups.setdefault("bus", parser.add_argument_group("bus"))
+            bus = target = bus or parser.add_argument_group("bus")
         if spec.passthrough and spec.short:       # pytest's own spelling (-k, -n) is the command line's too
             flags = [spec.short]
         else:
@@ -161,14 +177,7 @@ def add_cli_options(parser: argparse.ArgumentParser, names: Iterable[str], *,
                 kwargs["nargs"] = "+"
         else:
             kwargs["default"] = default
-        if spec.kind in ("value", "list"):
-            if spec.type is not None:
-                kwargs["type"] = spec.type
-            if spec.choices:
-                kwargs["choices"] = spec.choices
-            if spec.metavar:
-                kwargs["metavar"] = spec.metavar
-        target.add_argument(*flags, **kwargs)
+        target.add_argument(*flags, **kwargs, **_value_kwargs(spec))
 
 
 def pytest_args(args: argparse.Namespace, names: Iterable[str]) -> list[str]:
@@ -209,7 +218,7 @@ def add_pytest_options(group: Any, specs: Sequence[OptionSpec] = OPTIONS) -> Non
     for spec in specs:
         if not spec.plugin:
             continue
-        help_text = _PLUGIN_NAMES.sub(lambda m: f"--bench-{m.group(1)}", _help(spec, spec.default, None))
+        help_text = _PLUGIN_NAMES.sub(lambda m: f"--bench-{m.group(1)}", _help(spec, spec.default, spec.plugin_help))
         if spec.kind == "switch":
             group.addoption(spec.pytest_name, action="store_true", default=None, dest=spec.pytest_dest,
                             help=help_text)
@@ -224,14 +233,7 @@ def add_pytest_options(group: Any, specs: Sequence[OptionSpec] = OPTIONS) -> Non
             kwargs["help"] = help_text + "; repeatable"
         else:
             kwargs["default"] = spec.default
-        if spec.kind in ("value", "list"):
-            if spec.type is not None:
-                kwargs["type"] = spec.type
-            if spec.choices:
-                kwargs["choices"] = list(spec.choices)
-            if spec.metavar:
-                kwargs["metavar"] = spec.metavar
-        group.addoption(spec.pytest_name, **kwargs)
+        group.addoption(spec.pytest_name, **kwargs, **_value_kwargs(spec))
 
 
 def get(config: Any, name: str) -> Any:
