@@ -26,6 +26,7 @@ from tests.repo import ROOT
 
 CHASSIS_DBC, BENCH_DBC = ROOT / "dbc" / "chassis.dbc", ROOT / "dbc" / "bench.dbc"
 MINI = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"
+SCENARIO = '[scenario]\ncommand = "BENCH_Control.ScenarioId"\nack = "PLANT_Status.ScenarioIdAck"\n'
 
 FAKE_MODULE = '''
 import json, os
@@ -84,7 +85,7 @@ def project(tmp_path: Path, bus_table: str = "", baudrate: int | None = None) ->
     path = tmp_path / "bench.toml"
     path.write_text(f'[bench]\ndatabases = ["{chassis}", "{bench_dbc}"]\nstimulus = ["DRIVER", "TESTER"]\n'
                     f'plant = "chassis"\ntestcases = "{ROOT / "testcases"}"\nreports = "{tmp_path / "reports"}"\n'
-                    f'{bus_table}', encoding="utf-8")
+                    f'{SCENARIO}{bus_table}', encoding="utf-8")
     return path
 
 

@@ -26,7 +26,8 @@ def hostile_project(folder: Path) -> Path:
     dbc.write_text(text, encoding="utf-8")
     config = folder / "bench.toml"
     config.write_text(f'[bench]\ndatabases = ["{dbc}", "{BENCH_DBC}"]\nstimulus = ["DRIVER", "TESTER"]\n'
-                      f'plant = "chassis"\ntestcases = "{ROOT / "testcases"}"\nreports = "{folder / "reports"}"\n')
+                      f'plant = "chassis"\ntestcases = "{ROOT / "testcases"}"\nreports = "{folder / "reports"}"\n'
+                      '[scenario]\ncommand = "BENCH_Control.ScenarioId"\nack = "PLANT_Status.ScenarioIdAck"\n')
     return config
 
 
