@@ -2,7 +2,8 @@
 processes, `bench report merge`, and the merged report against the one-process report, case for case.
 
 The subset is a small real part of the campaign (about a dozen fast cases of two vehicles); the shards run
-at the same time, as on three CI machines. The mismatch checks then edit copies of the real shard folders.
+at the same time, as on three CI machines, the first with two workers (-n 2). The mismatch checks then edit
+copies of the real shard folders.
 """
 
 from __future__ import annotations
@@ -44,7 +45,9 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     one = base / "one"
     shards = [base / f"shard{k}" for k in range(1, SHARDS + 1)]
     merged = base / "merged"
-    processes = [bench("run", "-k", SUBSET, "--shard", f"{k}/{SHARDS}", "--out", str(folder))
+    # shard 1 also shares its cases between two workers (-n 2): shards and -n combine
+    processes = [bench("run", "-k", SUBSET, "--shard", f"{k}/{SHARDS}", "--out", str(folder),
+                       *(["-n", "2"] if k == 1 else []))
                  for k, folder in enumerate(shards, 1)]
     for process in processes:
         finish(process)
@@ -112,8 +115,10 @@ def test_merged_html_and_log_index(runs: dict[str, Any], capsys: pytest.CaptureF
     for entry in index:
         for name in entry["logs"]:
             assert (merged / name).is_file()
+    logs = [name for entry in index for name in entry["logs"]]
+    assert [name.rpartition("/")[2] for name in logs] == ["run-gw0.mcap", "run-gw1.mcap", "run.mcap", "run.mcap"]
     assert main(["log", "info", str(merged)]) == 0
-    assert capsys.readouterr().out.count("complete") == SHARDS
+    assert capsys.readouterr().out.count("complete") == len(logs)
 
 
 # -- shards that do not make one campaign: each is a clear error naming the folder -------------------------
