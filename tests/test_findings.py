@@ -22,7 +22,7 @@ from bench.findings import MAX_FINDINGS, FindingCollector
 from bench.restbus import Restbus
 from bench.results import Finding, RunResult
 from bench.results_io import dump, load, merge
-from bench.run import RESULTS_NAME, BenchRun
+from bench.run import BenchRun
 
 
 def test_collector_keeps_warnings_of_the_bench_and_the_plant() -> None:
@@ -94,7 +94,7 @@ def test_refused_frames_are_a_warning_and_a_finding(tmp_path: Path, monkeypatch:
     props = [p.get("value") for p in ET.parse(tmp_path / "junit.xml").getroot().iter("property")
              if p.get("name") == "finding"]
     assert any("could not be sent" in (v or "") for v in props)
-    assert load(tmp_path / RESULTS_NAME).findings == result.findings
+    assert load(tmp_path / "results.json").findings == result.findings   # the report folder's record
 
 
 def test_a_clean_run_has_no_finding(tmp_path: Path) -> None:
