@@ -57,7 +57,9 @@ class LogProcess:
     def frame(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, error: str) -> None:
         batch = self._batch
         batch.append((t, arbitration_id, data, direction, valid, error))
-        if len(batch) >= BATCH_FRAMES or time.monotonic() >= self._deadline:
+        # the clock every 32nd frame only: a read is a system call in a UML guest (issue 15), and the runner
+        # logs every frame on the bus
+        if len(batch) >= BATCH_FRAMES or (not len(batch) & 31 and time.monotonic() >= self._deadline):
             self._hand_over()
 
     def step(self, t: float, level: int, name: str, message: str) -> None:

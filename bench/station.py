@@ -81,6 +81,7 @@ class Station:
         self.monitor = monitor
         self.now = now
         self.t = 0.0       # bench time of the tick in progress (or the last one): what its behaviours see
+        self.drained = False   # the clock's wait read the socket empty just before this tick
         # Real time: bench time of a received frame from its receive timestamp (bench.clock.WallClock.stamp,
         # checked against the clock's latest read), so a late station still measures the bus's timing, not its
         # own lateness, and a frame costs no clock read. None: the time of reading.
@@ -159,7 +160,10 @@ class Station:
 
     def tick(self, tick: int, t: float, dt: float) -> None:
         self.t = t
-        self.poll(0.0)
+        if self.drained:   # the clock's wait just found the socket empty (bench.clock.WallClock.wait_until)
+            self.drained = False
+        else:
+            self.poll(0.0)
         io = self.io
         for behaviour in self.behaviours:
             behaviour.step(io, t, dt)

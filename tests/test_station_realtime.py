@@ -295,3 +295,25 @@ def test_a_late_plant_reads_the_clock_once_per_tick(codebook, monkeypatch: pytes
     monkeypatch.setattr(time, "monotonic", counting.real)
     assert scheduler.tick == 100
     assert counting.calls == 100, counting.calls
+
+
+def test_a_tick_after_a_wait_that_found_the_socket_empty_reads_no_more(codebook) -> None:
+    clock = WallClock()
+    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=3)
+    station = _station(codebook, bus, clock)
+    polls: list[float] = []
+    real_poll = station.poll
+
+    def counting_poll(timeout: float = 0.0, limit: int = POLL_BATCH) -> int:
+        polls.append(timeout)
+        return real_poll(timeout, limit)
+
+    station.poll = counting_poll   # type: ignore[method-assign]
+    clock.start()
+    clock.wait_until(0.01, [station])
+    assert station.drained and station.monitor.frames == 3      # the wait read the 3 frames and then nothing
+    waited = len(polls)
+    station.tick(10, 0.01, 0.001)
+    assert len(polls) == waited and not station.drained          # no second look at an empty socket
+    station.tick(11, 0.011, 0.001)                               # not after a wait: it reads
+    assert len(polls) == waited + 1
