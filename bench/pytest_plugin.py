@@ -85,7 +85,10 @@ def pytest_configure(config: pytest.Config) -> None:
             raise pytest.UsageError("-n (pytest-xdist) runs one in-process virtual bus per worker; a real bus "
                                     "has one plant and cannot be shared by several runners")
         if not config.getoption("--bench-out"):
-            project = load_config(_config_path(config))
+            try:   # no bench.toml here or above: one line, not a traceback
+                project = load_config(_config_path(config))
+            except BenchError as exc:
+                raise pytest.UsageError(str(exc)) from None
             config.option.bench_out = str(default_out_dir(project.reports))
         config.stash[_WALL0_KEY] = time.monotonic()
 

@@ -18,6 +18,7 @@ from bench.config import ProjectConfig, RunSettings
 from bench.errors import BenchError, ConfigError
 from bench.faults import FaultPlan
 from bench.monitor import FrameSink, Monitor
+from bench.node import Behaviour
 from bench.plugins import load_plant
 from bench.restbus import Restbus
 from bench.station import Station
@@ -29,7 +30,7 @@ _virtual_channels = itertools.count(1)
 def resolve_external(codebook: Codebook, stimulus: Sequence[str], external: Sequence[str]) -> set[str]:
     """The external nodes named on the command line, checked against the databases."""
     nodes = codebook.nodes
-    names = set()
+    names: set[str] = set()
     for item in external:
         names.update(n for n in item.replace(",", " ").split() if n)
     if ALL in names:
@@ -94,7 +95,7 @@ class BenchSession:
         self.stations[-1].babbles = True
         self.scheduler = Scheduler(self.stations, self.clock)
 
-    def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence, *,
+    def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence[Behaviour], *,
                  every_tick: bool = True) -> Station:
         bus = open_bus(self.settings.interface, self.channel, self.bus_options)
         stamp = getattr(self.clock, "stamp", None)   # real time: frames get their receive timestamps
