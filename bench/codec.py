@@ -249,7 +249,7 @@ class MessageCodec:
             return {k: v if type(v) is int and not -_EXACT_LIMIT <= v <= _EXACT_LIMIT else float(v)
                     for k, v in decoded.items()}
         last_data, last_values = self._last
-        if data == last_data and type(data) is bytes:
+        if data == last_data:
             return last_values.copy()
         if len(data) < self.length:
             raise DecodeError(f"{self.name}: {len(data)} bytes, the message has {self.length}")
@@ -267,8 +267,7 @@ class MessageCodec:
                 if raw & sign_bit:
                     raw -= span
                 out[name] = raw * scale + offset
-        if type(data) is bytes:
-            self._last = (data, out.copy())
+        self._last = (bytes(data), out.copy())   # a copy of a bytearray: the caller may change it later
         return out
 
     def out_of_range(self, values: Mapping[str, float]) -> list[str]:

@@ -88,3 +88,19 @@ def test_strict_encoding_refuses_what_cantools_strict_refuses(codebook: Codebook
         codec.encode(values | {"SteerAngleCmd": 90.01}, strict=True)
     with pytest.raises(cantools_errors.EncodeError, match="not required"):
         codec.encode(values | {"Nope": 1.0}, strict=True)
+
+
+def test_decode_of_the_same_payload_again_gives_the_same_values_as_a_new_dict(codebook: Codebook) -> None:
+    """decode remembers the last payload (the sender's and receiver's monitors decode each frame in one
+    process): a caller that changes its dict, or the bytearray it decoded, never changes a later decode."""
+    codec = next(c for c in codebook.by_id.values() if c.fast and c.length == 8)
+    payload = bytearray(range(1, 9))
+    first = codec.decode(payload)
+    expected = dict(first)
+    first[next(iter(first))] = -12345.0
+    again = codec.decode(bytes(payload))
+    assert again == expected and again is not first
+    payload[0] ^= 0xFF
+    changed = codec.decode(payload)
+    assert changed == codec.decode(bytes(payload)) == {s.name: v for s, v in zip(
+        codec.signals, codec.message.decode(bytes(payload), decode_choices=False).values())} != expected

@@ -100,3 +100,38 @@ def test_shutdown_wakes_a_waiting_recv() -> None:
     bus.shutdown()
     thread.join(2.0)
     assert not thread.is_alive() and len(errors) == 1
+
+
+def test_raw_frames_skip_can_message_yet_python_can_receivers_get_their_own() -> None:
+    """send_raw (the stations' path) hands one shared frame to station readers (raw_frames) and a fresh
+    can.Message, with its channel, is_rx and the sender's time, to a python-can recv; a can.Message sent the
+    python-can way reaches raw_frames as the receiver's copy."""
+    with VirtualTimeBus(channel="raw") as a, VirtualTimeBus(channel="raw") as b, \
+            VirtualTimeBus(channel="raw") as c:
+        payload = bytearray(b"\x01\x02\x03\x04\x05\x06\x07\x08")
+        a.send_raw(0.125, 0x123, payload)
+        payload[0] = 0xFF                      # the sender's buffer changes later: the frame sent does not
+        frames = list(b.raw_frames(0.0, 64))
+        assert [(f.timestamp, f.arbitration_id, bytes(f.data), f.is_extended_id, f.is_error_frame)
+                for f in frames] == [(0.125, 0x123, b"\x01\x02\x03\x04\x05\x06\x07\x08", False, False)]
+        msg = c.recv(0.0)
+        assert msg is not None and msg.timestamp == 0.125 and msg.arbitration_id == 0x123
+        assert msg.channel == "raw" and msg.is_rx and not msg.is_fd and msg.dlc == 8
+        assert msg.data == bytearray(b"\x01\x02\x03\x04\x05\x06\x07\x08") and isinstance(msg.data, bytearray)
+        assert a.recv(0.0) is None             # not its own frames (receive_own_messages=False)
+        a.send(can.Message(timestamp=0.25, arbitration_id=0x7FF, data=b"\x09", is_extended_id=False))
+        (copy,) = list(b.raw_frames(0.0, 64))
+        assert isinstance(copy, can.Message) and copy.arbitration_id == 0x7FF and copy.data == bytearray(b"\x09")
+        for i in range(5):
+            a.send_raw(i, 0x100 + i, b"")
+        assert [f.arbitration_id for f in b.raw_frames(0.0, 3)] == [0x100, 0x101, 0x102]   # at most `limit`
+        assert [f.arbitration_id for f in b.raw_frames(0.0, 3)] == [0x103, 0x104]
+    with pytest.raises(can.CanOperationError):
+        list(b.raw_frames(0.0, 1))
+
+
+def test_raw_frames_of_own_sends_when_asked() -> None:
+    with VirtualTimeBus(channel="own", receive_own_messages=True) as a:
+        a.send_raw(1.0, 0x10, b"\x00")
+        (msg,) = list(a.raw_frames(0.0, 8))
+        assert isinstance(msg, can.Message) and not msg.is_rx and msg.timestamp == 1.0
