@@ -16,6 +16,7 @@ from __future__ import annotations
 import signal
 import time
 from collections.abc import Generator, Iterator
+from datetime import datetime
 from pathlib import Path
 
 import pytest
@@ -32,7 +33,7 @@ from bench.errors import BenchError
 from bench.faults import parse_fault
 from bench.marks import MARKER_HELP, CaseMarks, check_marks, read_marks, skip_reason, split_names
 from bench.options import add_pytest_options
-from bench.results import CaseRef, RequirementInfo, RunResult
+from bench.results import CaseRef, RequirementInfo, RunResult, Table
 from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 from bench.session import resolve_external
 from bench.shard import apply_shard
@@ -304,22 +305,54 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         out_dir = Path(config.getoption("--bench-out"))
         result = _merge_parts(out_dir, time.monotonic() - config.stash.get(_WALL0_KEY, time.monotonic()), aborted)
         if result is None:
-            return
+            result = _empty_shard(config, out_dir, aborted)
+            if result is None:
+                return
     else:
         run = config.stash.get(_RUN_KEY, None)
         if run is None and config.stash[_PENDING_KEY] and not aborted:
             run = _run_for_skipped_cases(config)
-        if run is None:
-            return
         worker = _worker_id(config)
-        part = run.out_dir / PARTS_DIR / f"{worker}.json" if worker else None
-        result = run.finish(aborted=aborted, part_of=part)
-        out_dir = run.out_dir
+        if run is None:
+            out = config.getoption("--bench-out")
+            empty = _empty_shard(config, Path(out) if out else None, aborted, worker)
+            if empty is None or worker:   # a worker's empty part is for the controller to merge
+                return
+            result, out_dir = empty, Path(config.getoption("--bench-out"))
+        else:
+            part = run.out_dir / PARTS_DIR / f"{worker}.json" if worker else None
+            result = run.finish(aborted=aborted, part_of=part)
+            out_dir = run.out_dir
     _last_finished.append(result)
     _record_shard(config, out_dir)
     reporter = config.pluginmanager.get_plugin("terminalreporter")
     if reporter is not None:
         reporter.write_line(f"bench: report in {out_dir}")
+
+
+def _empty_shard(config: pytest.Config, out_dir: Path | None, aborted: bool,
+                 worker: str | None = None) -> RunResult | None:
+    """A shard that no case fell to (more shards than cases, or a narrow -k) still writes its report folder
+    (a pytest-xdist worker: its part of it), so that `bench report merge` gets all N and the campaign they
+    deselected; no bus is opened. None when this run is no shard."""
+    which = shards.current(config)
+    if which is None or aborted:
+        return None
+    project, _ = _facts(config)
+    folder = out_dir or default_out_dir(project.reports)
+    folder.mkdir(parents=True, exist_ok=True)
+    config.option.bench_out = str(folder)
+    settings = RunSettings(interface=config.getoption("--bench-interface"), channel=config.getoption("--bench-channel"))
+    result = RunResult(started=datetime.now().astimezone().isoformat(timespec="seconds"),
+                       interface=settings.interface, channel=settings.channel or "",
+                       time_mode="virtual" if settings.virtual_time else "real", requirements=_catalogue(project),
+                       deselected=[*config.stash[_DESELECTED_KEY]])
+    result.tables.append(Table("Shard", ["shard", "cases"], [[f"{which[0]}/{which[1]}", "none fell to this shard"]]))
+    if worker:
+        results_io.dump(result, folder / PARTS_DIR / f"{worker}.json")
+    else:
+        write_reports(result, folder)
+    return result
 
 
 def _record_shard(config: pytest.Config, out_dir: Path) -> None:

@@ -200,3 +200,17 @@ def test_plain_pytest_takes_the_same_shard_option(tmp_path: Path) -> None:
                              "--bench-out", str(tmp_path / "out")], cwd=ROOT, capture_output=True, text=True,
                             timeout=300)
     assert result.returncode == 4 and "--bench-shard: '4/3': K/N needs 1 <= K <= N" in result.stderr, result.stderr
+
+
+def test_a_shard_no_case_fell_to_still_reports(tmp_path: Path) -> None:
+    """More shards than cases: the empty shard passes and writes its folder, so that the merge gets all N."""
+    one_case = "test_ackermann_normal and 900"
+    folders = [tmp_path / "s1", tmp_path / "s2"]
+    processes = [bench("run", "-k", one_case, "--shard", f"{k}/2", "--out", str(f)) for k, f in enumerate(folders, 1)]
+    for process in processes:
+        finish(process)
+    ran = [cases(f) for f in folders]
+    assert sorted(len(r) for r in ran) == [0, 1]
+    out = finish(bench("report", "merge", *map(str, folders), "--out", str(tmp_path / "merged")))
+    assert "1 cases (1 passed): PASS" in out
+    assert cases(tmp_path / "merged") == {**ran[0], **ran[1]}

@@ -144,7 +144,7 @@ def merge(folders: list[Path], out: Path) -> RunResult:
         index.append({"shard": shard.label, "folder": str(shard.folder), "cases": len(shard.result.cases),
                       "logs": [f"{LOGS_DIR}/{shard.record.shard}/{p.name}" for p in logs]})
         parts.append((f"shard {shard.label}", shard.result))
-        if not logs:
+        if not logs and shard.result.cases:
             log.warning("%s: no MCAP log in the shard's folder", shard.folder)
     # the shards ran side by side on their machines: the campaign took as long as its slowest shard
     merged = results_io.merge(parts, wall_time=max(s.result.wall_time for s in shards))
