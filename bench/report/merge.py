@@ -94,10 +94,13 @@ def check(shards: list[Shard]) -> list[str]:
                             ", ".join(x for x in (_few("only here", extra), _few("not here", lacking)) if x) + ")")
     ran: dict[str, Path] = {}
     for shard in shards:
+        twice: dict[Path, list[str]] = {}
         for case in shard.result.cases:
             where = ran.setdefault(case.nodeid, shard.folder)
             if where != shard.folder:
-                problems.append(f"{shard.folder}: case {case.nodeid} ran here and in {where}")
+                twice.setdefault(where, []).append(case.nodeid)
+        for where, ids in twice.items():
+            problems.append(f"{shard.folder}: {_few(f'cases ran here and in {where}', ids)}")
         lacking = sorted(set(shard.record.selected) - {c.nodeid for c in shard.result.cases})
         if lacking:
             what = "cases given to this shard but not in its results (aborted?)"
