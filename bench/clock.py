@@ -121,11 +121,16 @@ class WallClock:
             return
         # A station whose last poll here found its socket empty (a short batch) is `drained`: its tick then
         # reads no more (one system call less per tick on time; a frame of the last microseconds waits a tick).
+        # A wait that ends with nothing received waited its whole timeout: the deadline has come, and the clock
+        # is not read again (`recent` becomes t, a lower bound of the present).
         if len(stations) == 1:
             station = stations[0]
             got = POLL_BATCH
             while remaining > 0:
                 got = station.poll(timeout=remaining)   # bounded: returns after a batch, then the deadline
+                if got == 0:
+                    self._last = max(self._last, t)
+                    break
                 remaining = t - self.now()
             station.drained = got < POLL_BATCH
             return
@@ -134,6 +139,10 @@ class WallClock:
             full = set(fds)
             while remaining > 0:
                 ready, _, _ = select.select(fds, [], [], remaining)
+                if not ready:
+                    full.clear()
+                    self._last = max(self._last, t)
+                    break
                 full.clear()
                 for station, fd in zip(stations, fds):
                     if fd in ready and station.poll(0.0) >= POLL_BATCH:

@@ -1,20 +1,25 @@
 """Periodic sending on SocketCAN vcan0: the kernel's broadcast manager (BCM) against the tick scheduler.
 
-Needs SocketCAN with vcan0 up; on a machine without CAN in its kernel run it in the vcan lane's guest:
+Needs SocketCAN with vcan0 up; on a machine without CAN in its kernel run it in the vcan lane's guest (User-mode
+Linux where it runs, docs/vcan-lane.md):
 
     scripts/vcan-lane --command 'python benchmarks/bench_periodic_vcan.py --json "$LANE_OUT/periodic.json"'
 
-Four senders run at the same time, each in a process of its own, for 20 s (quick: 6 s) after a 2 s warm-up,
-while `bench plant` runs on the same bus as load (--no-load: without it):
+The question (issue 15, acceptance 2): the period error of the bench's two send paths (the tick scheduler and
+the broadcast manager through bench/periodic.py), beside python-can's own `send_periodic` as the baseline,
+measured in the same run. Four senders run at the same time, each in a process of its own, for 20 s (quick:
+6 s) after a 2 s warm-up, while `bench plant` runs on the same bus as load (--no-load: without it):
 - "tick scheduler": a bench station (bench.station, the restbus of node DRIVER: DRV_Steering and DRV_Pedals
   at 10 ms, DRV_MotionRequest at 20 ms) on the wall clock's 1 ms tick, with kernel periodic sending off
   (what every message of the bench did before bench/periodic.py);
 - "bench + BCM": a bench station with bench/periodic.py on (the restbus of node TESTER: BENCH_SteeringRobot
   at 10 ms, BENCH_Control at 20 ms, ...): its steady messages go to the BCM as 16-frame counter cycles;
-- "python-can BCM": python-can's `bus.send_periodic(16 frames, period)` directly (0x7E0 at 10 ms, 0x7E1 at 20 ms);
-- baseline "python-can thread": `can.broadcastmanager.ThreadBasedCyclicSendTask` with a modifier_callback
-  that writes AliveCounter and Checksum (0x7F0 at 10 ms, 0x7F1 at 20 ms), how a python-can user sends E2E
-  frames without the BCM.
+- baseline "python-can send_periodic": python-can's `bus.send_periodic(16 frames, period)` (on socketcan a BCM
+  task: 0x7E0 at 10 ms, 0x7E1 at 20 ms);
+- "python-can thread": `can.broadcastmanager.ThreadBasedCyclicSendTask` with a modifier_callback that writes
+  AliveCounter and Checksum (0x7F0 at 10 ms, 0x7F1 at 20 ms), how a python-can user sends E2E frames without
+  the BCM (a second reference).
+Each sender reports its CPU time (user + system, s), so the cost of a path is beside its accuracy.
 A receiver process records the kernel's receive time of every frame (SO_TIMESTAMPNS: its own scheduling does
 not enter the figures; on vcan that is the moment the frame was sent). Period error = |interval between
 consecutive frames of an identifier - its cycle time|; p50/p99/max per sender over its identifiers;
@@ -40,7 +45,8 @@ WARMUP_S = 2.0
 CHANNEL = os.environ.get("VCAN_CHANNEL", "vcan0")
 RAW_BCM = {0x7E0: 0.010, 0x7E1: 0.020}
 THREAD = {0x7F0: 0.010, 0x7F1: 0.020}
-KINDS = ("tick scheduler", "bench + BCM", "python-can BCM", "python-can thread")
+BASELINE = "python-can send_periodic"
+KINDS = ("tick scheduler", "bench + BCM", BASELINE, "python-can thread")
 
 
 def has_vcan() -> bool:
@@ -84,11 +90,16 @@ def run_station(node: str, kernel: bool, seconds: float) -> None:
     clock.start()
     scheduler.run_until(seconds)
     stats = station.kernel
-    print(json.dumps({"node": node, "sent": station.sent, "max_lag_ms": clock.max_lag * 1000,
+    print(json.dumps({"node": node, "sent": station.sent, "max_lag_ms": clock.max_lag * 1000, "cpu_s": _cpu(),
                       "bcm_tasks_started": stats.started if stats else 0,
                       "bcm_modified": stats.modified if stats else 0, "bcm_stopped": stats.stopped if stats else 0}),
           flush=True)
     bus.shutdown()
+
+
+def _cpu() -> float:
+    times = os.times()
+    return round(times.user + times.system, 3)
 
 
 def _protect(frame_id: int, data: bytearray, counter: int) -> None:
@@ -108,6 +119,7 @@ def run_raw_bcm(seconds: float) -> None:
     for task in tasks:
         task.stop()
     bus.shutdown()
+    print(json.dumps({"cpu_s": _cpu()}), flush=True)
 
 
 def run_thread(seconds: float) -> None:
@@ -130,6 +142,7 @@ def run_thread(seconds: float) -> None:
     for task in tasks:
         task.stop()
     bus.shutdown()
+    print(json.dumps({"cpu_s": _cpu()}), flush=True)
 
 
 # -- the receiver --------------------------------------------------------------------------------------------------
@@ -180,7 +193,7 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     driver, tester = station_messages("DRIVER"), station_messages("TESTER")
     cycles = {"tick scheduler": {i: c for i, (_, c) in driver.items()},
               "bench + BCM": {i: c for i, (_, c) in tester.items()},
-              "python-can BCM": dict(RAW_BCM), "python-can thread": dict(THREAD)}
+              BASELINE: dict(RAW_BCM), "python-can thread": dict(THREAD)}
     ids = [i for kind in cycles.values() for i in kind]
     load = None
     if not args.no_load:
@@ -195,7 +208,7 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     senders = {
         "tick scheduler": spawn("--station", "DRIVER", "off", f"{total:.1f}", log=work / "tick.log"),
         "bench + BCM": spawn("--station", "TESTER", "on", f"{total:.1f}", log=work / "bench_bcm.log"),
-        "python-can BCM": spawn("--raw-bcm", f"{total:.1f}", log=work / "raw_bcm.log"),
+        BASELINE: spawn("--raw-bcm", f"{total:.1f}", log=work / "raw_bcm.log"),
         "python-can thread": spawn("--thread", f"{total:.1f}", log=work / "thread.log"),
     }
     try:
@@ -215,23 +228,33 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     frames = {int(k): [tuple(f) for f in v] for k, v in raw.items()}
     analysis = {kind: analyse(frames, cycles[kind], t_start) for kind in KINDS}
     stations = {}
-    for kind, log in (("tick scheduler", "tick.log"), ("bench + BCM", "bench_bcm.log")):
+    for kind, log in (("tick scheduler", "tick.log"), ("bench + BCM", "bench_bcm.log"), (BASELINE, "raw_bcm.log"),
+                      ("python-can thread", "thread.log")):
         lines = [line for line in (work / log).read_text().splitlines() if line.startswith("{")]
         stations[kind] = json.loads(lines[-1]) if lines else {}
     plant_status = []
     if load is not None:
         plant_status = [line for line in (work / "plant.log").read_text().splitlines() if "max lag" in line][-1:]
     result.details.update(seconds=seconds, warmup_s=WARMUP_S, channel=CHANNEL, load="bench plant" if load else "none",
-                          plant_status=plant_status, stations=stations, analysis=analysis)
-    base = analysis["python-can thread"]["overall"]
-    for kind in KINDS[:3]:
+                          plant_status=plant_status, stations=stations, analysis=analysis, uname=" ".join(os.uname()),
+                          loadavg=_loadavg(), date=time.strftime("%Y-%m-%d %H:%M:%S %Z"))
+    base = analysis[BASELINE]["overall"]
+    for kind in ("tick scheduler", "bench + BCM", "python-can thread"):
         o = analysis[kind]["overall"]
         for stat in ("p50", "p99", "max"):
-            result.add(f"{kind}: period error {stat}", o[stat], "ms", base[stat], "python-can thread",
+            result.add(f"{kind}: period error {stat}", o[stat], "ms", base[stat], BASELINE,
                        note=(f"{o['n']} intervals, lost {analysis[kind]['lost']} (baseline: "
-                             f"{base['n']} intervals, lost {analysis['python-can thread']['lost']}); "
+                             f"{base['n']} intervals, lost {analysis[BASELINE]['lost']}); "
                              f"{json.dumps(stations.get(kind, {}))}" if stat == "max" else ""))
     print(f"load: {result.details['load']} {' '.join(plant_status)}")
+
+
+def _loadavg() -> str:
+    """The load of the machine the benchmark sees (in a guest: the guest's)."""
+    try:
+        return Path("/proc/loadavg").read_text().strip()
+    except OSError:
+        return "unknown"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
