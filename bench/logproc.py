@@ -1,8 +1,8 @@
 """The run's MCAP log, written by a child process.
 
 Logging every frame (JSON of the raw frame and of its decoded values, then mcap's chunking and
-compression) costs more than simulating it; in a child process it runs on the machine's other core
-while the simulation goes on. The simulation hands over raw frames in batches (no decoded values:
+compression) costs about 13 µs of CPU per frame, a fifth of a campaign's CPU (docs/performance.md,
+2026-11-24); in a child process it runs on the machine's other core while the simulation goes on. The simulation hands over raw frames in batches (no decoded values:
 the child decodes them again with the same codec, which is cheaper than pickling them). The child
 ignores SIGINT/SIGTERM and finishes the file when the run closes the pipe, or when the run dies:
 a run killed with SIGKILL still leaves a complete log of every frame handed over before the kill
