@@ -2,8 +2,9 @@
 
 Logging every frame (JSON of the raw frame and of its decoded values, then mcap's chunking and
 compression) costs about 13 µs of CPU per frame, a fifth of a campaign's CPU (docs/performance.md,
-2026-11-24); in a child process it runs on the machine's other core while the simulation goes on. The simulation hands over raw frames in batches (no decoded values:
-the child decodes them again with the same codec, which is cheaper than pickling them). The child
+2026-11-24); in a child process it runs on the machine's other core while the simulation goes on.
+The simulation hands over raw frames in batches (no decoded values: the child decodes them again
+with the same codec, which is cheaper than pickling them). The child
 ignores SIGINT/SIGTERM and finishes the file when the run closes the pipe, or when the run dies:
 a run killed with SIGKILL still leaves a complete log of every frame handed over before the kill
 (at most BATCH_SECONDS of wall time of frames are lost).
