@@ -14,7 +14,6 @@ tick's time, a late runner's skip uses the read that ended its wait.
 
 from __future__ import annotations
 
-import select
 import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
@@ -30,6 +29,8 @@ STAMP_WINDOW = 5.0
 STAMP_LEAD = 1.0
 #: At most this many frames are read when a real-time run stops to be looked at (Scheduler._catch_up).
 CATCH_UP_FRAMES = 8192
+#: Batches (of POLL_BATCH frames) a station reads after a sleeping wait at most; the rest waits for its tick.
+DRAIN_BATCHES = 16
 
 
 class Clock(Protocol):
@@ -113,16 +114,28 @@ class WallClock:
         return max(t, 0.0) if now - STAMP_WINDOW <= t <= now else now
 
     def wait_until(self, t: float, stations: Sequence[Station]) -> None:
-        """Receive until bench time t. With every station's socket selectable (socketcan), one select waits
-        on all of them (two stations in one process: no busy loop of polls and short sleeps)."""
+        """Return at bench time t, with what the stations' sockets received meanwhile read."""
         remaining = t - self.now()
         if remaining < 0:
             self.max_lag = max(self.max_lag, -remaining)
             return
-        # A station whose last poll here found its socket empty (a short batch) is `drained`: its tick then
-        # reads no more (one system call less per tick on time; a frame of the last microseconds waits a tick).
-        # A wait that ends with nothing received waited its whole timeout: the deadline has come, and the clock
-        # is not read again (`recent` becomes t, a lower bound of the present).
+        if all(station.stamped_batches for station in stations):
+            # Every frame carries the kernel's receive time and one call reads a batch (socketcan): sleep to the
+            # deadline, then read what came. One system call for the wait and none for a frame that arrives
+            # meanwhile (a wake-up per frame is a host context switch and a clock read in a UML guest); a frame
+            # read at the deadline still has the time it arrived. No clock read after the sleep either: it
+            # lasted its whole time (`recent` becomes t, a lower bound of the present).
+            time.sleep(remaining)
+            self._last = max(self._last, t)
+            for station in stations:
+                for _ in range(DRAIN_BATCHES):
+                    if station.poll(0.0) < POLL_BATCH:
+                        station.drained = True   # its tick reads no more (bench.station.Station.tick)
+                        break
+            return
+        # Other buses: receive while waiting. A station whose last poll here found its socket empty (a short
+        # batch) is `drained`, and its tick reads no more; a wait that ends with nothing received waited its
+        # whole timeout, and the clock is not read again.
         if len(stations) == 1:
             station = stations[0]
             got = POLL_BATCH
@@ -133,23 +146,6 @@ class WallClock:
                     break
                 remaining = t - self.now()
             station.drained = got < POLL_BATCH
-            return
-        fds = [fd for fd in (station.selectable() for station in stations) if fd is not None]
-        if len(fds) == len(stations):
-            full = set(fds)
-            while remaining > 0:
-                ready, _, _ = select.select(fds, [], [], remaining)
-                if not ready:
-                    full.clear()
-                    self._last = max(self._last, t)
-                    break
-                full.clear()
-                for station, fd in zip(stations, fds):
-                    if fd in ready and station.poll(0.0) >= POLL_BATCH:
-                        full.add(fd)
-                remaining = t - self.now()
-            for station, fd in zip(stations, fds):
-                station.drained = fd not in full
             return
         while remaining > 0:
             for station in stations:

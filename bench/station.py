@@ -114,10 +114,11 @@ class Station:
         self._send_raw = getattr(bus, "send_raw", None)
         self._raw_frames = getattr(bus, "raw_frames", None)
 
-    def selectable(self) -> int | None:
-        """The socket (descriptor) a select() may wait on for this station's frames; None when its bus has
-        none the station reads directly."""
-        return self._fast.fileno() if self._fast is not None and self._fast.native else None
+    @property
+    def stamped_batches(self) -> bool:
+        """Whether its frames carry the kernel's receive time and one call reads a batch of them (socketcan,
+        bench/socketcan_rx.py): then a wall-clock wait may sleep and read at its end (bench.clock.WallClock)."""
+        return self._fast is not None and self._fast.native and self.stamp is not None
 
     def poll(self, timeout: float = 0.0, limit: int = POLL_BATCH) -> int:
         """Receive up to `limit` pending frames into the monitor (the first recv may wait up to timeout).

@@ -318,3 +318,40 @@ def test_a_tick_after_a_wait_that_found_the_socket_empty_reads_no_more(codebook)
     assert len(polls) == waited and not station.drained          # no second look at an empty socket
     station.tick(11, 0.011, 0.001)                               # not after a wait: it reads
     assert len(polls) == waited + 1
+
+
+def test_a_station_with_stamped_batches_sleeps_to_the_deadline_and_reads_at_its_end(
+        codebook, monkeypatch: pytest.MonkeyPatch) -> None:
+    """socketcan (here a kernel datagram pair that stamps the same way): no wake-up per frame and one clock read
+    per wait; the frames that came during the sleep keep the time the kernel received them."""
+    import socket
+    import struct
+
+    from bench.socketcan_rx import SO_TIMESTAMPNS, FastReceiver
+
+    sender, receiver = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
+    receiver.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    receiver.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    try:
+        clock = WallClock()
+        station = _station(codebook, FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0), clock)
+        station._fast = FastReceiver(receiver)
+        assert station.stamped_batches
+        frame_id = codebook["VCU_WheelCmd_FL"].frame_id
+        clock.start()
+        sent_at = []
+        for _ in range(3 * POLL_BATCH + 5):         # more than a batch: all read at the end of the wait
+            sent_at.append(clock.now())
+            sender.send(struct.pack("=IB3x8s", frame_id, 8, bytes(8)))
+        counting = _CountingMonotonic()
+        monkeypatch.setattr(time, "monotonic", counting)
+        clock.wait_until(0.03, [station])
+        monkeypatch.setattr(time, "monotonic", counting.real)
+        assert counting.calls == 1                    # to know the wait; none after the sleep
+        assert clock.now() >= 0.03 and clock.recent() >= 0.03
+        assert station.monitor.frames == 3 * POLL_BATCH + 5 and station.drained
+        state = station.monitor.state("VCU_WheelCmd_FL")
+        assert state.last_seen == pytest.approx(sent_at[-1], abs=0.005)   # when it came, not 30 ms
+    finally:
+        sender.close()
+        receiver.close()
