@@ -20,8 +20,8 @@ How (docs/spec/e2e.md: AliveCounter +1 per transmission, 15 -> 0; Checksum over 
   continues after the last frame the kernel sent, and its next frame is due one cycle after it.
 - The log stays complete and exact: the kernel loops every frame it sends back to the raw sockets of the
   interface. A second raw socket of the station, filtered to the identifiers the kernel sends, reads them
-  without python-can's per-frame overhead, and the station logs them as "tx" (at the tick that reads them,
-  within a tick of the kernel sending them); the station's bus socket filters them out in the kernel
+  without python-can's per-frame overhead, and the station logs them as "tx" at the kernel's receive time of
+  the echo (SO_TIMESTAMPNS: the moment the kernel sent it); the station's bus socket filters them out in the kernel
   (inverted filters joined with CAN_RAW_JOIN_FILTERS, Linux >= 4.1). A foreign sender on an identifier the
   kernel sends is therefore not seen while the kernel sends it.
 
