@@ -28,7 +28,6 @@ log = logging.getLogger(__name__)
 
 MCAP_NAME, HTML_NAME, JUNIT_NAME = "run.mcap", "report.html", "junit.xml"
 RESULTS_NAME = "results.json"   # the run's record, machine-readable: `bench report merge` renders from it
-RESULTS_NAME = "results.json"   # the run's record, machine-readable: `bench report merge` renders from it
 
 
 def default_out_dir(reports: Path) -> Path:
@@ -190,7 +189,6 @@ def write_reports(run: RunResult, out_dir: Path) -> None:
 
     write_html(run, out_dir / HTML_NAME)
     write_junit(run, out_dir / JUNIT_NAME)
-    results_io.dump(run, out_dir / RESULTS_NAME)
     results_io.dump(run, out_dir / RESULTS_NAME)
 
 
