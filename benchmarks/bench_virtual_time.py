@@ -22,51 +22,19 @@ import argparse
 import math
 import resource
 import time
-from collections.abc import Mapping
 from pathlib import Path
 
 import common
+
+from bench.testing import MemoryIO
 
 TARGET = 50.0
 QUICK_PATHS = ["testcases/ev4wis/test_uturn.py", "testcases/sbw/test_step.py", "testcases/ev4wis/test_ackermann.py"]
 PIVOT = {"DriveMode": "PIVOT", "PivotX": 5.0, "PivotY": 2.0, "TargetSpeed": 1.0}
 
 
-class DictIO:
-    """A NodeIO without a bus: the latest values of every message in a dict (what B0 steps the plant on)."""
-
-    def __init__(self, values: dict[str, dict[str, float]]) -> None:
-        self.t = 0.0
-        self.values = values
-
-    @property
-    def now(self) -> float:
-        return self.t
-
-    def send_values(self, message: str, **signals: float) -> None:
-        self.values.setdefault(message, {}).update(signals)
-
-    def reset_outputs(self) -> None:
-        pass
-
-    def stop_sending(self, message: str) -> None:
-        pass
-
-    def resume_sending(self, message: str) -> None:
-        pass
-
-    def latest(self, message: str) -> Mapping[str, float] | None:
-        return self.values.get(message)
-
-    def timed_out(self, message: str) -> bool:
-        return message not in self.values
-
-    def invalid(self, message: str) -> bool:
-        return False
-
-
 def bare_plant(seconds: float, vehicle: str = "EV4WIS") -> dict[str, float]:
-    """B0: the plant's behaviours (bench.plants entry point) stepped on a DictIO; EV4WIS gets a PIVOT request,
+    """B0: the plant's behaviours (bench.plants entry point) stepped on a MemoryIO; EV4WIS gets a PIVOT request,
     other vehicles their stimulus start values (their models step the same equations every tick)."""
     from bench.codec import load_codebook
     from bench.config import load_config
@@ -83,7 +51,8 @@ def bare_plant(seconds: float, vehicle: str = "EV4WIS") -> dict[str, float]:
     if vehicle == "EV4WIS":
         motion = codebook["DRV_MotionRequest"]
         values["DRV_MotionRequest"].update({k: motion.physical(k, v) for k, v in PIVOT.items()})
-    io = DictIO(values)
+    io = MemoryIO()
+    io.values = values
     dt, ticks = 0.001, round(seconds / 0.001)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for tick in range(1, ticks + 1):

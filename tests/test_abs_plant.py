@@ -7,12 +7,12 @@ from __future__ import annotations
 import math
 import statistics
 import time
-from collections.abc import Mapping
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from bench.testing import MemoryIO
 from plant import signal_ranges
 from plant.assemblies.aclass_abs import build
 from plant.brakes import BrakeHydraulics, Valve
@@ -143,43 +143,9 @@ def test_sensors_quantise_are_seeded_and_have_the_configured_noise() -> None:
 
 # -- nodes on a fake bus ----------------------------------------------------------------------------------------
 
-class FakeIO:
-    """Latest values per message; every sent value must be finite and inside the DBC range mirrored in plant/."""
-
-    RANGES = signal_ranges.BY_SIGNAL
-
-    def __init__(self) -> None:
-        self.t = 0.0
-        self.values: dict[str, dict[str, float]] = {}
-        self.sent: dict[str, dict[str, float]] = {}
-
-    @property
-    def now(self) -> float:
-        return self.t
-
-    def send_values(self, message: str, **signals: float) -> None:
-        for name, value in signals.items():
-            assert isinstance(value, (int, float)) and math.isfinite(value), f"{message}.{name} = {value!r}"
-            lo, hi = self.RANGES.get((message, name), (-math.inf, math.inf))
-            assert lo <= value <= hi, f"{message}.{name} = {value} outside [{lo}, {hi}]"
-        self.sent.setdefault(message, {}).update(signals)
-
-    def latest(self, message: str) -> Mapping[str, float] | None:
-        return self.values.get(message)
-
-    def timed_out(self, message: str) -> bool:
-        return message not in self.values
-
-    def invalid(self, message: str) -> bool:
-        return False
-
-    def reset_outputs(self) -> None:
-        self.sent.clear()
-
-
 class Rig:
     def __init__(self, external: tuple[str, ...] = (), **control: float) -> None:
-        self.io = FakeIO()
+        self.io = MemoryIO(signal_ranges.BY_SIGNAL, loopback=False)
         self.behaviours = build(frozenset(external))
         self.tick = 0
         self.io.values["BENCH_Control"] = {"ScenarioId": 1, "RoadMu": 1.0, "InitialSpeed": 0.0, "SensorNoise": 0.1,
@@ -250,7 +216,7 @@ class _DeadSensors:
 def test_a_dead_wheel_speed_sensor_is_a_fault() -> None:
     hw = _DeadSensors()
     ecu = AbsEcu(PARAMS, CAR, hw)
-    io = FakeIO()
+    io = MemoryIO(signal_ranges.BY_SIGNAL, loopback=False)
     io.values["DRV_Pedals"] = {"AccelPedal": 0.0, "BrakePedal": 0.0, "BrakePressure": 0.0}
     for k in range(1, 700):
         io.t = k * DT
@@ -269,7 +235,7 @@ def test_never_a_nan_or_out_of_range_value_on_the_bus(pressure, pedal, hand_whee
     rig = Rig(InitialSpeed=speed, RoadMu=mu, SensorNoise=noise)
     rig.io.values["DRV_Pedals"] = {"AccelPedal": 0.0, "BrakePedal": pedal, "BrakePressure": pressure}
     rig.io.values["DRV_Steering"] = {"HandWheelAngle": hand_wheel}
-    rig.run(0.3)                                   # FakeIO asserts every value
+    rig.run(0.3)                                   # MemoryIO checks every value sent
 
 
 def test_plant_tick_cost(capsys) -> None:

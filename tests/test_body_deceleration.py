@@ -18,8 +18,9 @@ import math
 
 import pytest
 
+from bench.testing import MemoryIO
+from plant import signal_ranges as ranges
 from plant.assemblies.ev4wis import build
-from tests.plant_io import RangeCheckedIO
 
 DT = 0.001
 G = 9.81
@@ -29,7 +30,7 @@ MARGIN = 0.02          # relative to μ g (module docstring)
 def _drive(v0_kmh: float, v1_kmh: float, mu: float, hand_wheel: float, seconds: float = 6.0) -> dict[str, list[float]]:
     """The EV at v0 (ADAPTIVE, hand wheel in deg, ratio 15), TargetSpeed stepped to v1 after 1 s; per tick the body's
     forward speed u, its longitudinal acceleration (PLANT_Dynamics.LongAccel) and the wheels' mean speed."""
-    io = RangeCheckedIO()
+    io = MemoryIO(ranges.BY_SIGNAL)
     behaviours = build(())
     plant = next(b for b in behaviours if b.nodes == ("PLANT",))
     body = plant.body

@@ -13,6 +13,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from bench.testing import MemoryIO
+from plant import signal_ranges as ranges
 from plant.dynamic_body import (
     DYNAMIC_OFF_SPEED,
     DYNAMIC_ON_SPEED,
@@ -30,7 +32,6 @@ from plant.ecus.vcu import Vcu, VcuFault
 from plant.factory import assemble
 from plant.single_track import SingleTrack
 from plant.vehicles import load_parameters
-from tests.plant_io import RangeCheckedIO as FakeIO
 
 DT = 1e-3
 
@@ -179,7 +180,7 @@ def test_road_mu_is_taken_at_scenario_start() -> None:
     behaviours = assemble("EV4WIS", ())
     (plant,) = [b for b in behaviours if b.nodes == ("PLANT",)]
     assert isinstance(plant, EvBodyNode)
-    io = FakeIO()
+    io = MemoryIO(ranges.BY_SIGNAL)
     io.values["DRV_MotionRequest"] = {"DriveMode": 2, "PivotX": 0.0, "PivotY": 0.0, "TargetSpeed": 22.22}
     io.values["DRV_Steering"] = {"HandWheelAngle": 0.0, "HandWheelRate": 0.0, "DriverTorque": 0.0}
     io.values["BENCH_Control"] = {"ScenarioId": 3, "RoadMu": 0.3, "InitialSpeed": 22.22, "SensorNoise": 0.0,
@@ -241,7 +242,7 @@ def test_feedback_law_zeroes_sideslip_and_gives_the_closed_loop_gain(kmh: float)
 
 def _vcu_rear(config: dict[str, float] | None, imu: dict[str, float] | None = None,
               speed: float = 22.22) -> tuple[VcuFault, float, float]:
-    io = FakeIO()
+    io = MemoryIO(ranges.BY_SIGNAL)
     io.values["DRV_MotionRequest"] = {"DriveMode": 2, "PivotX": 0.0, "PivotY": 0.0, "TargetSpeed": speed}
     io.values["DRV_Steering"] = {"HandWheelAngle": 30.0, "HandWheelRate": 0.0, "DriverTorque": 0.0}
     if config is not None:

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from bench.node import Behaviour
+from bench.testing import MemoryIO
 from plant import signal_ranges as ranges
 from plant.body import BodyNode, BusWheel
 from plant.ecus.imu import Imu
@@ -27,44 +27,11 @@ POSITIONS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
 REPO = Path(__file__).resolve().parents[1]
 
 
-class FakeIO:
-    """A bus reduced to a dict of latest values; every sent value is checked finite at once."""
-
-    def __init__(self) -> None:
-        self.t = 0.0
-        self.values: dict[str, dict[str, float]] = {}
-        self.silenced: set[str] = set()
-        self.invalid_set: set[str] = set()
-        self.sent: dict[str, set[str]] = {}
-
-    @property
-    def now(self) -> float:
-        return self.t
-
-    def send_values(self, message: str, **signals: float) -> None:
-        for name, value in signals.items():
-            assert isinstance(value, (int, float)) and math.isfinite(value), f"{message}.{name} = {value!r}"
-            bounds = ranges.BY_SIGNAL.get((message, name))
-            if bounds is not None:
-                assert bounds[0] <= value <= bounds[1], f"{message}.{name} = {value} outside {bounds}"
-        self.values.setdefault(message, {}).update(signals)
-        self.sent.setdefault(message, set()).update(signals)
-
-    def latest(self, message: str) -> Mapping[str, float] | None:
-        return None if message in self.silenced else self.values.get(message)
-
-    def timed_out(self, message: str) -> bool:
-        return self.latest(message) is None
-
-    def invalid(self, message: str) -> bool:
-        return message in self.invalid_set
-
-
 class Rig:
-    """The factory's behaviours stepped in their order on a FakeIO."""
+    """The factory's behaviours stepped in their order on a MemoryIO."""
 
     def __init__(self, external: tuple[str, ...] = (), vcu: Vcu | None = None) -> None:
-        self.io = FakeIO()
+        self.io = MemoryIO(ranges.BY_SIGNAL)
         self.behaviours = assemble("EV4WIS", external)
         if vcu is not None:
             self.behaviours[0] = vcu
@@ -333,7 +300,7 @@ def test_wheel_fault_stops_the_vehicle():
 # -- wheel ECU -------------------------------------------------------------------------------------------
 
 def test_wheel_timeout_holds_angle_and_ramps_speed_to_zero():
-    io, wheel = FakeIO(), WheelEcu("FR", PARAMS)
+    io, wheel = MemoryIO(ranges.BY_SIGNAL), WheelEcu("FR", PARAMS)
     io.values["VCU_WheelCmd_FR"] = {"SteerAngleCmd": 30.0, "WheelSpeedCmd": 200.0}
     for _ in range(2000):
         wheel.step(io, 0.0, DT)
@@ -348,13 +315,13 @@ def test_wheel_timeout_holds_angle_and_ramps_speed_to_zero():
 
 
 def test_wheel_never_commanded_reports_timeout():
-    io, wheel = FakeIO(), WheelEcu("RL", PARAMS)
+    io, wheel = MemoryIO(ranges.BY_SIGNAL), WheelEcu("RL", PARAMS)
     wheel.step(io, 0.0, DT)
     assert io.values["WHL_Status_RL"]["WheelFault"] == WheelFault.CMD_TIMEOUT
 
 
 def test_wheel_clamps_out_of_range_command():
-    io, wheel = FakeIO(), WheelEcu("FL", PARAMS)
+    io, wheel = MemoryIO(ranges.BY_SIGNAL), WheelEcu("FL", PARAMS)
     io.values["VCU_WheelCmd_FL"] = {"SteerAngleCmd": 120.0, "WheelSpeedCmd": 10.0}
     for _ in range(3000):
         wheel.step(io, 0.0, DT)
@@ -367,7 +334,7 @@ def test_wheel_clamps_out_of_range_command():
 
 
 def test_servo_rate_limit_and_lag():
-    io, wheel = FakeIO(), WheelEcu("FL", PARAMS)
+    io, wheel = MemoryIO(ranges.BY_SIGNAL), WheelEcu("FL", PARAMS)
     io.values["VCU_WheelCmd_FL"] = {"SteerAngleCmd": 90.0, "WheelSpeedCmd": 0.0}
     wheel.step(io, 0.0, DT)
     assert wheel.rate_dps == pytest.approx(PARAMS.servo_rate_limit)       # saturated at first
@@ -498,16 +465,9 @@ def test_sent_signals_exist_in_the_dbc_with_the_plants_ranges():
 
 # -- speed --------------------------------------------------------------------------------------------------
 
-class LeanIO(FakeIO):
-    """send_values as cheap as the restbus's (a dict update, checked later), so only the plant is timed."""
-
-    def send_values(self, message: str, **signals: float) -> None:
-        self.values.setdefault(message, {}).update(signals)
-
-
 def test_plant_tick_cost(capsys):
     rig = Rig()
-    rig.io = LeanIO()
+    rig.io = MemoryIO()   # no range checks: only the plant is timed
     rig.request(3, 1.0, (2.0, 1.0))
     rig.run(0.5)
     n = 5000

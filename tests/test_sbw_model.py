@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.node import Behaviour
+from bench.testing import MemoryIO
 from plant import signal_ranges as ranges
 from plant.assemblies import aclass
 from plant.driver import ANGLE, OFF, TORQUE, SteeringRobot
@@ -29,47 +29,14 @@ P = load_parameters("SBW")
 REPO = Path(__file__).resolve().parents[1]
 
 
-class FakeIO:
-    """A bus reduced to a dict of latest values; every sent value must be finite and inside `bounds`."""
-
-    def __init__(self, bounds: Mapping[tuple[str, str], tuple[float, float]] = {}) -> None:
-        self.t = 0.0
-        self.values: dict[str, dict[str, float]] = {}
-        self.silenced: set[str] = set()
-        self.bounds = bounds
-
-    @property
-    def now(self) -> float:
-        return self.t
-
-    def send_values(self, message: str, **signals: float) -> None:
-        for name, value in signals.items():
-            assert isinstance(value, (int, float)) and math.isfinite(value), f"{message}.{name} = {value!r}"
-            lo, hi = self.bounds.get((message, name), (-math.inf, math.inf))
-            assert lo <= value <= hi, f"{message}.{name} = {value} outside [{lo}, {hi}]"
-        self.values.setdefault(message, {}).update(signals)
-
-    def latest(self, message: str) -> Mapping[str, float] | None:
-        return None if message in self.silenced else self.values.get(message)
-
-    def timed_out(self, message: str) -> bool:
-        return self.latest(message) is None
-
-    def invalid(self, message: str) -> bool:
-        return False
-
-    def reset_outputs(self) -> None:
-        pass
-
-
 BOUNDS = ranges.BY_SIGNAL
 
 
 class Rig:
-    """The ACLASS behaviours in factory order on a FakeIO, at `kmh`, the robot holding the hand wheel."""
+    """The ACLASS behaviours in factory order on a MemoryIO, at `kmh`, the robot holding the hand wheel."""
 
     def __init__(self, kmh: float = 50.0, mode: int = 0, external: tuple[str, ...] = (), scenario: int = 1) -> None:
-        self.io = FakeIO(BOUNDS)
+        self.io = MemoryIO(BOUNDS)
         self.behaviours = assemble("ACLASS", external)
         self.tick = 0
         by_node = {b.nodes[0]: b for b in self.behaviours}
@@ -425,12 +392,12 @@ def test_anything_on_the_inputs_never_puts_nan_or_out_of_range_on_the_bus(mode, 
     rig = Rig(kmh, steering)
     rig.robot(mode, angle, torque)
     rig.fault(fault, offset)
-    rig.run(0.3)                       # FakeIO.send_values asserts finite values inside the DBC ranges
+    rig.run(0.3)                       # MemoryIO.send_values asserts finite values inside the DBC ranges
 
 
 # -- cost --------------------------------------------------------------------------------------------------------------
 
-class _LeanIO(FakeIO):
+class _LeanIO(MemoryIO):
     def send_values(self, message: str, **signals: float) -> None:
         self.values.setdefault(message, {}).update(signals)
 
