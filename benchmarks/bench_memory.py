@@ -40,11 +40,13 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
         first = last / (1 + growth / 100) if last and growth is not None and math.isfinite(growth) else None
         change = abs(growth) if growth is not None and math.isfinite(growth) else None
         result.add(f"{who}: RSS at the end", last / 1024 if last else None, "MiB", first / 1024 if first else None,
-                   f"RSS at {steady_from:.0f} s (steady state begins)" if steady_from is not None else "RSS when the steady state begins",
+                   f"RSS at {steady_from:.0f} s (steady state begins)" if steady_from is not None
+                   else "RSS when the steady state begins",
                    note=f"max {common.fmt(max(samples) / 1024 if samples else None, 'MiB')}, median "
                         f"{common.fmt(statistics.median(samples) / 1024 if samples else None, 'MiB')} "
                         f"({len(samples)} samples, 5 s apart)")
-        result.add(f"{who}: RSS change (absolute) over the steady state", change, "%", target=TARGET_PCT, target_op="<=",
+        result.add(f"{who}: RSS change (absolute) over the steady state", change, "%",
+                   target=TARGET_PCT, target_op="<=",
                    note=f"signed {common.fmt(growth, '%')} (soak.py's figure: last sample, which may fall into "
                         f"the report writing after the case)")
         # Samples are taken every SAMPLE_S from the runner's launch; one taken before `seconds` had passed is
@@ -62,7 +64,8 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
             settled = next((t for k, (t, _) in enumerate(series)
                             if all(abs(v - final) <= 0.02 * final for _, v in series[k:])), None)
             half = [v for t, v in series if t >= series[-1][0] / 2]
-            result.add(f"{who}: RSS change over the second half of the run", (half[-1] - half[0]) / half[0] * 100.0, "%",
+            result.add(f"{who}: RSS change over the second half of the run",
+                       (half[-1] - half[0]) / half[0] * 100.0, "%",
                        note=f"within ±2 % of its final value from {settled:g} s on" if settled is not None else
                             "never within ±2 % of its final value for the rest of the run")
     result.add("frames received from the plant", figures["frames_received_from_plant"], "frames",

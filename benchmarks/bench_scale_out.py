@@ -56,7 +56,8 @@ def one_run(out: Path, n: int, workers: str | None) -> dict:
             if prop.get("name") == "bench_time":
                 bench_s = float(prop.get("value"))
     return {"workers": workers or "none (one process)", "exit_code": proc.returncode, "wall_s": wall,
-            "cpu_s_all_processes": cpu, "cpu_s_by_role": roles.by_role(), "cases": tests, "failures": failures, "errors": errors, "bench_s": bench_s,
+            "cpu_s_all_processes": cpu, "cpu_s_by_role": roles.by_role(), "cases": tests, "failures": failures,
+            "errors": errors, "bench_s": bench_s,
             "mcap_logs": sorted(p.name for p in out.glob("*.mcap")), "load_before": load}
 
 
@@ -74,11 +75,13 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     for label, run in runs.items():
         if run["exit_code"] != 0 or run["cases"] != n:
             result.details.setdefault("problems", []).append(
-                f"{label}: exit {run['exit_code']}, {run['cases']} cases, {run['failures']} failed, {run['errors']} errors")
+                f"{label}: exit {run['exit_code']}, {run['cases']} cases, {run['failures']} failed, "
+                f"{run['errors']} errors")
     speedup = single["wall_s"] / parallel["wall_s"]
     result.add("sweep wall time, bench run -n 2", parallel["wall_s"], "s", single["wall_s"],
                "bench run, one process",
-               note=f"{n} centres; logs {', '.join(parallel['mcap_logs'])}; CPU {parallel['cpu_s_all_processes']:.0f} s "
+               note=f"{n} centres; logs {', '.join(parallel['mcap_logs'])}; "
+                    f"CPU {parallel['cpu_s_all_processes']:.0f} s "
                     f"vs {single['cpu_s_all_processes']:.0f} s")
     cores = common.machine()["usable_cores"] or 1
     busy = single["cpu_s_all_processes"] / single["wall_s"]
@@ -86,11 +89,13 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     main_cpu = roles.get("bench run (pytest, bus, plant, monitors)", 0.0)
     demand = (single["cpu_s_all_processes"] / main_cpu) if main_cpu else float("nan")
     result.add("speed-up on 2 cores (one process / -n 2)", speedup, "×", 1.0, "one process", TARGET, ">=",
-               note=f"cores busy: one process {busy:.2f}, -n 2 {parallel['cpu_s_all_processes'] / parallel['wall_s']:.2f} "
+               note=f"cores busy: one process {busy:.2f}, "
+                    f"-n 2 {parallel['cpu_s_all_processes'] / parallel['wall_s']:.2f} "
                     f"(what the machine gave us); CPU -n 2 / one process "
                     f"{parallel['cpu_s_all_processes'] / single['cpu_s_all_processes']:.2f}")
     result.add("cores one run wants (its CPU / its main process's CPU)", demand, "cores",
-               note=f"the log process works beside the run: CPU by role {', '.join(f'{k} {v:.1f} s' for k, v in roles.items())}; "
+               note="the log process works beside the run: CPU by role "
+                    f"{', '.join(f'{k} {v:.1f} s' for k, v in roles.items())}; "
                     f"so {cores} cores allow at most ~{cores / demand:.2f}× over one run, on an otherwise idle machine")
     if "n1" in runs:
         result.add("sweep wall time, bench run -n 1 (xdist overhead)", runs["n1"]["wall_s"], "s", single["wall_s"],

@@ -93,7 +93,8 @@ def machine_line(m: dict[str, Any]) -> str:
     pk = m["packages"]
     return (f"{m['cpu']}, {m['cores']} cores ({m['usable_cores']} usable), {m['python']}, {m['os']}; "
             f"python-can {pk.get('python-can')}, cantools {pk.get('cantools')}, mcap {pk.get('mcap')}, "
-            f"numpy {pk.get('numpy')}, pytest-xdist {pk.get('pytest-xdist')}; code {m.get('source', '?')}; load average "
+            f"numpy {pk.get('numpy')}, pytest-xdist {pk.get('pytest-xdist')}; code {m.get('source', '?')}; "
+            "load average "
             f"{' / '.join(str(x) for x in m['load_average'])} (1/5/15 min)")
 
 
@@ -187,7 +188,7 @@ def print_result(result: Result) -> None:
             print(f"   {'':<52} {fig.note}")
 
 
-# -- statistics (percentile: the bench's own, bench/checks.py) ----------------------------------------------------------------------------------------------
+# -- statistics (percentile: the bench's own, bench/checks.py) ---------------------------------------------------
 def summary(values: Sequence[float], scale: float = 1.0) -> dict[str, float | int]:
     """n, p50, p99, max (and mean) of values, times scale (e.g. 1000 for ms)."""
     return {"n": len(values), "p50": percentile(values, 50) * scale, "p99": percentile(values, 99) * scale,
@@ -339,7 +340,7 @@ def udp_users_at_start() -> dict[str, Any]:
     return {"other_users_when_started": udp_multicast_users()}
 
 
-def note_udp_users(result: "Result", quiet: dict[str, Any], seen: dict[str, float]) -> None:
+def note_udp_users(result: Result, quiet: dict[str, Any], seen: dict[str, float]) -> None:
     """Record who else used the udp_multicast port during the measurement. Since bench.bus sets
     IP_MULTICAST_ALL = 0 their frames no longer reach our buses (nor ours theirs), but they share the CPU."""
     others = sorted(set(quiet.get("other_users_when_started", [])) | set(seen))

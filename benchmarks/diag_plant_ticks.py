@@ -62,7 +62,8 @@ def main() -> None:
         bins[next(label for edge, label in ((0.001, "0.5-1 ms"), (0.002, "1-2 ms"), (0.005, "2-5 ms"),
                                             (0.02, "5-20 ms"), (float("inf"), "> 20 ms")) if behind < edge)] += 1
     print(f"\nlate ticks (> {LATE_S * 1000:g} ms behind): {len(late)} of ~{ticks} ({len(late) / ticks * 100:.2f} %); "
-          f"max {max((b for _, b in late), default=0) * 1000:.2f} ms; " + ", ".join(f"{k}: {n}" for k, n in sorted(bins.items())))
+          f"max {max((b for _, b in late), default=0) * 1000:.2f} ms; "
+          + ", ".join(f"{k}: {n}" for k, n in sorted(bins.items())))
     for when, generation, pause in pauses:
         if generation >= 1:
             print(f"gc generation {generation} at {when - t0:7.2f} s: {pause * 1000:.2f} ms")

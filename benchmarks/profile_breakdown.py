@@ -25,7 +25,8 @@ from pathlib import Path
 #: innermost match wins; order matters only between rules that could match the same frame.
 RULES: list[tuple[str, ...] | tuple[str, str, str | None]] = [
     ("idle: waiting for the tick's wall-clock deadline (recv timeout, sleep)", "can/", r"recv", "WallClock.wait_until"),
-    ("idle: waiting for the tick's wall-clock deadline (recv timeout, sleep)", "bench/clock.py", r"WallClock\.wait_until"),
+    ("idle: waiting for the tick's wall-clock deadline (recv timeout, sleep)", "bench/clock.py",
+     r"WallClock\.wait_until"),
     ("log: mcap writer (records, chunks, indexes)", "mcap/", None, "bench/recorder.py"),
     ("log: zstd compression", "zstandard", None, "bench/recorder.py"),
     ("log: JSON of decoded values (json module)", "json/", None, "bench/recorder.py"),
@@ -119,7 +120,7 @@ def main() -> None:
             for (p, name), m in by_component.most_common():
                 if p == proc:
                     print(f"    {m / n * 100:5.1f} % / {m / total * 100:5.1f} %  {name}")
-        print(f"  hottest functions (self time):")
+        print("  hottest functions (self time):")
         for name, n in leaves.most_common(args.top):
             print(f"    {n / total * 100:5.1f} %  {name}")
 

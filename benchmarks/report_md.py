@@ -25,8 +25,10 @@ def summary_table(data: dict) -> list[str]:
         if r.get("error"):
             out.append(f"| {name} | error: {r['error']} | | | | |")
         for f in r.get("figures", []):
-            base = f"{common.fmt(f.get('baseline'), f.get('unit', ''))} ({f['baseline_name']})" if f.get("baseline_name") else ""
-            target = f"{f['target_op']} {common.fmt(f['target'], f.get('unit', ''))}" if f.get("target") is not None else ""
+            base = (f"{common.fmt(f.get('baseline'), f.get('unit', ''))} ({f['baseline_name']})"
+                    if f.get("baseline_name") else "")
+            target = (f"{f['target_op']} {common.fmt(f['target'], f.get('unit', ''))}"
+                      if f.get("target") is not None else "")
             met = {None: "", True: "yes", False: "**no**"}[f.get("met")]
             out.append(f"| {name} | {f['name'].strip()} | {_fig_value(f)} | {base} | {target} | {met} |")
     return out
@@ -71,7 +73,8 @@ def periodic_table(r: dict) -> list[str]:
     for name, s in plant.items():
         b = base.get(name, {})
         out.append(f"| {name} | {s['cycle_ms']:g} | {s['p50']:.3f} / {s['p99']:.3f} / {s['max']:.2f} | {s['lost']} | "
-                   f"{b.get('p50', float('nan')):.3f} / {b.get('p99', float('nan')):.3f} / {b.get('max', float('nan')):.2f} |")
+                   f"{b.get('p50', float('nan')):.3f} / {b.get('p99', float('nan')):.3f} / "
+                   f"{b.get('max', float('nan')):.2f} |")
     return out
 
 

@@ -64,7 +64,8 @@ def soak(seconds: float, out: Path, sample_every: float = 5.0) -> dict:
     time.sleep(1.0)
     runner = subprocess.Popen([sys.executable, "-m", "bench", "run", str(ROOT / "benchmarks/cases/test_soak.py"),
                                "--interface", "udp_multicast", "--channel", group, "--external", "all", "--out",
-                               str(out)], cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                               str(out)], cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True)
     samples: list[tuple[float, int | None, int | None]] = []
     t0 = time.monotonic()
     while runner.poll() is None:
@@ -83,9 +84,11 @@ def soak(seconds: float, out: Path, sample_every: float = 5.0) -> dict:
         return (last - first) / first * 100.0
 
     return {
-        "seconds": seconds, "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "seconds": seconds,
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "runner_exit": runner.returncode, "plant_exit": plant.returncode,
-        "frames_received_from_plant": received, "frames_lost": lost, "lost_by_id": {hex(k): v for k, v in lost_by_id.items()},
+        "frames_received_from_plant": received, "frames_lost": lost,
+        "lost_by_id": {hex(k): v for k, v in lost_by_id.items()},
         "rss_plant_kib": [s[1] for s in samples], "rss_runner_kib": [s[2] for s in samples],
         "rss_growth_plant_pct": growth(1), "rss_growth_runner_pct": growth(2),
         "steady_from_s": steady[0][0] if steady else None,

@@ -32,7 +32,8 @@ def _centres(n: int, seed: int) -> list[tuple[float, float]]:
 
 
 def expected(x: float, y: float, v: float) -> dict[str, tuple[float, float]]:
-    """docs/spec/formulas.md §2: β_i = atan((P_iy − y)/(x − P_ix)), n_i = 30 v (x − P_ix)/(π r r_o cos β_i) [deg, rpm]."""
+    """docs/spec/formulas.md §2: β_i = atan((P_iy − y)/(x − P_ix)),
+    n_i = 30 v (x − P_ix)/(π r r_o cos β_i) [deg, rpm]."""
     r_o = math.hypot(x, y)
     out = {}
     for wheel, (px, py) in WHEELS.items():

@@ -42,7 +42,8 @@ def test_wheel_command_steps(bench):
         x, y = _centre(rng)
         before = commands()
         bench.set("DRV_MotionRequest", DriveMode="PIVOT", PivotX=x, PivotY=y, TargetSpeed=0.3)
-        bench.wait_until(lambda: commands() != before, 0.1)      # the VCU's commands changed on the bus
+        # the VCU's commands changed on the bus (before bound now: B023)
+        bench.wait_until(lambda before=before: commands() != before, 0.1)
         bench.eventually(f"step {i + 1}: centre ({x:g}, {y:g}) m, every wheel within {ANGLE_TOL}° of its command",
                          lambda: worst_error() <= ANGLE_TOL, SETTLE_S)
         bench.run(REST_S)
