@@ -212,7 +212,7 @@ def _fast_adder(writer: Writer) -> Callable[[int, int, bytes], None] | None:
 
     mcap's pure-Python writer builds a Message object and writes its five fields one by one through a
     BytesIO (about 4 µs a message, more than JSON and compression together); the log writes two messages
-    per frame. This writes the same bytes (tests/test_recorder.py compares the files record by record)
+    per frame. This writes the same bytes (tests/bench/test_recorder.py compares the files record by record)
     into the writer's open chunk and keeps its chunk index and statistics as `add_message` does, through
     the writer's private state. None (the caller then uses `add_message`) when that state is not what
     mcap 1.x has."""

@@ -9,7 +9,7 @@ valid one decoded (counts of /can/frames and /can/decoded/* against the monitor'
 Baselines in the same run, the same scenario each (EV4WIS, PIVOT about (5, 2) m at 1 m/s, S s of bench time),
 layer by layer, to show what each layer costs:
   B0  the bare plant tick loop: the vehicle's behaviours stepped every 1 ms on a dict-backed NodeIO (as
-      tests/test_plant_ev.py's Rig does) — no bus, no frames, no checks, no log;
+      tests/plant/test_plant_ev.py's Rig does) — no bus, no frames, no checks, no log;
   B1  a bench session on the virtual-time bus without a log: plant + restbus (encode, E2E) + both stations'
       monitors (decode, checks, history) + the tick loop;
   B2  B1 plus the run's log and timing collector (bench.run.BenchRun, as a campaign runs), without pytest.

@@ -3,7 +3,7 @@
 Why one object: the plant's factory, the registry of vehicles, the network a vehicle's bus carries and the
 stimulus a scenario of it sends are all derived from it (plant/registry.py), so adding a vehicle is one module
 with its parameter file, plus its name and code in the DBC's value table of BENCH_Control.Vehicle and
-PLANT_Status.Vehicle (tests/test_dbc_contract.py checks that the declarations and the tables agree).
+PLANT_Status.Vehicle (tests/integration/test_dbc_contract.py checks that the declarations and the tables agree).
 """
 
 from __future__ import annotations

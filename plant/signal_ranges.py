@@ -2,7 +2,7 @@
 
 Why: the restbus refuses (stops the sender on) a NaN or out-of-range value, so every behaviour clamps
 to these bounds before `send_values` and flags a fault where its message has one.
-`tests/test_plant_ev.py` checks these against dbc/chassis.dbc and dbc/bench.dbc, so they cannot drift.
+`tests/plant/test_plant_ev.py` checks these against dbc/chassis.dbc and dbc/bench.dbc, so they cannot drift.
 """
 
 from __future__ import annotations

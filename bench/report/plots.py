@@ -1,7 +1,7 @@
 """Plots of a case as small inline SVG, drawn directly (no matplotlib).
 
 Size: a campaign has ~400 plots and the whole report must stay within a few MB
-(tests/test_report_campaign.py), so every series is reduced to what the page can show: at most
+(tests/integration/test_report_campaign.py), so every series is reduced to what the page can show: at most
 :data:`MAX_POINTS` points (min and max per bucket, so spikes survive), then simplified in
 pixel space (a point goes when the line moves by less than :data:`SIMPLIFY_PX` without it),
 and written as a relative path with 0.1 px resolution. Strokes, fonts and colours of the axes

@@ -1,7 +1,7 @@
 """Turning-state identification and reference speed of the ABS ([P4] eq. 5-14, docs/spec/formulas.md §6), as a pure
 class: no bus, no plant. The reference ABS ECU (plant/ecus/abs.py) runs it on exactly what it publishes
 (ABS_WheelSpeeds, the PressureStateXX and AbsActive of ABS_SteerState, and its brake switch), so a replay of
-a recorded log gives the same flags (tests/test_abs_replay.py).
+a recorded log gives the same flags (tests/integration/test_abs_replay.py).
 
 Signs are the paper's: wheels 1-4 = FL, FR, RL, RR; yaw rate r > 0 and road-wheel angle delta > 0 for a LEFT
 turn; T = 1 left, -1 right, 0 straight (the exception of docs/spec/formulas.md §1, kept on the bus in TurnDirection).

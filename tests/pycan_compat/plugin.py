@@ -13,7 +13,6 @@ from typing import Any
 
 import pytest
 
-
 SWAPPED = "virtual"
 BENCH_INTERFACE = "bench_virtual"
 

@@ -8,8 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tests.bench.test_report_browser import IMG, SCRIPT, dump, problems
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
-from tests.test_report_browser import IMG, SCRIPT, dump, problems
 
 CASES = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"
 

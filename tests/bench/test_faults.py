@@ -4,7 +4,6 @@ registry (bench/fault_kinds.py) from which the checks, the --fault help and docs
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 
@@ -14,9 +13,10 @@ from bench.errors import ConfigError
 from bench.fault_kinds import FaultKind, Outgoing
 from bench.faults import KINDS, Fault, FaultPlan, parse_fault, validate
 from bench.restbus import Restbus
+from tests import repo
 
 MSG = "VCU_WheelCmd_FL"
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = repo.ROOT
 
 
 def _frame(codebook: Codebook, counter: int = 5) -> tuple[int, bytes]:

@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.test_report_browser import problems, run_browser
+from tests import repo
+from tests.bench.test_report_browser import problems, run_browser
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = repo.ROOT
 BUDGET = 3_000_000               # bytes: the whole campaign's report.html
 FAIL_RGB = (0xCF, 0x22, 0x2E)    # var(--fail): the border of the failures box
 SCREEN = (1280, 900)             # the first screen of a laptop browser window

@@ -7,8 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tests.bench.test_replay import group, make_log
 from tests.repo import ROOT
-from tests.test_replay import group, make_log
 
 
 def replay(log: Path) -> subprocess.CompletedProcess:

@@ -22,11 +22,12 @@ from plant.ecus.sbw import SbwEcu, SbwFault, SteeringMode
 from plant.factory import assemble
 from plant.sbw import SbwMechanics, SbwSensors, SensorFault
 from plant.vehicles import SbwParams, load_file, load_parameters
+from tests import repo
 
 DT = 1e-3
 RAD = math.pi / 180.0
 P = load_parameters("SBW")
-REPO = Path(__file__).resolve().parents[1]
+REPO = repo.ROOT
 
 
 BOUNDS = ranges.BY_SIGNAL

@@ -9,9 +9,20 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from plant.kinematics import (CENTRE_TOLERANCE_M, Geometry, Undefined, ackermann_front, centre_from_axle_angles,
-                              centre_x_on_mid_axle, centre_x_on_rear_axle, classify_centre, curvature_angle,
-                              rotation, translation, yaw_rate)
+from plant.kinematics import (
+    CENTRE_TOLERANCE_M,
+    Geometry,
+    Undefined,
+    ackermann_front,
+    centre_from_axle_angles,
+    centre_x_on_mid_axle,
+    centre_x_on_rear_axle,
+    classify_centre,
+    curvature_angle,
+    rotation,
+    translation,
+    yaw_rate,
+)
 
 EV = Geometry(half_track=1.11 / 2, half_wheelbase=2.76 / 2, wheel_radius=0.281)   # docs/spec/vehicles.md A
 UNIT = Geometry(half_track=1.0, half_wheelbase=2.0, wheel_radius=30.0 / math.pi)   # 1 rpm per m/s

@@ -26,6 +26,7 @@ from plant.ecus.abs_estimator import (
     yaw_rate,
 )
 from plant.vehicles import AbsParams, load_file, load_parameters
+from tests import repo
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 CAR, PARAMS = load_parameters("ACLASS"), load_parameters("ABS")
@@ -189,7 +190,7 @@ def test_bad_config_is_refused(field: str, value: float) -> None:
 
 
 def test_parameter_file_errors_name_the_key(tmp_path: Path) -> None:
-    text = (Path(__file__).resolve().parents[1] / "plant" / "vehicles" / "abs.toml").read_text()
+    text = (repo.ROOT / "plant" / "vehicles" / "abs.toml").read_text()
     bad = tmp_path / "abs.toml"
     bad.write_text(text.replace('v_l0                  = { value = 0.6,', 'v_l0                  = { value = 12.0,'))
     with pytest.raises(ValueError, match="v_l0"):

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import base64
-import hashlib
-
 import dataclasses
+import hashlib
 import re
 import xml.etree.ElementTree as ET
 from html.parser import HTMLParser
@@ -14,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.report import write_html, write_junit
 import bench.report.html as report_html
+from bench.report import write_html, write_junit
 from bench.report.html import fmt
 from bench.report.junit import split_nodeid, xml_safe
 from bench.report.plots import MAX_POINTS, Plotter, decimate

@@ -4,7 +4,6 @@ two processes over udp_multicast, and crash safety (SIGKILL, SIGINT)."""
 from __future__ import annotations
 
 import json
-import os
 import random
 import signal
 import subprocess
@@ -33,7 +32,7 @@ def frames_of(path: Path) -> list[tuple[int, int, bytes, str]]:
     epoch times (the run's wall-clock start + bench time); metadata `bench.clock` gives the start."""
     out = []
     with open(path, "rb") as f:
-        origin = next((int(m.metadata["origin_ns"]) for m in make_reader(f).iter_metadata() if m.name == "bench.clock"))
+        origin = next(int(m.metadata["origin_ns"]) for m in make_reader(f).iter_metadata() if m.name == "bench.clock")
         f.seek(0)
         for schema, channel, message in make_reader(f).iter_messages(topics=["/can/frames"]):
             body = json.loads(message.data)

@@ -83,7 +83,7 @@ VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=(PARAMETERS,),
 PARAMETERS = f'''\
 name = "TOY"
 [parameters]
-coast_time = {{ value = {COAST_TIME}, unit = "s", source = "chosen (tests/test_toy_vehicle.py)" }}
+coast_time = {{ value = {COAST_TIME}, unit = "s", source = "chosen (tests/integration/test_toy_vehicle.py)" }}
 '''
 
 BENCH_TOML = """\

@@ -26,8 +26,9 @@ from bench.faults import CASE, FaultPlan, parse_fault, validate
 from bench.logread import read_decoded, summarise
 from bench.results import RunResult
 from bench.run import BenchRun
+from tests import repo
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = repo.ROOT
 DROPPED, CORRUPTED = "VCU_WheelCmd_FL", "VCU_WheelCmd_FR"
 CYCLE = 0.010                      # s, both messages (dbc/chassis.dbc GenMsgCycleTime 10)
 DROP_SPEC = f"drop:{DROPPED}@case+0.5-1"

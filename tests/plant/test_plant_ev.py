@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 
@@ -18,13 +17,14 @@ from plant.ecus.vcu import CENTRE_AT_INFINITY_M, Vcu, VcuFault
 from plant.ecus.wheel import WheelEcu, WheelFault
 from plant.factory import assemble, build
 from plant.vehicles import Ev4wisParams, load_file, load_parameters
+from tests import repo
 
 DT = 1e-3
 PARAMS = load_parameters("EV4WIS")
 K, L, R = 1.11 / 2, 2.76 / 2, 0.281
 CORNERS = ("FL", "FR", "RL", "RR")
 POSITIONS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
-REPO = Path(__file__).resolve().parents[1]
+REPO = repo.ROOT
 
 
 class Rig:

@@ -4,13 +4,13 @@ receiver's transition table as the document writes it."""
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from bench import e2e
+from tests import repo
 from tests.reference import crc8_j1850
 
 
@@ -61,7 +61,7 @@ def test_payload_is_the_frame_without_its_e2e_bytes(payload: bytes, first: int, 
 def test_only_e2e_py_reads_or_writes_the_e2e_bytes() -> None:
     """Counter and checksum bytes go through bench/e2e.py everywhere else (sender and receiver cannot disagree):
     no other module of bench/ or plant/ indexes or slices a frame with COUNTER_BYTE or CHECKSUM_BYTE."""
-    root = Path(__file__).resolve().parents[1]
+    root = repo.ROOT
     pattern = re.compile(r"\[[^\]]*\b(COUNTER_BYTE|CHECKSUM_BYTE)\b[^\]]*\]")   # a subscript or slice with one
     found = [f"{path.relative_to(root)}:{n}: {line.strip()}"
              for folder in ("bench", "plant") for path in sorted((root / folder).rglob("*.py"))
@@ -76,7 +76,7 @@ def test_counter_wraps_15_to_0() -> None:
 
 
 # -- the receiver's transition table (docs/spec/e2e.md "States and transitions") ------------------------------
-E2E_DOC = Path(__file__).resolve().parents[1] / "docs" / "spec" / "e2e.md"
+E2E_DOC = repo.ROOT / "docs" / "spec" / "e2e.md"
 TABLE_HEADER = "| state | check | next state | frame accepted |"
 REFERENCE = 5          # the reference counter of a receiver that has one
 

@@ -97,6 +97,7 @@ def test_long_runs_keep_memory_bounded_and_say_so(codebook: Codebook, monkeypatc
     t, _ = monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd", since=4.5)
     assert t[0] == 4.5
     import pytest
+
     from bench.errors import BenchError
     with pytest.raises(BenchError, match="only the last"):
         monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd", since=0.0)

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests import repo
+
+ROOT = repo.ROOT
 SCANNED = ("bench", "plant", "testcases", "tests", "examples", "benchmarks", "scripts", "dbc", "docs",
            "README.md", "bench.toml")
 SUFFIXES = {".py", ".md", ".dbc", ".toml", ".j2"}
