@@ -23,15 +23,15 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterator, Mapping
+from io import BufferedIOBase
 from pathlib import Path
-from typing import IO, Any
+from typing import Any, BinaryIO, TypedDict
 
 import can
 from can.io.generic import BinaryIOMessageReader, BinaryIOMessageWriter
 
-from bench.errors import LogError
-
 from bench.codec import MessageCodec, load_codebook
+from bench.errors import LogError
 from bench.logread import LoggedFrame, read_frames
 from bench.monitor import Monitor
 from bench.recorder import Recorder
@@ -67,13 +67,27 @@ def _paths(value: Any) -> list[Path]:
     return [Path(str(item).strip()) for item in items if str(item).strip()]
 
 
+class _FrameKeywords(TypedDict):
+    """The recorder's keywords for one received frame (Recorder.frame), besides time, id, data and verdict."""
+
+    channel: str
+    is_extended: bool
+    is_error: bool
+    is_remote: bool
+    is_fd: bool
+    bitrate_switch: bool
+    error_state_indicator: bool
+    channel_number: int | None
+    dlc: int | None
+
+
 class MCAPWriter(BinaryIOMessageWriter):
     """Writes received messages into a bench MCAP log (python-can writer for ".mcap").
 
     `file` is a path or a binary file object (which stop() closes, as python-can's writers do)."""
 
-    def __init__(self, file: str | os.PathLike[str] | IO[bytes], *, dbc: Any = None, channel: Any = None,
-                 append: bool = False, flush_interval: float = 0.5, **kwargs: Any) -> None:
+    def __init__(self, file: str | os.PathLike[str] | BinaryIO | BufferedIOBase, *, dbc: Any = None,
+                 channel: Any = None, append: bool = False, flush_interval: float = 0.5, **kwargs: Any) -> None:
         if append:
             raise ValueError(f"{file}: an MCAP log cannot be appended to; write a new file")
         dbc_paths = _paths(dbc)
@@ -88,7 +102,7 @@ class MCAPWriter(BinaryIOMessageWriter):
         self.default_channel = channel           # the channel of messages that carry none
         self.monitor = Monitor(codebook, sink=self._sink) if codebook else None
         self._last_t = 0.0
-        self._extra: dict[str, Any] = {}         # the recorder's keywords for the frame in the monitor's hands
+        self._extra: _FrameKeywords | None = None   # the recorder's keywords for the frame in the monitor's hands
 
     def on_message_received(self, msg: can.Message) -> None:
         t = msg.timestamp
@@ -98,10 +112,10 @@ class MCAPWriter(BinaryIOMessageWriter):
         channel, number = _channel(self.default_channel if msg.channel is None else msg.channel)
         direction = "rx" if msg.is_rx else "tx"
         data = bytes(msg.data)
-        extra = {"channel": channel, "is_extended": msg.is_extended_id, "is_error": msg.is_error_frame,
-                 "is_remote": msg.is_remote_frame, "is_fd": msg.is_fd, "bitrate_switch": msg.bitrate_switch,
-                 "error_state_indicator": msg.error_state_indicator, "channel_number": number,
-                 "dlc": msg.dlc if msg.is_remote_frame else None}
+        extra = _FrameKeywords(channel=channel, is_extended=msg.is_extended_id, is_error=msg.is_error_frame,
+                               is_remote=msg.is_remote_frame, is_fd=msg.is_fd, bitrate_switch=msg.bitrate_switch,
+                               error_state_indicator=msg.error_state_indicator, channel_number=number,
+                               dlc=msg.dlc if msg.is_remote_frame else None)
         if self.monitor is None or msg.is_remote_frame:
             self.recorder.frame(t, msg.arbitration_id, data, direction=direction, **extra)
             return
@@ -110,6 +124,8 @@ class MCAPWriter(BinaryIOMessageWriter):
 
     def _sink(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
               codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
+        if self._extra is None:   # the monitor calls back only from on_frame, which sets the keywords first
+            raise RuntimeError("MCAPWriter: a frame from the monitor before any was received")
         self.recorder.frame(t, arbitration_id, data, direction=direction, valid=valid, error=reason, **self._extra)
         if values is not None and codec is not None:
             self.recorder.decoded(t, codec.name, values)
@@ -129,16 +145,18 @@ class MCAPReader(BinaryIOMessageReader):
 
     `file` is a path or a binary file object, read from where it stands; stop() closes it."""
 
-    def __init__(self, file: str | os.PathLike[str] | IO[bytes], **kwargs: Any) -> None:
+    def __init__(self, file: str | os.PathLike[str] | BinaryIO, **kwargs: Any) -> None:
+        stream: BinaryIO
         if isinstance(file, (str, os.PathLike)):
             try:
-                self.file = open(file, "rb")  # noqa: SIM115 - closed by stop()
+                stream = open(file, "rb")  # noqa: SIM115 - closed by stop()
             except OSError as exc:
                 raise LogError(f"{file}: cannot read run log: {exc.strerror}") from None
         else:
-            self.file = file
+            stream = file
+        self.file = stream
         try:
-            self._frames = read_frames(self.file)
+            self._frames = read_frames(stream)
             # Read the head now, so that a foreign file fails here (LogError) and not mid-iteration.
             self._first = next(self._frames, None)
         except BaseException:

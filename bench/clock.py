@@ -36,6 +36,7 @@ DRAIN_BATCHES = 16
 
 class Clock(Protocol):
     realtime: bool
+    epoch_ns: int     # the wall-clock instant of bench time 0, ns since the epoch (the run log's times)
 
     def start(self) -> None: ...
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -519,7 +519,7 @@ def _check_value_table(message: Message, signal: Signal, lines: _Lines, add: _Ad
         if repeated:
             add(WARNING, "value-table", f"value(s) {', '.join(map(str, repeated))} named twice: the last "
                 "name wins", at)
-    choices = signal.choices or {}
+    choices: Mapping[int, object] = signal.choices or {}
     if not choices:
         return
     names = [str(n) for n in choices.values()]

@@ -14,7 +14,7 @@ import contextlib
 import io
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -105,7 +105,7 @@ class _Scan:
             except OSError as exc:
                 raise LogError(f"{self.path}: cannot read run log: {exc}") from None
         else:
-            self.path = Path(source)  # type: ignore[arg-type]
+            self.path = Path(source)
             try:
                 with self.path.open("rb") as file:
                     head = file.read(len(MAGIC))
@@ -129,7 +129,8 @@ class _Scan:
         footer = False
         with self._open() as file:
             try:
-                for record in StreamReader(_WholeReads(file)).records:
+                # mcap reads a non-RawIOBase input only through read(); its annotation asks for a whole file
+                for record in StreamReader(_WholeReads(file)).records:  # type: ignore[arg-type]
                     if isinstance(record, Channel):
                         self.topics[record.id] = record.topic
                     elif isinstance(record, Metadata) and record.name == CLOCK_METADATA:
@@ -157,7 +158,7 @@ def _messages(scan: _Scan, wanted: Any) -> Iterator[tuple[str, Message]]:
             ids.add(record.id)
 
 
-def read_frames(path: str | Path | IO[bytes]) -> Iterator[LoggedFrame]:
+def read_frames(path: str | Path | IO[bytes]) -> Generator[LoggedFrame, None, None]:
     """The raw frames of a log, in the order logged (`path` may also be a binary file object)."""
     scan = _Scan(path)
     path = scan.path
@@ -182,7 +183,8 @@ def read_frames(path: str | Path | IO[bytes]) -> Iterator[LoggedFrame]:
                 error_state_indicator=bool(d.get("error_state_indicator", False)),
                 channel_number=None if number is None else int(number))
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise LogError(f"{path}: damaged frame record at {message.log_time} ns: {type(exc).__name__}: {exc}") from None
+            raise LogError(f"{path}: damaged frame record at {message.log_time} ns: "
+                           f"{type(exc).__name__}: {exc}") from None
         yield frame
 
 

@@ -29,6 +29,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
+from io import BufferedIOBase
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, cast
@@ -293,7 +294,7 @@ class Recorder:
 
     def __init__(
         self,
-        path: Path | IO[bytes],
+        path: Path | IO[bytes] | BufferedIOBase,
         databases: Sequence[cantools.database.can.Database],
         attachments: Sequence[Path] = (),
         *,

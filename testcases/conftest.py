@@ -1,7 +1,7 @@
 """Every case carries the campaign of its package (`CAMPAIGN` in testcases/<campaign>/__init__.py) as
 `@pytest.mark.campaign(name=...)`, so that `pytest -m "campaign(name='4WIS')"` selects a campaign without a list of
-cases; `bench run testcases/ev4wis` selects the same cases by path. tests/integration/test_campaigns.py checks that every case
-has exactly one campaign."""
+cases; `bench run testcases/ev4wis` selects the same cases by path. tests/integration/test_campaigns.py checks that
+every case has exactly one campaign."""
 
 from __future__ import annotations
 

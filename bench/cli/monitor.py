@@ -22,7 +22,7 @@ from typing import Any
 
 import can
 from rich import box
-from rich.console import Console, Group
+from rich.console import Console, Group, JustifyMethod
 from rich.live import Live
 from rich.table import Table
 from rich.text import Text
@@ -211,9 +211,11 @@ def _number(value: float, digits: int = 1) -> str:
 def render(live: LiveMonitor, now: float, source: str, elapsed: float) -> Group:
     monitor = live.monitor
     table = Table(box=box.MINIMAL, header_style="bold", pad_edge=False, expand=True)
-    for name, justify in (("ID", "left"), ("Message", "left"), ("Sender", "left"), ("Frames", "right"),
-                          ("Rate Hz", "right"), ("DBC Hz", "right"), ("p50 ms", "right"), ("max ms", "right"),
-                          ("DBC ms", "right"), ("E2E", "left"), ("Timeout", "left")):
+    columns: tuple[tuple[str, JustifyMethod], ...] = (
+        ("ID", "left"), ("Message", "left"), ("Sender", "left"), ("Frames", "right"), ("Rate Hz", "right"),
+        ("DBC Hz", "right"), ("p50 ms", "right"), ("max ms", "right"), ("DBC ms", "right"), ("E2E", "left"),
+        ("Timeout", "left"))
+    for name, justify in columns:
         table.add_column(name, justify=justify, no_wrap=True)
     table.add_column("Values", no_wrap=True, overflow="ellipsis", ratio=1)   # the rest of the width
     seen = 0
