@@ -43,8 +43,9 @@ def project() -> ProjectConfig:
 @pytest.fixture(scope="module")
 def collected(project: ProjectConfig) -> _Collected:
     found = _Collected()
-    found.exit_code = pytest.main([str(project.testcases), "--collect-only", "-p", "no:terminal", "-p", "no:cacheprovider",
-                 "--rootdir", str(ROOT), "--bench-config", str(project.path)], plugins=[found])
+    found.exit_code = pytest.main([str(project.testcases), "--collect-only", "-p", "no:terminal",
+                                   "-p", "no:cacheprovider",
+                                   "--rootdir", str(ROOT), "--bench-config", str(project.path)], plugins=[found])
     return found
 
 

@@ -127,8 +127,9 @@ def compare_encode(codec: MessageCodec, values: dict[str, Any]) -> None:
     values = {k: v for k, v in values.items() if v is not MISSING}
     message = codec.message
     for strict in (False, True):
-        theirs = _outcome(lambda: message.encode(dict(values), scaling=True, strict=strict))
-        ours = _outcome(lambda: codec.encode(dict(values), strict=strict) if strict else codec.encode(dict(values)))
+        theirs = _outcome(lambda strict=strict: message.encode(dict(values), scaling=True, strict=strict))
+        ours = _outcome(lambda strict=strict: codec.encode(dict(values), strict=strict) if strict
+                        else codec.encode(dict(values)))
         _assert_same(ours, theirs, f"encode(strict={strict}) {values}")
         if theirs[0] == "ok" and not strict:   # and what was encoded decodes alike
             compare_decode(codec, theirs[1])
@@ -185,7 +186,8 @@ def _edges(message: Message, signal: Signal) -> list[Any]:
     for limit in (signal.minimum, signal.maximum):
         if limit is not None:
             tiny = abs(signal.scale) * 1e-7
-            out += [limit, limit - tiny, limit + tiny, limit - 1e-5 * abs(signal.scale), limit + 1e-5 * abs(signal.scale)]
+            step = 1e-5 * abs(signal.scale)
+            out += [limit, limit - tiny, limit + tiny, limit - step, limit + step]
     if signal.is_float:
         out += [0.0, -0.0, 1.5, 3.4e38, 3.5e38, 1e39, -1e39, 1e308, 5e-324, 2**64, -(2**64)]
         return out

@@ -89,13 +89,15 @@ def test_malformed_heading_names_file_and_line(line: str) -> None:
 
 def test_ids_follow_the_convention() -> None:
     assert all(map(is_requirement_id, ["VCU-FLT-03", "VCU-4WS-02", "COM-E2E-01", "PLANT-01"]))
-    assert not any(map(is_requirement_id, ["vcu-FLT-03", "VCU-FLT-3", "VCU-FLT-003", "VCU_FLT-03", "VCU-FLT-٠٣", "-01"]))
+    assert not any(map(is_requirement_id,
+                       ["vcu-FLT-03", "VCU-FLT-3", "VCU-FLT-003", "VCU_FLT-03", "VCU-FLT-٠٣", "-01"]))
 
 
 def test_duplicate_id_names_both_places(tmp_path: Path) -> None:
     (tmp_path / "a.md").write_text("### VCU-FLT-01 — one\n")
     (tmp_path / "b.md").write_text("text\n### VCU-FLT-01 — again\n")
-    with pytest.raises(ContractError, match=r"b\.md:2: duplicate requirement id VCU-FLT-01 \(first defined at .*a\.md:1\)"):
+    with pytest.raises(ContractError,
+                       match=r"b\.md:2: duplicate requirement id VCU-FLT-01 \(first defined at .*a\.md:1\)"):
         load_requirements([tmp_path / "a.md", tmp_path / "b.md"])
 
 
@@ -120,7 +122,8 @@ def test_contract_documents_are_globs_relative_to_bench_toml(tmp_path: Path) -> 
 
 
 @pytest.mark.parametrize("contract, words", [
-    ('[contract]\ndocuments = [\n  "contract/*.md",\n  "nothing/*.md",\n]\n', ["bench.toml:11:", "'nothing/*.md' matches no file"]),
+    ('[contract]\ndocuments = [\n  "contract/*.md",\n  "nothing/*.md",\n]\n',
+     ["bench.toml:11:", "'nothing/*.md' matches no file"]),
     ('[contract]\ndocuments = "contract/*.md"\n', ["bench.toml", "non-empty list of glob strings"]),
     ('[contract]\ndocuments = []\n', ["bench.toml", "non-empty list"]),
     ('[contract]\ndocument = ["contract/*.md"]\n', ["bench.toml", "unknown key(s) document"]),
@@ -212,14 +215,16 @@ def test_external_node_skips_reference_cases_and_the_report_judges_requirements(
     # the skipped case came first, before any case had started the run: it is in the report all the same
     assert list(cases) == ["test_ref", "test_pass", "test_fail", "test_wheel"]
     skipped = cases["test_ref"].find("skipped")
-    assert skipped is not None and "reference_only: configures the reference VCU (VCU is external)" in skipped.get("message")
+    assert skipped is not None
+    assert "reference_only: configures the reference VCU (VCU is external)" in skipped.get("message")
     assert properties(cases["test_pass"]) == [("dut", "VCU"), ("req", "VCU-FLT-01"), ("req", "COM-E2E-01")]
     assert properties(cases["test_wheel"]) == [("dut", "WHL_FL"), ("req", "WHL-STS-01")]
     assert cases["test_fail"].find("failure") is not None
     html = (tmp_path / "report.html").read_text()
     section = html[html.index('<section id="conformance">'):]
     section = section[:section.index("</section>")]
-    rows = dict(re.findall(r'<span class="mono rid">([A-Z0-9-]+)</span>.*?<span class="badge ([a-z-]+)">', section, re.S))
+    rows = dict(re.findall(r'<span class="mono rid">([A-Z0-9-]+)</span>.*?<span class="badge ([a-z-]+)">',
+                           section, re.S))
     # VCU-FLT-02: test_fail failed (test_ref skipped); VCU-FLT-03: no case; COM-E2E-01 in the VCU table
     assert rows == {"COM-E2E-01": "pass", "VCU-FLT-01": "pass", "VCU-FLT-02": "fail", "VCU-FLT-03": "uncovered",
                     "WHL-STS-01": "pass"}
@@ -248,7 +253,8 @@ def test_external_all_skips_reference_cases(fixture_project: Path, tmp_path: Pat
 
 
 def test_bench_run_dut_runs_only_the_cases_that_judge_it(fixture_project: Path, tmp_path: Path) -> None:
-    result = subprocess.run([*BENCH, "run", str(fixture_project / "cases"), "--config", str(fixture_project / "bench.toml"),
+    result = subprocess.run([*BENCH, "run", str(fixture_project / "cases"),
+                             "--config", str(fixture_project / "bench.toml"),
                              "--out", str(tmp_path), "--dut", "VCU"], cwd=ROOT, capture_output=True, text=True,
                             timeout=300)
     assert result.returncode == 1, result.stdout + result.stderr
@@ -329,7 +335,8 @@ def test_skip_reason_names_the_external_nodes() -> None:
 # -- the section and the JUnit properties on hand-made results -----------------------------------------------
 def catalogue() -> list[RequirementInfo]:
     return [RequirementInfo(rid, f"title of {rid}", "contract/x.md", i) for i, rid in enumerate(
-        ["COM-E2E-01", "COM-E2E-02", "VCU-A-01", "VCU-A-02", "VCU-A-03", "VCU-A-04", "VCU-A-05", "WHL-S-01", "ABS-X-01"], 1)]
+        ["COM-E2E-01", "COM-E2E-02", "VCU-A-01", "VCU-A-02", "VCU-A-03", "VCU-A-04", "VCU-A-05", "WHL-S-01",
+         "ABS-X-01"], 1)]
 
 
 def case(name: str, outcome: str, duts: list[str], reqs: list[str]) -> CaseResult:

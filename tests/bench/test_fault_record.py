@@ -55,7 +55,8 @@ def test_validate_names_each_bad_spec(codebook: Codebook) -> None:
 
 def test_case_relative_windows(codebook: Codebook) -> None:
     fault = parse_fault("drop:VCU_WheelCmd_FL@case+0.5-1")
-    assert (fault.relative, fault.start, fault.end, fault.describe()) == (CASE, 0.5, 1.0, "drop:VCU_WheelCmd_FL@case+0.5-1")
+    assert (fault.relative, fault.start, fault.end, fault.describe()) == (CASE, 0.5, 1.0,
+                                                                          "drop:VCU_WheelCmd_FL@case+0.5-1")
     plan = FaultPlan(codebook)
     plan.add(fault)
     frame_id = codebook[DROPPED].frame_id
@@ -102,7 +103,8 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
         case.run(1.5)
         no_frames = case.value("IMU_Motion", "YawRate")
         case.expect("yaw rate", no_frames, 0.0, abs_tol=1.0, unit="deg/s")
-        case.plot("wheel commands", [(DROPPED, "SteerAngleCmd"), (CORRUPTED, "SteerAngleCmd"), ("IMU_Motion", "YawRate")])
+        case.plot("wheel commands",
+                  [(DROPPED, "SteerAngleCmd"), (CORRUPTED, "SteerAngleCmd"), ("IMU_Motion", "YawRate")])
         case.close()
         case.result.outcome = "failed"
         case.result.sim_time = run.session.now() - case.result.sim_start
@@ -143,7 +145,8 @@ def test_faults_in_the_report(recorded: Recorded) -> None:
         assert f'<span class="mono">{spec}</span>' in header
     case_a = html[html.index('id="case-1"'):html.index('id="case-2"')]
     assert "Faults during this case" in case_a and '<span class="tag">fault</span>' in case_a
-    shaded = re.findall(r'<rect class="fault" x="([\d.]+)" y="\d+" width="([\d.]+)"[^>]*><title>([^<]*)</title>', case_a)
+    shaded = re.findall(r'<rect class="fault" x="([\d.]+)" y="\d+" width="([\d.]+)"[^>]*><title>([^<]*)</title>',
+                        case_a)
     assert {t.split(" (")[0] for _, _, t in shaded} == {SILENCE_SPEC, DROP_SPEC, recorded.inject_spec}
     # the drop's window is 0.5 s of the 1.5 s case: about a third of the plot's width
     drop_x, drop_w = next((float(x), float(w)) for x, w, t in shaded if t.startswith(DROP_SPEC))
@@ -208,7 +211,8 @@ def test_invalid_frames_are_explained(recorded: Recorded) -> None:
     html = (recorded.out / "report.html").read_text(encoding="utf-8")
     section = html[html.index('<section id="invalid">'):]
     section = section[:section.index("</section>")]
-    assert f'<td class="mono">{CORRUPTED}</td>' in section and '<a href="#case-1">test_a</a><span class="tag">fault</span>' in section
+    assert f'<td class="mono">{CORRUPTED}</td>' in section
+    assert '<a href="#case-1">test_a</a><span class="tag">fault</span>' in section
     assert '<a href="#invalid">where they come from</a>' in html
 
 

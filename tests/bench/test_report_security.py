@@ -20,7 +20,8 @@ def hostile_project(folder: Path) -> Path:
     marker = 'CM_ BO_ 256 '
     start = text.index(marker)
     end = text.index(";", start)
-    text = text[:start] + f'CM_ BO_ 256 "{SCRIPT.replace(chr(34), chr(39))} {IMG.replace(chr(34), chr(39))}"' + text[end:]
+    comment = f'CM_ BO_ 256 "{SCRIPT.replace(chr(34), chr(39))} {IMG.replace(chr(34), chr(39))}"'
+    text = text[:start] + comment + text[end:]
     text = text.replace('"NORMAL"', '"<b onmouseover=alert(1)>NORMAL</b>"', 1)
     dbc = folder / "chassis.dbc"
     dbc.write_text(text, encoding="utf-8")

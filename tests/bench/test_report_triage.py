@@ -24,7 +24,8 @@ def _run() -> RunResult:
                      faults=[FaultRecord("drop:VCU_WheelCmd_FL@case+1-2", "command line", "drop", "VCU_WheelCmd_FL",
                                          11.0, 12.0, 100)],
                      plots=[Plot("wheel", "time since case start [s]", "deg",
-                                 [Series("VCU_WheelCmd_FL.SteerAngleCmd", list(T), list(np.sin(T)), gap=0.025)], x0=10.0)])
+                                 [Series("VCU_WheelCmd_FL.SteerAngleCmd", list(T), list(np.sin(T)), gap=0.025)],
+                                 x0=10.0)])
     broken = CaseResult("testcases/test_y.py::test_broken", "test_broken", "error",
                         message="Traceback ...\nBenchError: the plant did not acknowledge scenario 3")
     return RunResult("2026-01-01T00:00:00", "virtual", "", "virtual", cases=[*ok[:30], bad, *ok[30:], broken],

@@ -19,7 +19,8 @@ WHEELS = {"FL": (-K, L), "FR": (K, L), "RL": (-K, -L), "RR": (K, -L)}
 
 
 def expected(x: float, y: float, v_o: float) -> dict[str, tuple[float, float]]:
-    """docs/spec/formulas.md §2 for the wheel at P: beta = atan((Py - y)/(x - Px)), n = 30 v_o (x - Px)/(pi r r_o cos beta)
+    """docs/spec/formulas.md §2 for the wheel at P: beta = atan((Py - y)/(x - Px)),
+    n = 30 v_o (x - Px)/(pi r r_o cos beta)
     (FL: Px = -K gives atan((L - y)/(x + K)), as printed)."""
     r_o = math.hypot(x, y)
     out = {}

@@ -34,7 +34,7 @@ def frames_of(path: Path) -> list[tuple[int, int, bytes, str]]:
     with open(path, "rb") as f:
         origin = next(int(m.metadata["origin_ns"]) for m in make_reader(f).iter_metadata() if m.name == "bench.clock")
         f.seek(0)
-        for schema, channel, message in make_reader(f).iter_messages(topics=["/can/frames"]):
+        for _schema, _channel, message in make_reader(f).iter_messages(topics=["/can/frames"]):
             body = json.loads(message.data)
             out.append((message.log_time - origin, body["id"], bytes(body["data"][: body["dlc"]]), body["direction"]))
     return out

@@ -193,8 +193,8 @@ def rigid_check(x: float, y: float, v_o: float, g: Geometry) -> None:
     angles, speeds = rotation(x, y, v_o, g)
     omega = np.array([0.0, 0.0, -v_o / math.hypot(x, y)])          # clockwise positive -> -z
     s = np.array([x, y, 0.0])
-    k, l = g.half_track, g.half_wheelbase
-    for p, a, n in zip([(-k, l), (k, l), (-k, -l), (k, -l)], angles, speeds):
+    k, h = g.half_track, g.half_wheelbase
+    for p, a, n in zip([(-k, h), (k, h), (-k, -h), (k, -h)], angles, speeds):
         vel = np.cross(omega, np.array([p[0], p[1], 0.0]) - s)[:2]
         heading = np.array([math.sin(math.radians(a)), math.cos(math.radians(a))])
         scale = max(1.0, float(np.linalg.norm(vel)))

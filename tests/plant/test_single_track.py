@@ -145,7 +145,8 @@ def test_four_wheel_steering_steady_state(u: float, delta_f: float, ratio: float
 
 
 def test_zero_sideslip_ratio_changes_sign_at_vehicles_md_speed() -> None:
-    """docs/spec/vehicles.md B: k = −0.46 at 40 km/h, +0.22 at 100 km/h, sign change at 67.7 km/h; checked on the model."""
+    """docs/spec/vehicles.md B: k = −0.46 at 40 km/h, +0.22 at 100 km/h, sign change at 67.7 km/h; checked on the
+    model."""
     def k_from_model(kmh: float) -> float:
         u = kmh / 3.6
         b_f, _, _ = ACLASS.steady_state(u, 1.0, 0.0)
