@@ -18,7 +18,7 @@ import time
 import weakref
 from collections import deque
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, final
 
 import can
 
@@ -57,6 +57,7 @@ def _copy(msg: can.Message, channel: Any, is_rx: bool) -> can.Message:
     return copy
 
 
+@final   # no subclasses: the receive paths test `type(item) is VirtualFrame`, the fast test
 class VirtualFrame:
     """A classic 11-bit data frame sent with `VirtualTimeBus.send_raw`: what a station reads of a frame
     (the fields of can.Message it needs, as bench.socketcan_rx.RawFrame), one object shared by every
@@ -90,7 +91,7 @@ def _message(frame: VirtualFrame, channel: Any, is_rx: bool) -> can.Message:
     return msg
 
 
-class _Inbox(deque):  # type: ignore[type-arg]
+class _Inbox(deque[can.Message | VirtualFrame]):
     """One bus's pending frames. The channel registry holds inboxes, never buses, so a dropped bus is
     collected. `qsize()`/`empty()` as python-can's virtual bus exposes its `queue`."""
 

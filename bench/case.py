@@ -11,6 +11,7 @@ import math
 import re
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
+from typing import Literal
 
 import numpy as np
 
@@ -366,11 +367,11 @@ class Case:
         self.result.plots.append(Plot(title, "time since case start [s]", ylabel, series, x0=self.start))
 
     def plot_series(self, title: str, series: Sequence[Series], *, xlabel: str, ylabel: str,
-                    kind: str = "time", x0: float | None = None) -> None:
+                    kind: Literal["time", "xy"] = "time", x0: float | None = None) -> None:
         """A plot in the report of series the case computed (`kind` "time", or "xy" for a top view with
         equal axes); `x0`: the bench time at x = 0 of a time plot whose x is seconds (the report then shades
         fault windows on it). Records no step."""
-        self.result.plots.append(Plot(title, xlabel, ylabel, list(series), kind, x0))  # type: ignore[arg-type]
+        self.result.plots.append(Plot(title, xlabel, ylabel, list(series), kind, x0))
 
     def table(self, title: str, columns: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
         """A table in the case's part of the report (e.g. measured figures next to a paper's); floats are

@@ -43,6 +43,7 @@ class DecodeError(cantools_errors.DecodeError, ValueError):
 _FIELD_OVERFLOW: tuple[type[Exception], ...] = (OverflowError, bitstruct.Error)
 
 
+# bitstruct ships no type information, so mypy sees its Error as Any (a base class it cannot check).
 class EncodeError(SignalError, cantools_errors.EncodeError, OverflowError, bitstruct.Error):  # type: ignore[misc]
     """A value whose raw number does not fit its signal's bit field. It is each class cantools may raise
     for that (OverflowError or bitstruct.Error, by bitstruct build) and cantools' EncodeError, so a

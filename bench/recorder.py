@@ -22,6 +22,7 @@ import itertools
 import json
 import math
 import mimetypes
+import os
 import platform
 import struct
 import threading
@@ -32,7 +33,7 @@ from importlib.metadata import PackageNotFoundError, version
 from io import BufferedIOBase
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any, cast
+from typing import IO, Any, SupportsFloat, cast
 
 import cantools
 from cantools.database.namedsignalvalue import NamedSignalValue
@@ -171,7 +172,12 @@ def _number(value: object, choices: Mapping[str, int]) -> int | float | None:
         return choices[value]
     if isinstance(value, int):
         return int(value)  # also makes bools numbers
-    number = float(value)  # type: ignore[arg-type]  # TypeError/ValueError for non-numbers
+    if isinstance(value, float):
+        number = value
+    elif isinstance(value, SupportsFloat):   # numpy scalars, Decimal ...
+        number = float(value)
+    else:
+        raise TypeError(f"a {type(value).__name__} is not a number")
     return number if math.isfinite(number) else None
 
 
@@ -249,7 +255,7 @@ def _fast_adder(writer: Writer) -> Callable[[int, int, bytes], None] | None:
         index.records.append((ns, offset))
         builder.num_messages += 1
         if records.count > limit:   # as add_message does (the recorder's own limit usually comes first)
-            writer.flush()  # type: ignore[no-untyped-call]
+            writer.flush()  # type: ignore[no-untyped-call]   # mcap's Writer.flush carries no annotations
 
     return add
 
@@ -264,7 +270,7 @@ def _finalise_chunk(writer: Writer, file: IO[bytes]) -> None:
     if flush is not None:
         flush()
     else:  # pragma: no cover - old mcap
-        writer._Writer__finalize_chunk()  # type: ignore[attr-defined]
+        writer._Writer__finalize_chunk()  # type: ignore[attr-defined]   # mcap < 1.2's private method, see above
     file.flush()
 
 
@@ -304,8 +310,12 @@ class Recorder:
     ) -> None:
         if not flush_interval > 0:
             raise LogError(f"run log {path}: flush interval must be > 0 s, not {flush_interval!r}")
-        stream = cast("IO[bytes]", path) if hasattr(path, "write") else None   # a binary file object (python-can)
-        self.path = Path(str(getattr(stream, "name", "<stream>"))) if stream is not None else Path(path)  # type: ignore[arg-type]
+        stream: IO[bytes] | None = None
+        if isinstance(path, (str, os.PathLike)):
+            self.path = Path(path)
+        else:   # a binary file object (python-can's writers hand over theirs)
+            stream = cast("IO[bytes]", path)
+            self.path = Path(str(getattr(stream, "name", "<stream>")))
         self._interval = float(flush_interval)
         self._origin_ns = 0   # log time of bench time 0 (set_origin); 0: log times are bench times
         self._chunk_bytes = int(chunk_size)
@@ -540,7 +550,7 @@ class Recorder:
         atexit.unregister(self.close)
         try:
             if not self._broken:  # else leave the file ending at its last whole chunk: still readable
-                self._writer.finish()  # type: ignore[no-untyped-call]
+                self._writer.finish()  # type: ignore[no-untyped-call]   # mcap's Writer.finish carries no annotations
         finally:
             self._file.close()
 

@@ -62,6 +62,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
+from bench.node import Behaviour
 from plant import signal_ranges as ranges
 from plant.body import BodyNode, PlanarBody, WheelSource
 from plant.single_track import SingleTrackParams
@@ -278,8 +279,8 @@ class EvBodyNode(BodyNode):
     missing or not finite)."""
 
     def __init__(self, params: Ev4wisParams, wheels: Mapping[str, WheelSource], *, vehicle_code: int,
-                 linked: Sequence[object] = ()) -> None:
-        super().__init__(params.geometry, wheels, vehicle_code=vehicle_code, linked=linked)  # type: ignore[arg-type]
+                 linked: Sequence[Behaviour] = ()) -> None:
+        super().__init__(params.geometry, wheels, vehicle_code=vehicle_code, linked=linked)
         self.body: VehicleBody = VehicleBody(params)
         self.reset()
 

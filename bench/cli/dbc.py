@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from cantools.database.can import Database, Message
 from rich.console import Console
@@ -52,7 +52,7 @@ def register(subparsers: Any) -> None:
 class _WordsParser(argparse.ArgumentParser):
     """Parses the words after `bench dbc`; a mistake is a ConfigError (one line, exit 2), not an exit."""
 
-    def error(self, message: str) -> None:  # type: ignore[override]
+    def error(self, message: str) -> NoReturn:
         raise ConfigError(message)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import can
@@ -110,9 +111,9 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
     the run does not start (exit 2), rather than an error in every case."""
     problems: list[str] = []
 
-    def check(action: object, *arguments: object) -> object:
+    def check(action: Callable[..., object], *arguments: object) -> object:
         try:
-            return action(*arguments)  # type: ignore[operator]
+            return action(*arguments)
         except BenchError as exc:
             problems.extend(getattr(exc, "problems", None) or [str(exc)])
             return None

@@ -21,6 +21,7 @@ import re
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
+from typing import TypedDict
 from urllib.parse import quote
 
 from jinja2 import Environment, PackageLoader, select_autoescape
@@ -168,12 +169,21 @@ def failures(run: RunResult) -> list[Failure]:
     return out
 
 
+class _InvalidCase(TypedDict):
+    """A case in which a message's invalid frames of one reason arrived (a row of the report's table)."""
+
+    index: int
+    name: str
+    frames: int
+    fault: bool
+
+
 @dataclass
 class _InvalidRow:
     message: str
     reason: str
     frames: int = 0
-    cases: list[dict[str, object]] = field(default_factory=list)
+    cases: list[_InvalidCase] = field(default_factory=list)
 
 
 @dataclass
@@ -192,9 +202,9 @@ def invalid_sources(run: RunResult) -> InvalidSources:
             itemised += n
             row = rows.setdefault((message, reason), _InvalidRow(message, reason))
             row.frames += n
-            row.cases.append({"index": i, "name": case.name, "frames": n, "fault": bool(case.faults)})
+            row.cases.append(_InvalidCase(index=i, name=case.name, frames=n, fault=bool(case.faults)))
     for row in rows.values():
-        row.cases.sort(key=lambda c: -int(c["frames"]))   # type: ignore[call-overload]
+        row.cases.sort(key=lambda c: -c["frames"])
     ordered = sorted(rows.values(), key=lambda r: -r.frames)
     return InvalidSources(ordered, max(0, run.invalid_frames - itemised))
 

@@ -244,7 +244,7 @@ def build(external: Collection[str]) -> list[Behaviour]:
         behaviours.append(ecu)
         linked.append(ecu)
     if "IMU" not in external:
-        imu = Imu(plant)  # type: ignore[arg-type]   # duck-typed: yaw_rate_dps, lat_accel, long_accel as plant.body.PlanarBody
+        imu = Imu(plant)   # a MotionSource: yaw_rate_dps, lat_accel, long_accel as plant.body.PlanarBody
         behaviours.append(imu)
         linked.append(imu)
     if "ABS" not in external:

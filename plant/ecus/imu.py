@@ -10,10 +10,23 @@ seeded, so runs stay reproducible. Values are clamped to the DBC ranges (IMU_Mot
 from __future__ import annotations
 
 import random
+from typing import Protocol
 
 from bench.node import NodeIO
 from plant import signal_ranges as ranges
-from plant.body import PlanarBody
+
+
+class MotionSource(Protocol):
+    """The in-process body the IMU reads: plant.body.PlanarBody, or a vehicle's own plant (the A-class)."""
+
+    @property
+    def yaw_rate_dps(self) -> float: ...
+
+    @property
+    def lat_accel(self) -> float: ...
+
+    @property
+    def long_accel(self) -> float: ...
 
 
 class Imu:
@@ -21,7 +34,7 @@ class Imu:
 
     nodes: tuple[str, ...] = ("IMU",)
 
-    def __init__(self, body: PlanarBody | None = None, *,
+    def __init__(self, body: MotionSource | None = None, *,
                  noise_std: tuple[float, float, float] = (0.0, 0.0, 0.0), seed: int = 0) -> None:
         """noise_std: (yaw rate deg/s, lateral m/s^2, longitudinal m/s^2) standard deviations."""
         self.body = body

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar
 
 from plant.kinematics import Geometry
 
@@ -31,9 +31,17 @@ def param(unit: str) -> Any:
     return field(metadata={"unit": unit})
 
 
-def require_positive(params: object, signed: frozenset[str] = frozenset()) -> None:
+class ParameterSet(Protocol):
+    """What `load_file` builds: a frozen dataclass of `param` fields that also takes each value's source."""
+
+    __dataclass_fields__: ClassVar[dict[str, Any]]
+
+    def __init__(self, *, sources: Mapping[str, str], **values: float) -> None: ...
+
+
+def require_positive(params: ParameterSet, signed: frozenset[str] = frozenset()) -> None:
     """ValueError naming the first parameter field (other than `signed`) that is not > 0."""
-    for f in fields(params):  # type: ignore[arg-type]
+    for f in fields(params):
         if "unit" in f.metadata and f.name not in signed and not getattr(params, f.name) > 0.0:
             raise ValueError(f"key 'parameters.{f.name}' must be positive, got {getattr(params, f.name)!r}")
 
@@ -239,7 +247,7 @@ class SbwParams:
             raise ValueError(f"key 'parameters.lat_accel_weight' must be at most 1, got {self.lat_accel_weight!r}")
 
 
-P = TypeVar("P")
+P = TypeVar("P", bound=ParameterSet)
 
 
 @dataclass(frozen=True)
@@ -247,7 +255,7 @@ class ParameterFile:
     """A parameter file and the frozen dataclass it loads into (a vehicle's declaration names its files)."""
 
     path: Path
-    cls: type
+    cls: type[ParameterSet]
 
     def load(self) -> Any:
         """The checked parameter set (ValueError naming the file and key, see `load_file`)."""
@@ -288,7 +296,7 @@ def load_file(path: Path, cls: type[P]) -> P:
     table = data.get("parameters")
     if not isinstance(table, dict):
         raise ValueError(f"{path}: key 'parameters' is missing or not a table")
-    wanted = {f.name: f.metadata["unit"] for f in fields(cls) if "unit" in f.metadata}  # type: ignore[arg-type]
+    wanted = {f.name: f.metadata["unit"] for f in fields(cls) if "unit" in f.metadata}
     extra = sorted(set(table) - set(wanted))
     if extra:
         raise ValueError(f"{path}: unknown key 'parameters.{extra[0]}' (expected: {', '.join(wanted)})")
@@ -315,6 +323,6 @@ def load_file(path: Path, cls: type[P]) -> P:
         values[key] = float(value)
         sources[key] = source
     try:
-        return cls(**values, sources=MappingProxyType(sources))  # type: ignore[call-arg]
+        return cls(**values, sources=MappingProxyType(sources))
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
