@@ -27,9 +27,9 @@ import pytest
 from bench.codec import load_codebook
 from bench.config import load_config
 from plant.factory import messages_of, vehicles
+from tests.integration.vcan import CHANNEL, IN_LANE, has_vcan, load_lane_script
 from tests.reference import contract_checksum
 from tests.repo import ROOT
-from tests.vcan import CHANNEL, IN_LANE, has_vcan, load_lane_script
 
 WARM_UP_S = 2.0     # s after the plant's first frame before judging (its BCM tasks start after 3 cycles)
 WINDOW_S = 6.0      # s of bus judged

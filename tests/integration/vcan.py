@@ -11,8 +11,9 @@ import importlib.util
 import os
 import socket
 import sys
-from pathlib import Path
 from types import ModuleType
+
+from tests import repo
 
 CHANNEL = os.environ.get("VCAN_CHANNEL", "vcan0")
 IN_LANE = "VCAN_CHANNEL" in os.environ
@@ -33,7 +34,7 @@ def load_lane_script() -> ModuleType:
     name = "vcan_lane"
     if name in sys.modules:
         return sys.modules[name]
-    path = Path(__file__).resolve().parent.parent / "scripts" / "vcan-lane"
+    path = repo.ROOT / "scripts" / "vcan-lane"
     loader = importlib.machinery.SourceFileLoader(name, str(path))
     spec = importlib.util.spec_from_loader(name, loader)
     assert spec is not None

@@ -6,7 +6,7 @@ sockets. A station runs on it tick by tick through stable values, a single chang
 a fault plan; the frames "on the wire" must keep the contract (docs/spec/k-matrix.md: AliveCounter +1 per transmission,
 CRC-8/SAE-J1850 Checksum, the DBC cycle) across every hand-over, and the station's log must hold exactly the
 wire's frames. With CAN in the kernel (the vcan lane: scripts/vcan-lane --command 'python -m pytest
-tests/test_periodic.py'), the same checks run against the real BCM on vcan0.
+tests/bench/test_periodic.py'), the same checks run against the real BCM on vcan0.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ from bench.faults import FaultPlan, parse_fault
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import Station
+from tests.integration.vcan import IN_LANE, has_vcan
 from tests.reference import contract_checksum
-from tests.vcan import IN_LANE, has_vcan
 
 DT = 0.001
 
