@@ -260,7 +260,8 @@ def _snap(value: float) -> float:
 
 def saturate_centre(centre: tuple[float, float]) -> tuple[float, float]:
     """VCU-OUT-06: each coordinate saturated separately to +/-5242.87 m."""
-    return tuple(max(-RANGE_END, min(RANGE_END, c)) for c in centre)  # type: ignore[return-value]
+    x, y = centre
+    return max(-RANGE_END, min(RANGE_END, x)), max(-RANGE_END, min(RANGE_END, y))
 
 
 def translation(mode: int, heading_deg: float, v: float, curvature: float) -> Command:
