@@ -247,7 +247,8 @@ class Case:
         """Latest valid value of a signal (physical, in the DBC's unit) from the frames the monitor
         accepted. With no valid frame now, a NaN (`NoFrames`) that a check records as "no frames of
         MESSAGE" (none came) or "MESSAGE timed out" (none lately). Records no step."""
-        latest = self._monitor.latest(message, self.now)
+        # the clock's latest read, not a new one: a predicate calls this every tick (bench.session.Session.recent)
+        latest = self._monitor.latest(message, self.session.recent())
         if latest is None:
             if signal not in self.session.codebook[message].signal_names:
                 self.session.codebook[message].physical(signal, 0.0)  # raises the clear error

@@ -15,6 +15,7 @@ tick's time, a late runner's skip uses the read that ended its wait.
 from __future__ import annotations
 
 import gc
+import select
 import time
 from collections.abc import Callable, Sequence
 from typing import Protocol
@@ -82,6 +83,8 @@ class WallClock:
     def __init__(self) -> None:
         self.start()
         self.max_lag = 0.0   # worst lateness of a tick, s
+        self._poller = select.poll()
+        self._polled: set[int] = set()
 
     def start(self) -> None:
         # What exists before real time starts (modules, databases, the plant's models) is moved out of the
@@ -105,6 +108,33 @@ class WallClock:
         """time.monotonic() of the latest read (no new read)."""
         return self._last + self._t0
 
+    def _probe(self, stations: Sequence[Station]) -> list[Station]:
+        """One poll() over every station's sockets: a station whose bus socket is empty is `drained` (its tick
+        reads nothing), an empty echo socket is skipped once (bench.periodic.KernelPeriodic.echo_idle).
+        Returns the stations with frames waiting. Most sockets are empty at most ticks, and in a UML guest
+        each read that finds nothing is a system call of about 61 us (docs/vcan-lane.md)."""
+        fds = [station.socket_fds() for station in stations]
+        ready = self._ready(fds)
+        waiting = []
+        for station, (bus_fd, echo_fd) in zip(stations, fds):
+            if echo_fd is not None and echo_fd not in ready and station.kernel is not None:
+                station.kernel.echo_idle = True
+            if bus_fd in ready:
+                waiting.append(station)
+            else:
+                station.drained = True
+        return waiting
+
+    def _ready(self, fds: list[tuple[int, int | None]]) -> set[int]:
+        """The descriptors among `fds` with something to read (or an error to report) now: one poll()."""
+        wanted = {fd for pair in fds for fd in pair if fd is not None}
+        if wanted != self._polled:
+            self._poller = select.poll()
+            for fd in wanted:
+                self._poller.register(fd, select.POLLIN)
+            self._polled = wanted
+        return {fd for fd, _ in self._poller.poll(0)}
+
     def stamp(self, timestamp: float, now: float | None = None) -> float:
         """Bench time of a frame the kernel stamped at `timestamp` (epoch s: python-can's socketcan and
         udp_multicast give the socket's receive time), read at bench time `now` (default: the clock's latest
@@ -123,10 +153,13 @@ class WallClock:
     def wait_until(self, t: float, stations: Sequence[Station]) -> None:
         """Return at bench time t, with what the stations' sockets received meanwhile read."""
         remaining = t - self.now()
+        stamped = all(station.stamped_batches for station in stations)
         if remaining < 0:
             self.max_lag = max(self.max_lag, -remaining)
+            if stamped:
+                self._probe(stations)   # a late tick too: its stations read only sockets that hold something
             return
-        if all(station.stamped_batches for station in stations):
+        if stamped:
             # Every frame carries the kernel's receive time and one call reads a batch (socketcan): sleep to the
             # deadline, then read what came. One system call for the wait and none for a frame that arrives
             # meanwhile (a wake-up per frame is a host context switch and a clock read in a UML guest); a frame
@@ -134,7 +167,7 @@ class WallClock:
             # lasted its whole time (`recent` becomes t, a lower bound of the present).
             time.sleep(remaining)
             self._last = max(self._last, t)
-            for station in stations:
+            for station in self._probe(stations):
                 for _ in range(DRAIN_BATCHES):
                     if station.poll(0.0) < POLL_BATCH:
                         station.drained = True   # its tick reads no more (bench.station.Station.tick)

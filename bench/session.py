@@ -105,6 +105,11 @@ class BenchSession:
     def now(self) -> float:
         return self.scheduler.now if not self.clock.realtime else self.clock.now()
 
+    def recent(self) -> float:
+        """Bench time of the clock's latest read (real time: at most a tick's work old; no new read, which
+        in a UML guest is a system call of about 55 us)."""
+        return self.scheduler.now if not self.clock.realtime else self.clock.recent()
+
     @property
     def monitor(self) -> Monitor:
         station = self.runner or self.plant

@@ -120,6 +120,13 @@ class Station:
         bench/socketcan_rx.py): then a wall-clock wait may sleep and read at its end (bench.clock.WallClock)."""
         return self._fast is not None and self._fast.native and self.stamp is not None
 
+    def socket_fds(self) -> tuple[int, int | None]:
+        """The descriptors of its bus socket and of its kernel echo socket (None while no kernel task runs), for
+        one poll() over every station's sockets; only for a station with `stamped_batches`."""
+        assert self._fast is not None
+        kernel = self.kernel
+        return self._fast.fileno(), kernel.echo.fileno() if kernel is not None and kernel.tasks else None
+
     def poll(self, timeout: float = 0.0, limit: int = POLL_BATCH) -> int:
         """Receive up to `limit` pending frames into the monitor (the first recv may wait up to timeout).
         Returns how many were read: `limit` means more may be waiting."""
