@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
+from tests.repo import BENCH_DBC, CHASSIS_DBC, MINIMAL_PROJECT_TOML, ROOT
 
 TOY_CODE = 3
 COAST_TIME = 2.0          # s, toy.toml; the case's expectation is computed from it, not read from the plant
@@ -86,18 +86,7 @@ name = "TOY"
 coast_time = {{ value = {COAST_TIME}, unit = "s", source = "chosen (tests/integration/test_toy_vehicle.py)" }}
 '''
 
-BENCH_TOML = """\
-[bench]
-databases = ["db/chassis.dbc", "db/bench.dbc"]
-stimulus = ["DRIVER", "TESTER"]
-plant = "chassis"
-testcases = "cases"
-reports = "reports"
-
-[scenario]
-command = "BENCH_Control.ScenarioId"
-ack = "PLANT_Status.ScenarioIdAck"
-"""
+BENCH_TOML = MINIMAL_PROJECT_TOML
 
 CASE = f'''\
 import math

@@ -26,25 +26,14 @@ from pathlib import Path
 
 import pytest
 
-from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
+from tests.repo import BENCH_DBC, CHASSIS_DBC, MINIMAL_PROJECT_TOML, ROOT
 
 pytestmark = pytest.mark.wheel
 
 #: What the wheel is built from (pyproject's packages and readme); nothing else of the repository is copied.
 SOURCES = ("pyproject.toml", "README.md", "bench", "plant")
 
-BENCH_TOML = """\
-[bench]
-databases = ["db/chassis.dbc", "db/bench.dbc"]
-stimulus = ["DRIVER", "TESTER"]
-plant = "chassis"
-testcases = "cases"
-reports = "reports"
-
-[scenario]
-command = "BENCH_Control.ScenarioId"
-ack = "PLANT_Status.ScenarioIdAck"
-"""
+BENCH_TOML = MINIMAL_PROJECT_TOML
 
 # docs/spec/formulas.md §2, front-left wheel about a centre of rotation (x, y): atan((L - y) / (x + K)), with the
 # 4WIS EV's half wheelbase L = 2.76 / 2 m and half track K = 1.11 / 2 m (docs/spec/vehicles.md A).
