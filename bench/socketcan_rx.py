@@ -88,13 +88,18 @@ class RawFrame:
 
 def parse(frame: bytes, ancillary: list[tuple[int, int, bytes]]) -> RawFrame:
     """One received struct can_frame/canfd_frame and its SO_TIMESTAMPNS, as python-can reads them."""
-    can_id, length = _HEADER.unpack_from(frame)
+    seconds, nanoseconds = _TIMESPEC.unpack_from(ancillary[0][2])
+    return _frame_at(frame, 0, seconds + nanoseconds * 1e-9)
+
+
+def _frame_at(buffer: bytes | memoryview, base: int, timestamp: float) -> RawFrame:
+    """The struct can_frame/canfd_frame at `base` of `buffer`, as python-can's capture_message reads it."""
+    can_id, length = _HEADER.unpack_from(buffer, base)
     if length not in _FD_LENGTHS:          # python-can rounds an odd FD length up to the next valid one
         length = min(n for n in _FD_LENGTHS if n >= length)
-    seconds, nanoseconds = _TIMESPEC.unpack_from(ancillary[0][2])
     extended = bool(can_id & CAN_EFF_FLAG)
-    data = b"" if can_id & CAN_RTR_FLAG else frame[8:8 + length]   # a remote frame has no data (can.Message)
-    return RawFrame(seconds + nanoseconds * 1e-9, can_id & (0x1FFFFFFF if extended else 0x7FF), data, extended,
+    data = b"" if can_id & CAN_RTR_FLAG else bytes(buffer[base + 8:base + 8 + length])   # a remote frame: none
+    return RawFrame(timestamp, can_id & (0x1FFFFFFF if extended else 0x7FF), data, extended,
                     bool(can_id & CAN_ERR_FLAG))
 
 
@@ -141,19 +146,12 @@ class MMsgBatch:
         frames, control = self._frames_view, self._control_view
         out = []
         for i in range(got):
-            base = i * CANFD_MTU
-            can_id, length = _HEADER.unpack_from(frames, base)
-            if length not in _FD_LENGTHS:
-                length = min(n for n in _FD_LENGTHS if n >= length)
             if headers[i].hdr.controllen >= _ANCILLARY:
                 seconds, nanoseconds = _TIMESPEC.unpack_from(control, i * _ANCILLARY + _CMSG_HEADER)
                 timestamp = seconds + nanoseconds * 1e-9
             else:
                 timestamp = 0.0     # no stamp: outside any clock's window, the frame gets the time of reading
-            extended = bool(can_id & CAN_EFF_FLAG)
-            data = b"" if can_id & CAN_RTR_FLAG else bytes(frames[base + 8:base + 8 + length])
-            out.append(RawFrame(timestamp, can_id & (0x1FFFFFFF if extended else 0x7FF), data, extended,
-                                bool(can_id & CAN_ERR_FLAG)))
+            out.append(_frame_at(frames, i * CANFD_MTU, timestamp))
         return out
 
 
