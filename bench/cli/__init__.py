@@ -4,6 +4,7 @@ the parser it adds sets `handler=run`, a function `run(args) -> int` (the exit c
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import sys
 
@@ -23,9 +24,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def chosen_parser(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The innermost (sub)command's parser that `args` came through: its usage and options are the ones a
+    user who mistyped an option needs to see, not the top level's."""
+    while True:
+        actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not actions or getattr(args, actions[0].dest, None) not in actions[0].choices:
+            return parser
+        parser = actions[0].choices[getattr(args, actions[0].dest)]
+
+
+def unknown_arguments(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """'unrecognized arguments: --interfce x (did you mean --interface?)': a typo gets the close option."""
+    options = {o.lstrip("-"): o for a in parser._actions for o in a.option_strings}
+    shown = []
+    for extra in extras:
+        name = extra.split("=", 1)[0]
+        close = difflib.get_close_matches(name.lstrip("-"), options, n=1, cutoff=0.75) if name.startswith("-") else []
+        shown.append(f"{extra} (did you mean {options[close[0]]}?)" if close else extra)
+    return f"unrecognized arguments: {' '.join(shown)}"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extras = parser.parse_known_args(argv)
+    if extras:
+        chosen_parser(parser, args).error(unknown_arguments(chosen_parser(parser, args), extras))
     try:
         return int(args.handler(args))
     except BenchError as exc:
