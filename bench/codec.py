@@ -30,7 +30,7 @@ from cantools.database import errors as cantools_errors
 from cantools.database.can import Database, Message, Signal
 
 from bench import e2e
-from bench.errors import DatabaseError, SignalError
+from bench.errors import DatabaseError, SignalError, did_you_mean
 
 
 class DecodeError(cantools_errors.DecodeError, ValueError):
@@ -133,10 +133,19 @@ class MessageCodec:
         # Decoding: without an offset when no signal has one (x + 0.0 differs from x only for x = -0.0,
         # which a positive scale never gives); one loop either way, so the values come in signal order.
         self._no_offset = all(s.offset == 0 and s.scale > 0 for s in self.signals)
-        # Once per frame per process: in one process the sender's and the receiver's monitors (and the
-        # plant's stations) see the same frame; the second decode of the same payload copies the first.
-        # One tuple, replaced whole, so a reader on another thread never pairs a payload with other values.
-        self._last: tuple[bytes | None, dict[str, float]] = (None, {})
+        # Decode once per distinct payload: in one process the sender's and the receiver's monitors see the same
+        # frame, and most frames repeat their values with only AliveCounter and Checksum new. The cache is keyed
+        # by the payload without those two fields when they are plain raw numbers whose DBC range covers their
+        # whole field (scale 1, offset 0, unsigned: the contract's layout), so a repeat costs a copy and two
+        # numbers, and its range check is the one of the payload's first frame. One entry (key, values, names
+        # out of range or None until asked), replaced whole, so a reader on another thread never pairs a payload
+        # with other values.
+        full = (1 << (8 * self.length)) - 1
+        self._e2e_plain = self.fast and self.e2e and all(
+            _plain_raw(self.by_name[n]) for n in ("AliveCounter", "Checksum"))
+        self._body_mask = full & ~((0x0F << 8 * e2e.COUNTER_BYTE) | (0xFF << 8 * e2e.CHECKSUM_BYTE)) \
+            if self._e2e_plain else full
+        self._entry: tuple[int, dict[str, float], tuple[str, ...] | None] = (-1, {}, None)
         self._unpack: tuple[tuple[Any, ...], ...] = tuple(
             (s.name, s.start, (1 << s.length) - 1, (1 << (s.length - 1)) if s.signed else 0,
              1 << s.length, s.scale, s.offset)[: 6 if self._no_offset else 7]
@@ -163,7 +172,7 @@ class MessageCodec:
         """A checked physical value: value-table names resolved, NaN and out-of-range refused."""
         sig = self.by_name.get(signal)
         if sig is None:
-            raise SignalError(f"message {self.name} has no signal {signal!r} "
+            raise SignalError(f"message {self.name} has no signal {signal!r}{did_you_mean(signal, self.signal_names)} "
                               f"(signals: {', '.join(self.signal_names)})")
         if isinstance(value, str):
             if value not in sig.choices:
@@ -249,12 +258,41 @@ class MessageCodec:
                 raise DecodeError(f"{self.name}: {exc}") from None
             return {k: v if type(v) is int and not -_EXACT_LIMIT <= v <= _EXACT_LIMIT else float(v)
                     for k, v in decoded.items()}
-        last_data, last_values = self._last
-        if data == last_data:
-            return last_values.copy()
         if len(data) < self.length:
             raise DecodeError(f"{self.name}: {len(data)} bytes, the message has {self.length}")
         word = int.from_bytes(data, "little")
+        entry = self._entry
+        if word & self._body_mask != entry[0]:
+            entry = self._decode_word(word)
+        out = entry[1].copy()
+        if self._e2e_plain:
+            out["AliveCounter"] = float((word >> 8 * e2e.COUNTER_BYTE) & 0x0F)
+            out["Checksum"] = float((word >> 8 * e2e.CHECKSUM_BYTE) & 0xFF)
+        return out
+
+    def decode_checked(self, data: bytes | bytearray) -> tuple[dict[str, float], tuple[str, ...]]:
+        """`decode` and `out_of_range` of a frame (the monitor, every frame): the names out of range are
+        computed once per distinct payload (the fields of a plain AliveCounter and Checksum are never out)."""
+        if not self.fast:
+            values = self.decode(data)
+            return values, tuple(self.out_of_range(values))
+        if len(data) < self.length:
+            raise DecodeError(f"{self.name}: {len(data)} bytes, the message has {self.length}")
+        word = int.from_bytes(data, "little")
+        entry = self._entry
+        if word & self._body_mask != entry[0]:
+            entry = self._decode_word(word)
+        values = entry[1].copy()
+        if self._e2e_plain:
+            values["AliveCounter"] = float((word >> 8 * e2e.COUNTER_BYTE) & 0x0F)
+            values["Checksum"] = float((word >> 8 * e2e.CHECKSUM_BYTE) & 0xFF)
+        bad = entry[2]
+        if bad is None:
+            bad = tuple(self.out_of_range(values))
+            self._entry = (entry[0], entry[1], bad)
+        return values, bad
+
+    def _decode_word(self, word: int) -> tuple[int, dict[str, float], tuple[str, ...] | None]:
         out: dict[str, float] = {}
         if self._no_offset:
             for name, start, mask, sign_bit, span, scale in self._unpack:
@@ -268,8 +306,8 @@ class MessageCodec:
                 if raw & sign_bit:
                     raw -= span
                 out[name] = raw * scale + offset
-        self._last = (bytes(data), out.copy())   # a copy of a bytearray: the caller may change it later
-        return out
+        entry = self._entry = (word & self._body_mask, out, None)
+        return entry
 
     def out_of_range(self, values: Mapping[str, float]) -> list[str]:
         """Names of the signals whose decoded value lies outside the DBC range."""
@@ -300,6 +338,13 @@ def _raw_limits(length: int, signed: bool) -> tuple[int, int]:
     if signed:
         return -(1 << (length - 1)), (1 << (length - 1)) - 1
     return 0, (1 << length) - 1
+
+
+def _plain_raw(signal: SignalCodec) -> bool:
+    """An unsigned raw number (scale 1, offset 0) whose DBC range, if any, holds every value of its field."""
+    return (not signal.signed and signal.scale == 1 and signal.offset == 0
+            and (signal.minimum is None or signal.minimum <= 0)
+            and (signal.maximum is None or signal.maximum >= (1 << signal.length) - 1))
 
 
 def _float_exact(signal: Signal) -> bool:
@@ -334,7 +379,8 @@ class Codebook:
         try:
             return self.by_name[name]
         except KeyError:
-            raise SignalError(f"no message {name!r} in {', '.join(n for n, _ in self.databases)}") from None
+            raise SignalError(f"no message {name!r}{did_you_mean(name, self.by_name)} in "
+                              f"{', '.join(n for n, _ in self.databases)}") from None
 
     def sent_by(self, nodes: Iterable[str]) -> list[MessageCodec]:
         wanted = set(nodes)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from bench.bus import VIRTUAL, is_virtual
 from bench.busopts import BusOptions, positive_int
 from bench.contract import Requirement, load_requirements
-from bench.errors import ConfigError
+from bench.errors import ConfigError, did_you_mean
 
 if TYPE_CHECKING:
     from bench.codec import Codebook
@@ -52,19 +52,27 @@ class ScenarioProtocol:
     ack: tuple[str, str]
     timeout: float = DEFAULT_SCENARIO_TIMEOUT
 
-    def check(self, where: Path, codebook: Codebook, stimulus: tuple[str, ...]) -> None:
-        """The named messages and signals exist, and the stimulus nodes send the command (else a ConfigError)."""
-        for key, (message, signal) in (("command", self.command), ("ack", self.ack)):
-            codec = codebook.by_name.get(message)
-            if codec is None:
-                raise ConfigError(f"{where}: [scenario] {key}: no message {message!r} in the databases")
-            if signal not in codec.signal_names:
-                raise ConfigError(f"{where}: [scenario] {key}: message {message} has no signal {signal!r} "
-                                  f"(signals: {', '.join(codec.signal_names)})")
-        senders = codebook[self.command[0]].senders
-        if not set(senders) & set(stimulus):
-            raise ConfigError(f"{where}: [scenario] command: {self.command[0]} is sent by "
-                              f"{', '.join(senders) or 'no node'}, not by a stimulus node ({', '.join(stimulus)})")
+    def problems(self, where: Path, codebook: Codebook, stimulus: tuple[str, ...]) -> list[str]:
+        """The named messages and signals exist, and the stimulus nodes send the command."""
+        found = [p for key, (message, signal) in (("command", self.command), ("ack", self.ack))
+                 if (p := signal_problem(f"{where}: [scenario] {key}", codebook, message, signal))]
+        if not found:
+            senders = codebook[self.command[0]].senders
+            if not set(senders) & set(stimulus):
+                found.append(f"{where}: [scenario] command: {self.command[0]} is sent by "
+                             f"{', '.join(senders) or 'no node'}, not by a stimulus node ({', '.join(stimulus)})")
+        return found
+
+
+def signal_problem(where: str, codebook: Codebook, message: str, signal: str) -> str | None:
+    """What is wrong with a `Message.Signal` named in bench.toml, with the close name of a typo; None if fine."""
+    codec = codebook.by_name.get(message)
+    if codec is None:
+        return f"{where}: no message {message!r}{did_you_mean(message, codebook.by_name)} in the databases"
+    if signal not in codec.signal_names:
+        return (f"{where}: message {message} has no signal {signal!r}{did_you_mean(signal, codec.signal_names)} "
+                f"(signals: {', '.join(codec.signal_names)})")
+    return None
 
 
 @dataclass(frozen=True)
@@ -84,6 +92,23 @@ class ProjectConfig:
     @cached_property
     def requirement_ids(self) -> frozenset[str]:
         return frozenset(r.id for r in self.requirements)
+
+    def problems(self, codebook: Codebook) -> list[str]:
+        """What bench.toml names that the databases do not have (stimulus nodes, the scenario's and the timing
+        section's signals), one line each: checked before the first case, not found at the end of a run."""
+        found = [f"{self.path}: [bench] stimulus: node {node!r}{did_you_mean(node, codebook.nodes)} is in none "
+                 f"of the databases (nodes: {', '.join(codebook.nodes)})"
+                 for node in self.stimulus if node not in codebook.nodes]
+        if self.scenario is not None and not found:
+            found += self.scenario.problems(self.path, codebook, self.stimulus)
+        for pair in self.latency:
+            for key in ("command", "status"):
+                message, signal = getattr(pair, key)
+                problem = signal_problem(f"{self.path}: [timing] latency {pair.name!r} {key}", codebook, message,
+                                         signal)
+                if problem:
+                    found.append(problem)
+        return found
 
 
 def find_config(start: Path | None = None) -> Path:
@@ -114,6 +139,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
     section = data.get("bench")
     if not isinstance(section, dict):
         raise ConfigError(f"{path}: missing table [bench]")
+    _known_keys(f"{path}:", data, TABLES, what="table")
     base = path.parent
 
     def strings(key: str) -> tuple[str, ...]:
@@ -128,9 +154,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
             raise ConfigError(f"{path}: [bench] {key} must be a non-empty string, got {value!r}")
         return value
 
-    unknown = set(section) - {"databases", "stimulus", "plant", "testcases", "reports"}
-    if unknown:
-        raise ConfigError(f"{path}: [bench] unknown key(s) {', '.join(sorted(unknown))}")
+    _known_keys(f"{path}: [bench]", section, ("databases", "stimulus", "plant", "testcases", "reports"))
     databases = tuple(base / p for p in strings("databases"))
     for database in databases:   # checked here so that `bench run` stops before any case starts
         if not database.is_file():
@@ -154,9 +178,7 @@ def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
     one file; the requirements are read here so that a duplicate id stops the run before any case starts."""
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: [contract] must be a table")
-    unknown = set(table) - {"documents"}
-    if unknown:
-        raise ConfigError(f"{path}: [contract] unknown key(s) {', '.join(sorted(unknown))} (known: documents)")
+    _known_keys(f"{path}: [contract]", table, ("documents",))
     if "documents" not in table:
         return {}
     patterns = table["documents"]
@@ -179,6 +201,9 @@ def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
 
 #: [bus] keys the command line owns: a project file that fixed them would silently beat --interface/--channel.
 _BUS_CLI_ONLY = ("interface", "channel")
+
+
+TABLES = ("bench", "scenario", "contract", "timing", "bus")   # bench.toml's tables; any other is a typo
 
 
 def _bus_table(path: Path, table: Any) -> BusOptions:
@@ -208,6 +233,15 @@ def _bus_table(path: Path, table: Any) -> BusOptions:
     return options
 
 
+def _known_keys(where: str, table: dict[str, Any], known: tuple[str, ...], what: str = "key") -> None:
+    """Refuse a key (or table) bench.toml does not know, with the known one it most likely meant: a typo such as
+    `testcase` or `[scenaro]` would otherwise be read as absent and give a default or a later, vaguer error."""
+    unknown = [key for key in table if key not in known]
+    if unknown:
+        named = ", ".join(f"{key}{did_you_mean(key, known)}" for key in unknown)
+        raise ConfigError(f"{where} unknown {what}(s) {named} (known: {', '.join(known)})")
+
+
 def _line_of(text: str, needle: str) -> int:
     """The 1-based line of bench.toml that holds a value (tomllib gives no positions); 0 when not found."""
     for number, line in enumerate(text.splitlines(), 1):
@@ -220,9 +254,7 @@ def _latency_pairs(path: Path, timing: Any) -> tuple[LatencyPair, ...]:
     """[timing] latency = [{command = "Msg.Signal", status = "Msg.Signal", name?, threshold?, window?}, ...]"""
     if not isinstance(timing, dict):
         raise ConfigError(f"{path}: [timing] must be a table")
-    unknown = set(timing) - {"latency"}
-    if unknown:
-        raise ConfigError(f"{path}: [timing] unknown key(s) {', '.join(sorted(unknown))} (known: latency)")
+    _known_keys(f"{path}: [timing]", timing, ("latency",))
     entries = timing.get("latency", [])
     if not isinstance(entries, list):
         raise ConfigError(f"{path}: [timing] latency must be a list of tables, got {entries!r}")
@@ -232,10 +264,7 @@ def _latency_pairs(path: Path, timing: Any) -> tuple[LatencyPair, ...]:
         if not isinstance(entry, dict):
             raise ConfigError(f"{where} must be a table like {{command = \"Msg.Signal\", status = \"Msg.Signal\"}}, "
                               f"got {entry!r}")
-        unknown = set(entry) - {"command", "status", "name", "threshold", "window"}
-        if unknown:
-            raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))} "
-                              f"(known: command, status, name, threshold, window)")
+        _known_keys(f"{where}:", entry, ("command", "status", "name", "threshold", "window"))
         command, status = (_signal_ref(where, entry, key) for key in ("command", "status"))
         name = entry.get("name", f"{command[0]}.{command[1]} → {status[0]}.{status[1]}")
         if not isinstance(name, str) or not name:
@@ -255,9 +284,7 @@ def _scenario(path: Path, table: Any) -> ScenarioProtocol | None:
     where = f"{path}: [scenario]"
     if not isinstance(table, dict):
         raise ConfigError(f"{where} must be a table")
-    unknown = set(table) - {"command", "ack", "timeout"}
-    if unknown:
-        raise ConfigError(f"{where} unknown key(s) {', '.join(sorted(unknown))} (known: command, ack, timeout)")
+    _known_keys(where, table, ("command", "ack", "timeout"))
     for key in ("command", "ack"):
         if key not in table:
             raise ConfigError(f"{where} needs {key} = \"Message.Signal\"")

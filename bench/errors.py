@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
 
 class BenchError(Exception):
     """Base of every error the bench reports to a user as a one-line message."""
@@ -9,6 +12,14 @@ class BenchError(Exception):
 
 class ConfigError(BenchError):
     """A bad command-line value or configuration file."""
+
+
+class InputProblems(ConfigError):
+    """Several bad inputs found by one check: `bench.cli.main` prints each on its own line."""
+
+    def __init__(self, problems: list[str]) -> None:
+        super().__init__("; ".join(problems))
+        self.problems = problems
 
 
 class DatabaseError(BenchError):
@@ -21,3 +32,11 @@ class SignalError(BenchError):
 
 class LogError(BenchError):
     """A run log (MCAP) that cannot be written or read: missing, not MCAP, or bad data given to the recorder."""
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """' (did you mean X?)' when one known name is close to a mistyped one, else ''. Case and a leading '-'
+    are ignored in the comparison ('--chanel' -> '--channel', 'Voltge' -> 'Voltage')."""
+    by_key = {k.lstrip("-").lower(): k for k in known}
+    close = difflib.get_close_matches(name.lstrip("-").lower(), by_key, n=1, cutoff=0.6)
+    return f" (did you mean {by_key[close[0]]}?)" if close else ""

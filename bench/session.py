@@ -15,7 +15,7 @@ from bench.busopts import BusOptions, contract_options
 from bench.clock import Clock, Scheduler, VirtualClock, WallClock
 from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig, RunSettings
-from bench.errors import BenchError, ConfigError
+from bench.errors import BenchError, ConfigError, InputProblems
 from bench.faults import FaultPlan
 from bench.monitor import FrameSink, Monitor
 from bench.node import Behaviour
@@ -57,11 +57,9 @@ class BenchSession:
         self.project = project
         self.settings = settings
         self.codebook = load_codebook(project.databases)
-        for node in project.stimulus:
-            if node not in self.codebook.nodes:
-                raise ConfigError(f"{project.path}: stimulus node {node!r} is in none of the databases")
-        if project.scenario is not None:
-            project.scenario.check(project.path, self.codebook, project.stimulus)
+        problems = project.problems(self.codebook)
+        if problems:
+            raise InputProblems(problems)
         self.external = resolve_external(self.codebook, project.stimulus, settings.external)
         self.clock: Clock = VirtualClock() if settings.virtual_time else WallClock()
         channel = settings.channel

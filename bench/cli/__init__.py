@@ -4,14 +4,13 @@ the parser it adds sets `handler=run`, a function `run(args) -> int` (the exit c
 from __future__ import annotations
 
 import argparse
-import difflib
 import importlib
 import sys
 
 from rich.console import Console
 from rich.markup import escape
 
-from bench.errors import BenchError
+from bench.errors import BenchError, did_you_mean
 
 SUBCOMMANDS = ("run", "plant", "dbc", "log", "monitor", "replay", "report")
 
@@ -36,12 +35,9 @@ def chosen_parser(parser: argparse.ArgumentParser, args: argparse.Namespace) -> 
 
 def unknown_arguments(parser: argparse.ArgumentParser, extras: list[str]) -> str:
     """'unrecognized arguments: --interfce x (did you mean --interface?)': a typo gets the close option."""
-    options = {o.lstrip("-"): o for a in parser._actions for o in a.option_strings}
-    shown = []
-    for extra in extras:
-        name = extra.split("=", 1)[0]
-        close = difflib.get_close_matches(name.lstrip("-"), options, n=1, cutoff=0.75) if name.startswith("-") else []
-        shown.append(f"{extra} (did you mean {options[close[0]]}?)" if close else extra)
+    options = [o for a in parser._actions for o in a.option_strings]
+    shown = [extra + (did_you_mean(extra.split("=", 1)[0], options) if extra.startswith("-") else "")
+             for extra in extras]
     return f"unrecognized arguments: {' '.join(shown)}"
 
 

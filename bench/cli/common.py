@@ -58,14 +58,6 @@ def check_out_dir(out_dir: Path, force: bool) -> None:
         raise ConfigError(f"--out {out_dir}: cannot write there: permission denied")
 
 
-class InputProblems(ConfigError):
-    """Several bad inputs found by one pre-run check: `bench.cli.main` prints each on its own line."""
-
-    def __init__(self, problems: list[str]) -> None:
-        super().__init__("; ".join(problems))
-        self.problems = problems
-
-
 def reject_virtual(interface: str) -> None:
     """For the commands that share a bus with other processes (plant, monitor, replay)."""
     if is_virtual(interface):

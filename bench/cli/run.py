@@ -20,7 +20,6 @@ from bench.busopts import BusOptions
 from bench.cli.common import (
     BUS_OPTIONS,
     NODE_OPTIONS,
-    InputProblems,
     add_bus_options,
     add_node_options,
     check_out_dir,
@@ -28,7 +27,7 @@ from bench.cli.common import (
 )
 from bench.codec import load_codebook
 from bench.config import ProjectConfig, load_config
-from bench.errors import BenchError
+from bench.errors import BenchError, InputProblems
 from bench.faults import validate as validate_faults
 from bench.marks import split_names
 from bench.options import add_cli_options
@@ -73,6 +72,13 @@ class _Progress:
             self.collect_errors.append(f"{report.nodeid}: {report.longreprtext}")
             self.console.print(f"[bold red]cannot collect {escape(report.nodeid)}[/]", highlight=False)
             self.console.print(report.longreprtext, highlight=False, markup=False)
+
+    def pytest_keyboard_interrupt(self, excinfo: pytest.ExceptionInfo[BaseException]) -> None:
+        """pytest.exit (the plugin stops a run that cannot go on) is reported here too; without pytest's
+        terminal its reason would be lost and the run would end as a bare FAIL."""
+        if isinstance(excinfo.value, pytest.exit.Exception):
+            reason = str(excinfo.value.msg).removeprefix("bench: ")
+            self.console.print(f"[bold red]bench run: error:[/] {escape(reason)}", highlight=False)
 
     def pytest_collection_finish(self, session: pytest.Session) -> None:
         if getattr(session.config.option, "numprocesses", None):
@@ -119,6 +125,7 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
             return None
 
     codebook = load_codebook(project.databases)   # a database that does not load makes every other check moot
+    problems.extend(project.problems(codebook))
     for path in args.paths:
         if not Path(path.partition("::")[0]).exists():
             problems.append(f"{path}: no such test file or folder")
