@@ -78,7 +78,12 @@ def test_can_logger_records_a_bench_log(tmp_path: Path) -> None:
         last_read = time.time()
     finally:
         logger.send_signal(signal.SIGINT)
-        out, _ = logger.communicate(timeout=30)
+        try:
+            out, _ = logger.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            logger.kill()                    # a logger that ignored Ctrl-C must not outlive the test
+            logger.communicate()
+            raise
     assert logger.returncode == 0, out.decode(errors="replace")
 
     info = subprocess.run([sys.executable, "-m", "bench", "log", "info", str(log)], cwd=ROOT, env=ENV,
