@@ -166,11 +166,10 @@ class Monitor:
             kind, reason = "length", f"length {len(data)}, DBC says {codec.length}"
         elif not kind:
             try:
-                values = codec.decode(data)
+                values, bad = codec.decode_checked(data)
             except DecodeError as exc:
                 kind, reason = "decode", f"decode: {exc}"
             else:
-                bad = codec.out_of_range(values)
                 if bad:
                     kind, reason = "range", "range: " + ", ".join(f"{n}={values[n]:g}" for n in bad)
         if reason:
