@@ -61,6 +61,9 @@ _EXACT_LIMIT = 1 << 52
 #: A decoded value may exceed the DBC range by this fraction of the scale (rounding) and still be valid.
 RANGE_SLACK = 0.5
 
+#: Frames whose E2E check a message's codec remembers (two payloads' worth of AliveCounters, and then some).
+INTACT_CACHE = 64
+
 
 @dataclass(frozen=True, slots=True)
 class SignalCodec:
@@ -146,6 +149,9 @@ class MessageCodec:
         self._body_mask = full & ~((0x0F << 8 * e2e.COUNTER_BYTE) | (0xFF << 8 * e2e.CHECKSUM_BYTE)) \
             if self._e2e_plain else full
         self._entry: tuple[int, dict[str, float], tuple[str, ...] | None] = (-1, {}, None)
+        # The E2E check of a frame, once per distinct frame: both monitors of a process check each frame, and a
+        # message whose values stay the same repeats its 16 frames (one per AliveCounter).
+        self._intact: dict[bytes, int | None] = {}
         self._unpack: tuple[tuple[Any, ...], ...] = tuple(
             (s.name, s.start, (1 << s.length) - 1, (1 << (s.length - 1)) if s.signed else 0,
              1 << s.length, s.scale, s.offset)[: 6 if self._no_offset else 7]
@@ -158,6 +164,20 @@ class MessageCodec:
         self._pack_identity = tuple(f[:5] for f in fields if f[5] == 1 and f[6] == 0)
         self._pack_scaled = tuple(f[:6] for f in fields if f[5] != 1 and f[6] == 0)
         self._pack_linear = tuple(f for f in fields if f[6] != 0)
+
+    def counter_if_intact(self, data: bytes | bytearray) -> int | None:
+        """`bench.e2e.counter_if_intact` of a frame of this message (its AliveCounter if its Checksum is right,
+        else None), computed once per distinct frame."""
+        if type(data) is not bytes:
+            return e2e.counter_if_intact(self.frame_id, data)
+        cache = self._intact
+        found = cache.get(data, -1)
+        if found == -1:
+            found = e2e.counter_if_intact(self.frame_id, data)
+            if len(cache) >= INTACT_CACHE:
+                cache.clear()
+            cache[data] = found
+        return found
 
     # -- values ---------------------------------------------------------------------------------
     def start_values(self) -> dict[str, float]:

@@ -73,6 +73,17 @@ class MessageState:
     recent_tx: deque[bytes] = field(default_factory=lambda: deque(maxlen=OWN_ECHO_FRAMES))   # its last payloads
     senders: e2e.SenderTracker | None = None  # counter streams, followed after a sequence error
     calm: int = 0                            # accepted frames in a row while they are followed
+    # The message's time limits, s, computed once (inf without a cycle time: never reached); the same sums
+    # as written out, so a comparison with them decides as before.
+    timeout_s: float = field(init=False)     # a consumer's timeout: TIMEOUT_CYCLES cycles after the last valid
+    resync_s: float = field(init=False)      # a reception gap that resynchronises the E2E receiver
+    foreign_s: float = field(init=False)     # a received frame this soon after the station's own is another's
+
+    def __post_init__(self) -> None:
+        cycle = self.codec.cycle_time
+        self.timeout_s = math.inf if cycle is None else TIMEOUT_CYCLES * cycle + TIME_EPS
+        self.resync_s = math.inf if cycle is None else e2e.RESYNC_GAP_CYCLES * cycle + TIME_EPS
+        self.foreign_s = (FOREIGN_CYCLES * cycle if cycle else FOREIGN_S) + TIME_EPS
 
 
 @dataclass(slots=True)
@@ -131,26 +142,25 @@ class Monitor:
                 self.sink(t, arbitration_id, data, direction, False, reason, None, None)
             return False
         codec = state.codec
-        cycle = codec.cycle_time
-        if state.last_valid is not None and not state.timed_out_flag and cycle is not None \
-                and t - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
+        last_valid = state.last_valid
+        if last_valid is not None and not state.timed_out_flag and t - last_valid > state.timeout_s:
             self._time_out(state)   # the consumer went 3 cycles without a valid frame: record the timeout
         prev_seen = state.last_seen
         if prev_seen is not None:
-            if cycle is not None and t - prev_seen > e2e.RESYNC_GAP_CYCLES * cycle + TIME_EPS:
+            if t - prev_seen > state.resync_s:
                 state.rx.resync()   # a real reception gap (no frame at all): the sender may have restarted
                 state.senders = None
             if self.keep_intervals:
-                state.intervals.append(t - prev_seen)
-                if len(state.intervals) > 2 * INTERVALS_CAP:
-                    state.intervals_dropped += _trim(state.intervals, INTERVALS_CAP)
+                intervals = state.intervals
+                intervals.append(t - prev_seen)
+                if len(intervals) > 2 * INTERVALS_CAP:
+                    state.intervals_dropped += _trim(intervals, INTERVALS_CAP)
         state.last_seen = t
         state.frames += 1
         if direction == "tx":
             state.last_tx = t
             state.recent_tx.append(data)
-        elif state.last_tx is not None and data not in state.recent_tx and \
-                t - state.last_tx <= (FOREIGN_CYCLES * cycle if cycle else FOREIGN_S) + TIME_EPS:
+        elif state.last_tx is not None and data not in state.recent_tx and t - state.last_tx <= state.foreign_s:
             # (a copy of one of the station's own recent frames is its echo, e.g. the kernel's broadcast manager
             # handing a message back to the tick scheduler on socketcan: seen in the vcan lane at scenario changes)
             self._duplicate(state, t, arbitration_id, "frames received while this station sends it")
@@ -158,7 +168,12 @@ class Monitor:
         values = None
         length_ok = len(data) == codec.length
         if codec.e2e:
-            kind, reason = _e2e_verdict(state.rx, arbitration_id, data, length_ok)
+            found = codec.counter_if_intact(data) if length_ok else None
+            rx = state.rx
+            reference = rx.reference
+            check, accepted = rx.receive(found is not None, -1 if found is None else found)
+            if not accepted:   # (a damaged frame's counter is not read: the receiver ignores it)
+                kind, reason = _e2e_rejection(rx, check, found, reference, length_ok)
             if (kind or state.senders is not None) and length_ok and kind not in ("checksum", "length"):
                 self._follow_counters(state, t, arbitration_id, data, kind, prev_seen)
             state.last_data = data
@@ -266,8 +281,13 @@ class Monitor:
             raise
 
     def latest(self, message: str, now: float) -> dict[str, float] | None:
-        state = self.state(message)
-        if self.timed_out(message, now):
+        """The message's latest valid values; None before the first or while it is timed out. (A plant's
+        behaviours ask several times per tick: `timed_out`'s rule, written out here.)"""
+        state = self.by_name.get(message)
+        if state is None:
+            state = self.state(message)
+        last_valid = state.last_valid
+        if last_valid is None or now - last_valid > state.timeout_s:
             return None
         return state.latest
 
@@ -299,15 +319,11 @@ class Monitor:
         return self.invalid_dropped + len(self.invalid_log)
 
 
-def _e2e_verdict(rx: e2e.Receiver, frame_id: int, data: bytes, length_ok: bool) -> tuple[str, str]:
-    """(kind, reason) of the frame's protection through the receiver's state machine; ("", "") = accepted."""
-    found = e2e.counter_if_intact(frame_id, data) if length_ok else None
-    intact = found is not None
-    counter = -1 if found is None else found   # not read from a damaged frame (the receiver ignores it)
-    reference = rx.reference
-    check, accepted = rx.receive(intact, counter)
-    if accepted:
-        return "", ""
+def _e2e_rejection(rx: e2e.Receiver, check: e2e.Check, found: int | None, reference: int | None,
+                   length_ok: bool) -> tuple[str, str]:
+    """(kind, reason) of a frame the receiver's state machine did not accept (`reference`: its reference
+    counter before the frame)."""
+    counter = -1 if found is None else found
     expected = None if reference is None else (reference + 1) % e2e.COUNTER_MODULO
     if check is e2e.Check.ERROR:
         return ("checksum", "checksum") if length_ok else ("length", "length")

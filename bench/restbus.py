@@ -62,7 +62,8 @@ class Restbus:
 
     def set_unchecked(self, message: str, signals: Mapping[str, float | int | str]) -> None:
         """Set values without checking now (for behaviours stepping every tick); checked at send."""
-        self._slot(message).values.update(signals)
+        slot = self.periodic.get(message)
+        (self._slot(message) if slot is None else slot).values.update(signals)
 
     def reset_values(self, message: str) -> None:
         slot = self._slot(message)

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.codec import RANGE_SLACK, DecodeError, MessageCodec, load_codebook
+from bench.e2e import crc8_sae_j1850
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 CODEBOOK = load_codebook([CHASSIS_DBC, BENCH_DBC])
@@ -97,3 +98,20 @@ def test_a_short_frame_is_refused_after_a_cached_one() -> None:
         codec.decode_checked(data[:7])
     with pytest.raises(DecodeError):
         codec.decode(data[:7])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(sorted(CODEBOOK.by_name)), st.lists(st.binary(min_size=8, max_size=8), min_size=1, max_size=8),
+       st.lists(st.tuples(st.integers(0, 7), st.booleans()), min_size=1, max_size=200))
+def test_the_e2e_check_is_remembered_per_frame_only(name: str, pool: list[bytes],
+                                                    picks: list[tuple[int, bool]]) -> None:
+    """The codec's memo of the E2E check (frames repeat: both monitors, and 16 frames per unchanged payload)
+    gives the CRC's answer for every frame, right checksums and wrong, bytes and bytearray."""
+    codec = CODEBOOK[name]
+    frames = [bytes(f[:7]) + bytes((crc8_sae_j1850(bytes((codec.frame_id & 0xFF, codec.frame_id >> 8)) + f[:7]),))
+              if i % 2 else f for i, f in enumerate(pool)]
+    for index, as_bytearray in picks:
+        data = frames[index % len(frames)]
+        right = data[7] == crc8_sae_j1850(bytes((codec.frame_id & 0xFF, codec.frame_id >> 8)) + data[:7])
+        expected = data[6] & 0x0F if right else None
+        assert codec.counter_if_intact(bytearray(data) if as_bytearray else data) == expected
