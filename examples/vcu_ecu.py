@@ -55,6 +55,8 @@ NORMAL, LATERAL, ADAPTIVE, PIVOT = 0, 1, 2, 3
 OK, CENTRE_AT_ORIGIN, CENTRE_ON_WHEEL, ANGLE_OVER_90, REQUEST_INVALID, REQUEST_TIMEOUT, WHEEL_FAULT = range(7)
 
 TASK_S = 0.010  # VCU-GEN-02: inputs evaluated at least every 10 ms (each task, after its frames are sent)
+#: The messages the VCU reads (VCU-GEN-01: its receivers); the bus delivers only these (receive_filters)
+INPUTS = ("DRV_MotionRequest", "DRV_Steering", "IMU_Motion", *(f"WHL_Status_{w}" for w in WHEELS))
 
 
 # ==============================================================================================================
@@ -486,8 +488,7 @@ class Vcu:
 
     def __init__(self, db: cantools.database.Database, start: float) -> None:
         self.start = start
-        self.rx = {name: E2EReceiver(db.get_message_by_name(name)) for name in
-                   ["DRV_MotionRequest", "DRV_Steering", "IMU_Motion"] + [f"WHL_Status_{w}" for w in WHEELS]}
+        self.rx = {name: E2EReceiver(db.get_message_by_name(name)) for name in INPUTS}
         self.by_id = {r.message.frame_id: r for r in self.rx.values()}
         self.last_executed = POWER_UP  # VCU-FLT-08: 0 deg before any executed command
         self.out = Outputs()
@@ -618,12 +619,15 @@ class Transmitter:
 # ==============================================================================================================
 # Running on a bus
 # ==============================================================================================================
-def drain(bus: can.BusABC, vcu: Vcu) -> None:
+def drain(bus: can.BusABC, vcu: Vcu, now: float) -> None:
     """Judge every frame that arrived since the last task, in order, each at its reception time.
 
     The task reads the bus itself (no receive thread): after the process was descheduled it first takes in
     everything that arrived meanwhile, stamped by the kernel (python-can's timestamp, the wall clock of
-    time.time()), so a late task never mistakes its own stall for a silent sender (COM-RX-02)."""
+    time.time()), so a late task never mistakes its own stall for a silent sender (COM-RX-02). `now` is the
+    task's one read of that clock: a stamp more than a second away from it is of another clock (an interface
+    without receive timestamps), and the frame gets `now`. The bus delivers only what the VCU reads
+    (`receive_filters`), so no frame is read here only to be thrown away."""
     while True:
         try:
             msg = bus.recv(timeout=0.0)
@@ -631,8 +635,7 @@ def drain(bus: can.BusABC, vcu: Vcu) -> None:
             return
         if msg is None:
             return
-        now = time.time()
-        vcu.receive(msg, msg.timestamp if 0.0 <= now - msg.timestamp < 1.0 else now)
+        vcu.receive(msg, msg.timestamp if abs(now - msg.timestamp) < 1.0 else now)
 
 
 @dataclass
@@ -659,22 +662,28 @@ def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Eve
 
     Sending first keeps the frames on the grid whatever the evaluation costs; a request received after one
     task's evaluation is in the frames of the task after next, at most 20 ms later, which VCU-GEN-02 allows
-    (the next frame sent at least 10 ms after the request) and so does VCU-FLT-09 for a fault."""
+    (the next frame sent at least 10 ms after the request) and so does VCU-FLT-09 for a fault.
+
+    A task reads the clocks three times: the grid's (time.monotonic) before and after its sleep, and the wall
+    clock of the frames' stamps (time.time) once for its drain and its evaluation. On a slow machine a clock
+    read is not free (a system call of about 55 us in a User-mode Linux guest, docs/vcan-lane.md)."""
     tick, next_t = 0, time.monotonic()
-    stats, next_stats = TaskStats(), time.monotonic() + stats_every
+    stats, next_stats = TaskStats(), next_t + stats_every
     pending = frames_of_task(tx, vcu.out, tick)
     while not stop.is_set():
         now = time.monotonic()
         if next_t > now:
             time.sleep(next_t - now)
             now = time.monotonic()
-        stats.max_late_ms = max(stats.max_late_ms, (now - next_t) * 1000.0)
+        late = now - next_t
+        stats.max_late_ms = max(stats.max_late_ms, late * 1000.0)
         for frame in pending:
             send(frame)
-        drain(bus, vcu)  # frames received up to now (VCU-GEN-02)
-        out = vcu.evaluate(time.time())
+        wall = time.time()
+        drain(bus, vcu, wall)  # frames received up to now (VCU-GEN-02)
+        out = vcu.evaluate(wall)
         stats.faults[out.fault] += 1
-        missed = max(0, int((time.monotonic() - next_t) / TASK_S) - 1)
+        missed = max(0, int(late / TASK_S) - 1)   # slots whose successor's time had passed when this began
         stats.skipped_slots += missed
         tick += 1 + missed  # a late task skips the slots it missed instead of sending a burst
         next_t += TASK_S * (1 + missed)
@@ -711,8 +720,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def open_bus(args: argparse.Namespace) -> can.BusABC:
-    kwargs: dict[str, object] = {"interface": args.interface}
+def receive_filters(db: cantools.database.Database) -> list[can.typechecking.CanFilter]:
+    """Acceptance filters for exactly the identifiers the VCU reads (INPUTS), 11-bit data frames, as a real
+    ECU's CAN controller has them. python-can sets them in the kernel on socketcan (CAN_RAW_FILTER), so the
+    process never wakes for the rest of the bus (on the 4WIS network more than half its frames, among them
+    the VCU's own and the bench's), and applies them in software on interfaces without hardware filters."""
+    return [{"can_id": db.get_message_by_name(name).frame_id, "can_mask": 0x7FF, "extended": False}
+            for name in INPUTS]
+
+
+def open_bus(args: argparse.Namespace, filters: list[can.typechecking.CanFilter] | None = None) -> can.BusABC:
+    kwargs: dict[str, object] = {"interface": args.interface, "can_filters": filters}
     if args.channel is not None:
         kwargs["channel"] = args.channel
     if args.bitrate is not None:
@@ -745,7 +763,7 @@ def only_own_group(bus: can.BusABC) -> None:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     db = cantools.database.load_file(str(args.dbc))
-    bus = open_bus(args)
+    bus = open_bus(args, receive_filters(db))
     stop = threading.Event()
     vcu, tx = Vcu(db, time.time()), Transmitter(db)
     for signum in (signal.SIGINT, signal.SIGTERM):  # also when started in the background (SIGINT ignored there)

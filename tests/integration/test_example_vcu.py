@@ -164,3 +164,29 @@ def test_example_car_modes_put_the_centre_where_the_contract_says() -> None:
 def test_example_checksum_is_the_contracts() -> None:
     """docs/spec/e2e.md: CRC-8/SAE-J1850, check value 0x4B over '123456789' (init 0xFF, final XOR 0xFF)."""
     assert VCU.crc8_sae_j1850(b"123456789") == 0x4B
+
+
+def test_example_bus_delivers_only_what_the_vcu_reads() -> None:
+    """The example's acceptance filters pass exactly the messages its receivers judge, each one the DBC says the
+    VCU receives, and nothing else (python-can applies them in software on the virtual interface, in the kernel on
+    socketcan)."""
+    import can
+    import cantools
+
+    db = cantools.database.load_file(str(ROOT / "dbc" / "chassis.dbc"))
+    bench_db = cantools.database.load_file(str(ROOT / "dbc" / "bench.dbc"))
+    filters = VCU.receive_filters(db)
+    judged = {receiver.message.frame_id for receiver in VCU.Vcu(db, 0.0).rx.values()}
+    assert {f["can_id"] for f in filters} == judged and len(filters) == len(judged) == 7
+    assert all("VCU" in db.get_message_by_frame_id(frame_id).receivers for frame_id in judged)
+    others = [m.frame_id for m in db.messages if m.frame_id not in judged] + [m.frame_id for m in bench_db.messages]
+    channel = f"vcu-filters-{random.randint(0, 1 << 30)}"
+    with can.Bus(interface="virtual", channel=channel, can_filters=filters) as vcu_bus, \
+            can.Bus(interface="virtual", channel=channel) as bench_bus:
+        for frame_id in sorted(judged) + others:
+            bench_bus.send(can.Message(arbitration_id=frame_id, data=bytes(8), is_extended_id=False))
+        bench_bus.send(can.Message(arbitration_id=min(judged), data=bytes(8), is_extended_id=True))  # 29-bit
+        received = []
+        while (msg := vcu_bus.recv(timeout=0.05)) is not None:
+            received.append((msg.arbitration_id, msg.is_extended_id))
+    assert received == [(frame_id, False) for frame_id in sorted(judged)]
