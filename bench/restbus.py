@@ -12,6 +12,7 @@ AliveCounter), so a repeat costs one dict comparison. Every new value is checked
 
 from __future__ import annotations
 
+import heapq
 from collections.abc import Collection, Iterator, Mapping
 
 from bench import e2e
@@ -22,10 +23,12 @@ TICKS_PER_MS = 1  # the restbus is scheduled on the plant's 1 ms tick
 
 
 class _Periodic:
-    __slots__ = ("codec", "values", "period", "next_due", "counter", "enabled", "sent_values", "payload", "frames")
+    __slots__ = ("codec", "values", "period", "next_due", "counter", "enabled", "sent_values", "payload", "frames",
+                 "order")
 
-    def __init__(self, codec: MessageCodec, period_ticks: int, phase: int) -> None:
+    def __init__(self, codec: MessageCodec, period_ticks: int, phase: int, order: int) -> None:
         self.codec = codec
+        self.order = order           # its place among the restbus' messages: frames due together go in this order
         self.values: dict[str, float | int | str] = dict(codec.start_values())
         self.period = period_ticks
         self.next_due = phase
@@ -37,6 +40,10 @@ class _Periodic:
         self.sent_values: dict[str, float | int | str] | None = None
         self.payload = b""
         self.frames: list[bytes | None] = [None] * e2e.COUNTER_MODULO
+
+
+def _order(slot: _Periodic) -> int:
+    return slot.order
 
 
 class Restbus:
@@ -51,7 +58,12 @@ class Restbus:
                 continue
             period = max(1, round(codec.cycle_time * 1000 * TICKS_PER_MS))
             # Spread messages of equal cycle over the period so the bus load is even (deterministic).
-            self.periodic[codec.name] = _Periodic(codec, period, codec.frame_id % period)
+            self.periodic[codec.name] = _Periodic(codec, period, codec.frame_id % period, len(self.periodic))
+        # The schedule: (next due tick, order, message), so a tick looks at the messages due then, not at all of
+        # them; a stopped message that falls due waits aside (parked) until it is resumed.
+        self._queue: list[tuple[int, int, _Periodic]] = [(p.next_due, p.order, p) for p in self.periodic.values()]
+        heapq.heapify(self._queue)
+        self._parked: dict[int, _Periodic] = {}
 
     def set(self, message: str, **signals: float | int | str) -> None:
         """Set values of a message this restbus sends (checked now: for test code)."""
@@ -80,7 +92,10 @@ class Restbus:
 
     def resume_sending(self, message: str) -> None:
         """Send a message again after `stop_sending`, from its next due cycle on."""
-        self._slot(message).enabled = True
+        slot = self._slot(message)
+        slot.enabled = True
+        if self._parked.pop(slot.order, None) is not None:
+            heapq.heappush(self._queue, (slot.next_due, slot.order, slot))
 
     def _slot(self, message: str) -> _Periodic:
         slot = self.periodic.get(message)
@@ -91,14 +106,30 @@ class Restbus:
         return slot
 
     def due(self, tick: int) -> Iterator[tuple[int, bytes]]:
-        """The frames due at this tick, each with its counter and checksum."""
-        for slot in self.periodic.values():
-            if tick < slot.next_due or not slot.enabled:
-                continue
-            slot.next_due += slot.period
-            if slot.next_due <= tick:           # fell behind (real time): skip, do not burst
-                slot.next_due = tick + slot.period
-            yield slot.codec.frame_id, self.build(slot)
+        """The frames due at this tick, each with its counter and checksum, in the messages' order."""
+        queue = self._queue
+        if not queue or queue[0][0] > tick:
+            return
+        ready = []
+        while queue and queue[0][0] <= tick:
+            ready.append(heapq.heappop(queue)[2])
+        if len(ready) > 1:
+            ready.sort(key=_order)
+        done = 0
+        try:
+            for slot in ready:
+                done += 1
+                if not slot.enabled:
+                    self._parked[slot.order] = slot
+                    continue
+                slot.next_due += slot.period
+                if slot.next_due <= tick:           # fell behind (real time): skip, do not burst
+                    slot.next_due = tick + slot.period
+                heapq.heappush(queue, (slot.next_due, slot.order, slot))
+                yield slot.codec.frame_id, self.build(slot)
+        finally:   # the caller stopped early (or a value was refused): the rest stay due
+            for slot in ready[done:]:
+                heapq.heappush(queue, (slot.next_due, slot.order, slot))
 
     def build(self, slot: _Periodic) -> bytes:
         """The next frame of a message: its values checked and encoded (or the last frame's payload when they

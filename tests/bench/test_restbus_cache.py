@@ -5,6 +5,7 @@ the contract's AliveCounter and Checksum, and every bad value is refused at ever
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -141,3 +142,47 @@ def test_a_bad_value_is_refused_at_every_send(codebook: Codebook, name: str) -> 
     assert slot.counter == 2
     restbus.reset_values(name)
     assert restbus.build(slot) == _expected(codebook[name], dict(codebook[name].start_values()), 2)
+
+
+def _scan_due(restbus: Restbus, tick: int) -> Iterator[tuple[int, bytes]]:
+    """The restbus' schedule as it was written before its queue: every message looked at every tick."""
+    for slot in restbus.periodic.values():
+        if tick < slot.next_due or not slot.enabled:
+            continue
+        slot.next_due += slot.period
+        if slot.next_due <= tick:
+            slot.next_due = tick + slot.period
+        yield slot.codec.frame_id, restbus.build(slot)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.sampled_from(["VCU", "PLANT", "BENCH"]),
+       st.lists(st.tuples(st.integers(1, 25), st.sampled_from(["run", "run", "run", "stop", "resume", "partial"]),
+                          st.integers(0, 40)), min_size=1, max_size=120))
+def test_the_schedule_sends_what_a_scan_of_every_message_sent(node: str, steps: list[tuple[int, str, int]]) -> None:
+    """The queue of due messages gives the frames (and their order within a tick) of a scan over every message,
+    through skipped ticks (real time falling behind), stopped and resumed messages and a caller that stops
+    reading a tick's frames part way."""
+    nodes = {"BENCH": {"BENCH", "DRV"}}.get(node, {node})
+    if not any(CODEBOOK.sent_by(nodes)):
+        return
+    ours, theirs = Restbus(CODEBOOK, nodes), Restbus(CODEBOOK, nodes)
+    names = sorted(ours.periodic)
+    tick = 0
+    for skip, action, pick in steps:
+        name = names[pick % len(names)]
+        if action == "stop":
+            ours.stop_sending(name)
+            theirs.stop_sending(name)
+            continue
+        if action == "resume":
+            ours.resume_sending(name)
+            theirs.resume_sending(name)
+            continue
+        tick += skip
+        if action == "partial":   # the caller reads `pick % 3` frames of this tick, then drops the generator
+            a = [f for _, f in zip(range(pick % 3), ours.due(tick))]
+            b = [f for _, f in zip(range(pick % 3), _scan_due(theirs, tick))]
+        else:
+            a, b = list(ours.due(tick)), list(_scan_due(theirs, tick))
+        assert a == b, (tick, action, name)
