@@ -61,6 +61,11 @@ _EXACT_LIMIT = 1 << 52
 #: A decoded value may exceed the DBC range by this fraction of the scale (rounding) and still be valid.
 RANGE_SLACK = 0.5
 
+#: The plain AliveCounter's and Checksum's place in a decoded word, and their values as floats (raw * 1.0).
+_COUNTER_SHIFT = 8 * e2e.COUNTER_BYTE
+_CHECKSUM_SHIFT = 8 * e2e.CHECKSUM_BYTE
+_FLOATS = tuple(float(raw) for raw in range(256))
+
 #: Frames whose E2E check a message's codec remembers (two payloads' worth of AliveCounters, and then some).
 INTACT_CACHE = 64
 
@@ -286,8 +291,8 @@ class MessageCodec:
             entry = self._decode_word(word)
         out = entry[1].copy()
         if self._e2e_plain:
-            out["AliveCounter"] = float((word >> 8 * e2e.COUNTER_BYTE) & 0x0F)
-            out["Checksum"] = float((word >> 8 * e2e.CHECKSUM_BYTE) & 0xFF)
+            out["AliveCounter"] = _FLOATS[(word >> _COUNTER_SHIFT) & 0x0F]
+            out["Checksum"] = _FLOATS[(word >> _CHECKSUM_SHIFT) & 0xFF]
         return out
 
     def decode_checked(self, data: bytes | bytearray) -> tuple[dict[str, float], tuple[str, ...]]:
@@ -304,8 +309,8 @@ class MessageCodec:
             entry = self._decode_word(word)
         values = entry[1].copy()
         if self._e2e_plain:
-            values["AliveCounter"] = float((word >> 8 * e2e.COUNTER_BYTE) & 0x0F)
-            values["Checksum"] = float((word >> 8 * e2e.CHECKSUM_BYTE) & 0xFF)
+            values["AliveCounter"] = _FLOATS[(word >> _COUNTER_SHIFT) & 0x0F]
+            values["Checksum"] = _FLOATS[(word >> _CHECKSUM_SHIFT) & 0xFF]
         bad = entry[2]
         if bad is None:
             bad = tuple(self.out_of_range(values))
