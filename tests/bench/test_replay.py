@@ -54,6 +54,16 @@ def replay(log: Path, channel: str, *extra: str, expect: int) -> tuple[list, sub
     return got, subprocess.CompletedProcess(process.args, process.returncode, out, err)
 
 
+def span(stamps: list[float]) -> float:
+    """First to last frame as the frames' common pace gives it: the median of the slopes between every two
+    frames (Theil-Sen) times their count less one. A replayer that drifts or plays at another speed changes most
+    slopes; a frame held up by a busy host (it goes at once when late, bench/cli/replay.py) changes few of them.
+    Taking the last frame's stamp less the first's judged one frame alone: 0.51 s for 0.39 s once in 20 runs at
+    load 6."""
+    slopes = [(stamps[j] - stamps[i]) / (j - i) for i in range(len(stamps)) for j in range(i + 1, len(stamps))]
+    return statistics.median(slopes) * (len(stamps) - 1)
+
+
 def group() -> str:
     return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
 
@@ -67,7 +77,7 @@ def test_replay_sends_the_logged_frames_with_their_spacing(tmp_path: Path) -> No
     stamps = [m.timestamp for m in got]                                    # kernel receive times
     gaps = [b - a for a, b in zip(stamps, stamps[1:])]
     assert statistics.median(gaps) == pytest.approx(SPACING, abs=0.002)
-    assert stamps[-1] - stamps[0] == pytest.approx(39 * SPACING, abs=0.05)
+    assert span(stamps) == pytest.approx(39 * SPACING, abs=0.05)
     assert "sent 40 frames" in result.stderr and "1 error frames skipped" in result.stderr
 
 
@@ -77,8 +87,7 @@ def test_speed_and_direction(tmp_path: Path) -> None:
     got, result = replay(log, group(), "--direction", "rx", "--speed", "2", expect=40)
     assert result.returncode == 0, result.stderr
     assert [m.arbitration_id for m in got] == [0x400] * 40
-    stamps = [m.timestamp for m in got]
-    assert stamps[-1] - stamps[0] == pytest.approx(39 * SPACING / 2, abs=0.04)
+    assert span([m.timestamp for m in got]) == pytest.approx(39 * SPACING / 2, abs=0.04)
 
 
 @pytest.mark.parametrize(("argv", "needle"), [
