@@ -80,9 +80,9 @@ def test_wall_clock_keeps_its_deadline_on_a_bus_that_never_goes_quiet(codebook) 
 def test_a_frame_is_timed_by_its_receive_timestamp(codebook) -> None:
     clock = WallClock()
     clock.start()
-    epoch0 = time.time()
     time.sleep(0.05)
-    received = epoch0 + 0.01                     # the kernel received it 10 ms after start
+    received = clock.epoch_ns / 1e9 + 0.01       # the kernel received it 10 ms after start (the clock's own
+                                                 # epoch: a time.time() after start() was late under load)
     bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL", timestamp=received), budget=1)
     station = _station(codebook, bus, clock)
     station.poll()
@@ -117,22 +117,25 @@ def test_a_late_reader_measures_the_intervals_the_bus_had() -> None:
         time.sleep(0.1)
         clock.start()
         frame = _frame(codebook, "VCU_WheelCmd_FL")
-        sent_at = []
+        sent_at = []                             # (before, after) each send: the kernel stamps it in between
         for _ in range(20):
-            sent_at.append(time.monotonic())
+            before = time.monotonic()
             sender.send(frame)
+            sent_at.append((before, time.monotonic()))
             time.sleep(0.01)
         time.sleep(0.3)
         while station.poll(0.05):
             pass
         state = station.monitor.state("VCU_WheelCmd_FL")
         assert state.frames == 20
-        sent_intervals = [b - a for a, b in zip(sent_at, sent_at[1:])]
         measured = list(state.intervals)
         assert len(measured) == 19
-        # The reader took all 20 within a few ms; the stamps still give the sender's spacing.
-        for sent, got in zip(sent_intervals, measured):
-            assert got == pytest.approx(sent, abs=0.003)
+        # The reader took all 20 within a few ms; the stamps still give the sender's spacing: each interval
+        # lies between the shortest and the longest the two sends allow (a sender descheduled between its clock
+        # read and its send made a single read 3.4 ms off: seen under load). 1 ms: the stamp's clock
+        # (CLOCK_REALTIME, bench/clock.py) against the monotonic one over 10 ms.
+        for (a0, a1), (b0, b1), got in zip(sent_at, sent_at[1:], measured, strict=False):
+            assert b0 - a1 - 0.001 <= got <= b1 - a0 + 0.001, (got, b0 - a1, b1 - a0)
     finally:
         sender.shutdown()
         receiver.shutdown()
