@@ -172,7 +172,9 @@ class E2EReceiver:
 
 
 class E2ESender:
-    """COM-E2E-01/02/03: write the signals, then the AliveCounter (+1 per frame), then the Checksum."""
+    """COM-E2E-01/02/03: write the signals, then the AliveCounter, then the Checksum. The counter advances when
+    the frame was transmitted (`sent`): a frame the driver refused is not on the bus, and its counter value goes
+    with the next frame, so that receivers see neither a skipped nor a repeated value (COM-E2E-01)."""
 
     def __init__(self, message: cantools.database.Message) -> None:
         self.message = message
@@ -183,8 +185,11 @@ class E2ESender:
         raw["AliveCounter"], raw["Checksum"] = self.counter, 0
         data = bytearray(self.message.encode(raw, scaling=False, strict=False))  # COM-FRM-01: unused bits 0
         data[7] = frame_checksum(self.message.frame_id, data)
-        self.counter = (self.counter + 1) % 16
         return can.Message(arbitration_id=self.message.frame_id, data=bytes(data), is_extended_id=False)
+
+    def sent(self) -> None:
+        """The last frame built went out: the next one carries the next counter value (COM-E2E-01)."""
+        self.counter = (self.counter + 1) % 16
 
 
 def _raw_on_grid(signal: cantools.database.Signal, value: float) -> int:
@@ -596,6 +601,11 @@ class Transmitter:
         self.wheel_cmd = {w: E2ESender(db.get_message_by_name(f"VCU_WheelCmd_{w}")) for w in WHEELS}
         self.state = E2ESender(db.get_message_by_name("VCU_VehicleState"))
         self.centre = E2ESender(db.get_message_by_name("VCU_RotationCentre"))
+        self.by_id = {s.message.frame_id: s for s in (*self.wheel_cmd.values(), self.state, self.centre)}
+
+    def sent(self, frame: can.Message) -> None:
+        """COM-E2E-01: a transmitted frame advances its message's AliveCounter."""
+        self.by_id[frame.arbitration_id].sent()
 
     def wheel_frames(self, out: Outputs) -> list[can.Message]:
         """VCU-OUT-01: SteerAngleCmd and WheelSpeedCmd of each wheel."""
@@ -656,7 +666,7 @@ class TaskStats:
 
 
 def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Event,
-                 send: Callable[[can.Message], None], stats_every: float = 0.0) -> None:
+                 send: Callable[[can.Message], bool], stats_every: float = 0.0) -> None:
     """The 10 ms task on an absolute grid: send the frames of the last evaluation at once (COM-CYC-01: the
     wheels every task, the state every 2nd), then read the bus and evaluate for the next task.
 
@@ -678,7 +688,8 @@ def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Eve
         late = now - next_t
         stats.max_late_ms = max(stats.max_late_ms, late * 1000.0)
         for frame in pending:
-            send(frame)
+            if send(frame):
+                tx.sent(frame)
         wall = time.time()
         drain(bus, vcu, wall)  # frames received up to now (VCU-GEN-02)
         out = vcu.evaluate(wall)
@@ -698,13 +709,15 @@ def frames_of_task(tx: Transmitter, out: Outputs, tick: int) -> list[can.Message
     return tx.wheel_frames(out) + (tx.state_frames(out) if tick % 2 == 0 else [])
 
 
-def make_sender(bus: can.BusABC) -> Callable[[can.Message], None]:
-    """VCU-GEN-01: never stop sending; a full transmit buffer costs one frame, not the node."""
-    def send(frame: can.Message) -> None:
+def make_sender(bus: can.BusABC) -> Callable[[can.Message], bool]:
+    """VCU-GEN-01: never stop sending; a full transmit buffer costs one frame, not the node. The sender says
+    whether the frame went out (its AliveCounter advances only then, COM-E2E-01)."""
+    def send(frame: can.Message) -> bool:
         try:
             bus.send(frame, timeout=0.005)
         except can.CanError:
-            pass
+            return False
+        return True
     return send
 
 
@@ -723,8 +736,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def receive_filters(db: cantools.database.Database) -> list[can.typechecking.CanFilter]:
     """Acceptance filters for exactly the identifiers the VCU reads (INPUTS), 11-bit data frames, as a real
     ECU's CAN controller has them. python-can sets them in the kernel on socketcan (CAN_RAW_FILTER), so the
-    process never wakes for the rest of the bus (on the 4WIS network more than half its frames, among them
-    the VCU's own and the bench's), and applies them in software on interfaces without hardware filters."""
+    process never reads the rest of the bus (on the 4WIS network more than half its frames, among them the
+    VCU's own and the bench's); `open_bus` keeps them only where the driver applies them."""
     return [{"can_id": db.get_message_by_name(name).frame_id, "can_mask": 0x7FF, "extended": False}
             for name in INPUTS]
 
@@ -738,6 +751,11 @@ def open_bus(args: argparse.Namespace, filters: list[can.typechecking.CanFilter]
     if args.interface == "udp_multicast":
         kwargs["hop_limit"] = 0  # keep the traffic on this host, as the bench does
     bus = can.Bus(**kwargs)
+    if filters and not getattr(bus, "_is_filtered", False):
+        # python-can filters this interface in software, and then recv(timeout=0) returns None at the first
+        # frame it drops, as if the bus were empty: `drain` would stop early. Vcu.receive ignores what it does
+        # not read, so such a bus goes unfiltered.
+        bus.set_filters(None)
     if args.interface == "udp_multicast":
         only_own_group(bus)
     return bus

@@ -166,27 +166,48 @@ def test_example_checksum_is_the_contracts() -> None:
     assert VCU.crc8_sae_j1850(b"123456789") == 0x4B
 
 
-def test_example_bus_delivers_only_what_the_vcu_reads() -> None:
-    """The example's acceptance filters pass exactly the messages its receivers judge, each one the DBC says the
-    VCU receives, and nothing else (python-can applies them in software on the virtual interface, in the kernel on
-    socketcan)."""
+def test_example_reads_exactly_its_inputs_in_one_drain() -> None:
+    """The example's acceptance filters name exactly the messages its receivers judge, each one the DBC says the
+    VCU receives (in the kernel on socketcan). Where python-can would filter in software (here the virtual
+    interface) the bus stays unfiltered: there recv(timeout=0) returns None at the first frame it drops, and one
+    drain must still take in every frame that arrived."""
     import can
     import cantools
 
     db = cantools.database.load_file(str(ROOT / "dbc" / "chassis.dbc"))
     bench_db = cantools.database.load_file(str(ROOT / "dbc" / "bench.dbc"))
+    vcu = VCU.Vcu(db, 0.0)
+    judged = {receiver.message.frame_id for receiver in vcu.rx.values()}
     filters = VCU.receive_filters(db)
-    judged = {receiver.message.frame_id for receiver in VCU.Vcu(db, 0.0).rx.values()}
     assert {f["can_id"] for f in filters} == judged and len(filters) == len(judged) == 7
+    assert all(f["can_mask"] == 0x7FF and f["extended"] is False for f in filters)
     assert all("VCU" in db.get_message_by_frame_id(frame_id).receivers for frame_id in judged)
     others = [m.frame_id for m in db.messages if m.frame_id not in judged] + [m.frame_id for m in bench_db.messages]
-    channel = f"vcu-filters-{random.randint(0, 1 << 30)}"
-    with can.Bus(interface="virtual", channel=channel, can_filters=filters) as vcu_bus, \
-            can.Bus(interface="virtual", channel=channel) as bench_bus:
-        for frame_id in sorted(judged) + others:
+    channel = f"vcu-drain-{random.randint(0, 1 << 30)}"
+    args = VCU.parse_args(["--interface", "virtual", "--channel", channel])
+    with VCU.open_bus(args, filters) as vcu_bus, can.Bus(interface="virtual", channel=channel) as bench_bus:
+        assert not vcu_bus.filters                          # software filtering: left off
+        for frame_id in others[:5] + sorted(judged) + others[5:]:
             bench_bus.send(can.Message(arbitration_id=frame_id, data=bytes(8), is_extended_id=False))
-        bench_bus.send(can.Message(arbitration_id=min(judged), data=bytes(8), is_extended_id=True))  # 29-bit
-        received = []
-        while (msg := vcu_bus.recv(timeout=0.05)) is not None:
-            received.append((msg.arbitration_id, msg.is_extended_id))
-    assert received == [(frame_id, False) for frame_id in sorted(judged)]
+        VCU.drain(vcu_bus, vcu, time.time())
+        assert vcu_bus.recv(timeout=0.0) is None            # one drain took every frame
+    assert all(rx.accepted + rx.rejected == 1 for rx in vcu.rx.values())   # each input judged once
+
+
+def test_example_counter_advances_per_transmission() -> None:
+    """COM-E2E-01: +1 per transmission, never a skipped value: a frame the driver refused (a full transmit queue)
+    leaves its counter value to the next frame of that message."""
+    import cantools
+
+    db = cantools.database.load_file(str(ROOT / "dbc" / "chassis.dbc"))
+    tx = VCU.Transmitter(db)
+    refused = {3, 4, 9, 16, 17, 18}                       # tasks whose frames the driver refused
+    on_bus: dict[int, list[int]] = {}
+    for task in range(40):
+        for frame in tx.wheel_frames(VCU.Outputs()) + tx.state_frames(VCU.Outputs()):
+            if task not in refused:
+                tx.sent(frame)
+                on_bus.setdefault(frame.arbitration_id, []).append(frame.data[6] & 0x0F)
+    assert len(on_bus) == 6
+    for counters in on_bus.values():
+        assert len(counters) == 34 and all((b - a) % 16 == 1 for a, b in zip(counters, counters[1:]))
