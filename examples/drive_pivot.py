@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import socket
+import sys
 import time
 from pathlib import Path
 
@@ -36,6 +38,22 @@ def protect(frame_id: int, payload: bytes, counter: int) -> bytes:
     return bytes(data)
 
 
+def own_group_only(bus: can.BusABC) -> None:
+    """udp_multicast on Linux: python-can binds its socket to the wildcard address on one fixed port, so it
+    hears every group joined on this host: another bench's WHL_Status frames would be read as the plant's.
+    Limit the socket to its own group (IP_MULTICAST_ALL = 0, python-can has no option for it) and drop what it
+    queued before. Other interfaces are left alone."""
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None or sock.family != socket.AF_INET or not sys.platform.startswith("linux"):
+        return
+    sock.setsockopt(socket.IPPROTO_IP, getattr(socket, "IP_MULTICAST_ALL", 49), 0)
+    while True:
+        try:
+            sock.recv(65535, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--interface", default="udp_multicast")
@@ -48,6 +66,7 @@ def main() -> None:
     db = cantools.database.load_file(str(DBC))
     kwargs = {"hop_limit": 0} if args.interface == "udp_multicast" else {}
     bus = can.Bus(interface=args.interface, channel=args.channel, **kwargs)
+    own_group_only(bus)
     stimulus = {
         "DRV_Steering": {"HandWheelAngle": 0.0, "HandWheelRate": 0.0, "DriverTorque": 0.0},
         "DRV_Pedals": {"AccelPedal": 0.0, "BrakePedal": 0.0, "BrakePressure": 0.0},
