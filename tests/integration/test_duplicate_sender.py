@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 import random
 import re
-import signal
 import subprocess
 import sys
 import threading
@@ -20,6 +19,7 @@ from bench.codec import Codebook
 from bench.faults import FRAME_KINDS, Fault, FaultPlan
 from bench.monitor import Monitor
 from bench.restbus import Restbus
+from tests.child import Child
 from tests.repo import ROOT
 
 MESSAGE = "VCU_WheelCmd_FL"
@@ -214,8 +214,7 @@ def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
     identifiers have a second sender, and a listener's monitor (as `bench monitor` runs it) finds them by the
     counters alone."""
     group = _group()
-    command = [sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast", "--channel", group,
-               "--duration", "4"]
+    command = [sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast", "--channel", group]
     listener = can.Bus(interface="udp_multicast", channel=group, receive_own_messages=False)
     watcher = Monitor(codebook)
     stop = threading.Event()
@@ -230,15 +229,14 @@ def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
 
     thread = threading.Thread(target=listen, daemon=True)
     thread.start()
-    first = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # The first sends from before the second starts until after it ends: the second's 4 s overlap it whatever
+    # either's start-up takes (both ran 4 s from a 0.7 s head start before; under load they overlapped 0.16 s).
+    first = Child([*command, "--duration", "120"], ROOT)
     try:
-        time.sleep(0.7)
-        second = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=60)
-        first_output, _ = first.communicate(timeout=60)
+        first.wait_for("simulating", 60)
+        second = subprocess.run([*command, "--duration", "4"], cwd=ROOT, capture_output=True, text=True, timeout=60)
     finally:
-        if first.poll() is None:
-            first.send_signal(signal.SIGINT)
-            first.communicate(timeout=30)
+        first_output = first.stop()
         stop.set()
         thread.join(timeout=2)
         listener.shutdown()

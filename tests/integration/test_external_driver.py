@@ -6,11 +6,10 @@ from __future__ import annotations
 import json
 import math
 import random
-import signal
 import subprocess
 import sys
-import time
 
+from tests.child import Child
 from tests.repo import ROOT
 
 # docs/spec/vehicles.md A ([P0] §3): 2K = 1.11 m, 2L = 2.76 m, r = 0.281 m
@@ -33,17 +32,15 @@ def expected(x: float, y: float, v_o: float) -> dict[str, tuple[float, float]]:
 
 def test_plant_answers_a_foreign_driver_per_formulas() -> None:
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
-    plant = subprocess.Popen([sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast",
-                              "--channel", group, "--external", "DRIVER", "--duration", "60"],
-                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    plant = Child([sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast", "--channel", group,
+                   "--external", "DRIVER", "--duration", "60"], ROOT)
     try:
-        time.sleep(1.0)
+        plant.wait_for("simulating", 60)      # its bus is open: it hears the driver's first frame
         driver = subprocess.run([sys.executable, str(ROOT / "examples" / "drive_pivot.py"), "--interface",
                                  "udp_multicast", "--channel", group, "--pivot", "5", "-2", "--speed", "1.0",
                                  "--seconds", "4"], capture_output=True, text=True, timeout=60)
     finally:
-        plant.send_signal(signal.SIGINT)
-        plant_output, _ = plant.communicate(timeout=30)
+        plant_output = plant.stop()
     assert driver.returncode == 0, driver.stderr
     status = json.loads(driver.stdout)
     for corner, (angle, rpm) in expected(5.0, -2.0, 1.0).items():

@@ -15,6 +15,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
+from tests.child import Child
 from tests.reference import crc8_j1850
 from tests.repo import ROOT
 
@@ -79,19 +80,16 @@ def test_two_runs_give_the_same_frame_sequence(first_run: Path, tmp_path: Path) 
 def test_plant_and_runner_in_two_processes_over_udp_multicast(tmp_path: Path) -> None:
     # An administratively scoped group, random per test run; hop limit 0 keeps it on this host.
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
-    plant = subprocess.Popen([*BENCH, "plant", "--interface", "udp_multicast", "--channel", group,
-                              "--duration", "120"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                             text=True)
+    plant = Child([*BENCH, "plant", "--interface", "udp_multicast", "--channel", group, "--duration", "120"], ROOT)
     try:
-        time.sleep(1.0)
+        plant.wait_for("simulating", 60)      # its bus is open: the runner's first frame finds it listening
         result = bench_run(tmp_path, "--interface", "udp_multicast", "--channel", group, "--external", "all",
                            timeout=120)
         assert result.returncode == 0, result.stdout + result.stderr
         junit = (tmp_path / "junit.xml").read_text()
         assert 'failures="0"' in junit and 'errors="0"' in junit
     finally:
-        plant.send_signal(signal.SIGINT)
-        output, _ = plant.communicate(timeout=30)
+        output = plant.stop()
     assert plant.returncode == 0, output
     assert "stopped" in output
 
