@@ -636,8 +636,9 @@ def drain(bus: can.BusABC, vcu: Vcu, now: float) -> None:
     everything that arrived meanwhile, stamped by the kernel (python-can's timestamp, the wall clock of
     time.time()), so a late task never mistakes its own stall for a silent sender (COM-RX-02). `now` is the
     task's one read of that clock: a stamp more than a second away from it is of another clock (an interface
-    without receive timestamps), and the frame gets `now`. The bus delivers only what the VCU reads
-    (`receive_filters`), so no frame is read here only to be thrown away."""
+    without receive timestamps), and the frame gets `now`. Where the driver filters (socketcan's kernel, a CAN
+    controller) the bus delivers only what the VCU reads (`receive_filters`); elsewhere Vcu.receive ignores the
+    rest."""
     while True:
         try:
             msg = bus.recv(timeout=0.0)
@@ -676,7 +677,8 @@ def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Eve
 
     A task reads the clocks three times: the grid's (time.monotonic) before and after its sleep, and the wall
     clock of the frames' stamps (time.time) once for its drain and its evaluation. On a slow machine a clock
-    read is not free (a system call of about 55 us in a User-mode Linux guest, docs/vcan-lane.md)."""
+    read is not free (a system call of about 55 us in a User-mode Linux guest, docs/vcan-lane.md); python-can's
+    socketcan `recv` and `send` still read the clock and call select() once each per frame."""
     tick, next_t = 0, time.monotonic()
     stats, next_stats = TaskStats(), next_t + stats_every
     pending = frames_of_task(tx, vcu.out, tick)
@@ -694,7 +696,7 @@ def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Eve
         drain(bus, vcu, wall)  # frames received up to now (VCU-GEN-02)
         out = vcu.evaluate(wall)
         stats.faults[out.fault] += 1
-        missed = max(0, int(late / TASK_S) - 1)   # slots whose successor's time had passed when this began
+        missed = max(0, int(late / TASK_S) - 1)   # the slots that passed meanwhile but the last (it runs at once)
         stats.skipped_slots += missed
         tick += 1 + missed  # a late task skips the slots it missed instead of sending a burst
         next_t += TASK_S * (1 + missed)
