@@ -292,12 +292,12 @@ class Monitor:
         return state.latest
 
     def timed_out(self, message: str, now: float) -> bool:
-        state = self.state(message)
-        cycle = state.codec.cycle_time or math.inf
-        return state.last_valid is None or now - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS
+        state = self.by_name.get(message) or self.state(message)
+        last_valid = state.last_valid
+        return last_valid is None or now - last_valid > state.timeout_s
 
     def invalid(self, message: str) -> bool:
-        return self.state(message).last_invalid
+        return (self.by_name.get(message) or self.state(message)).last_invalid
 
     def history(self, message: str, signal: str, since: float = -math.inf) -> tuple[list[float], list[float]]:
         state = self.state(message)
