@@ -54,6 +54,14 @@ def table_rows(screen: str) -> list[dict[str, str]]:
     return rows
 
 
+def _kept_cycle(row: dict[str, str]) -> bool:
+    """The row shows a 10 ms message that came at its cycle within the window: 90-110 Hz and p50 8-12 ms."""
+    try:
+        return 90.0 <= float(row["Rate Hz"]) <= 110.0 and 8.0 <= float(row["p50 ms"]) <= 12.0
+    except (KeyError, ValueError):      # "–": no interval in the window yet
+        return False
+
+
 def test_monitor_shows_the_plant_messages_with_their_rates(tmp_path: Path) -> None:
     binary = tmux()
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
@@ -78,8 +86,10 @@ def test_monitor_shows_the_plant_messages_with_their_rates(tmp_path: Path) -> No
                                     capture_output=True, text=True, timeout=10).stdout
             rows = {r["Message"]: r for r in table_rows(screen)}
             row = rows.get("WHL_Status_FL")
-            # the plant runs in real time on a shared host: wait for a screen where it kept its cycle
-            if row is not None and row["Rate Hz"] not in ("", "–") and 90.0 <= float(row["Rate Hz"]) <= 110.0:
+            # the plant runs in real time on a shared host: wait for a screen where it kept its cycle over the
+            # monitor's window, by rate and by median interval (a plant that ran late replays its ticks at once:
+            # the rate stays about 100 Hz while the median falls, 0.85 ms and 5.9 ms seen at load 6-8)
+            if row is not None and _kept_cycle(row):
                 break
     finally:
         subprocess.run([*tmux_cmd, "kill-server"], env=env, capture_output=True, timeout=10)
