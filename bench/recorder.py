@@ -9,8 +9,8 @@ busy bus (>= 20 000 frames/s, each with its decoded message). Channels:
 - `/bench/steps`: test steps and verdicts as `foxglove.Log`.
 
 Chunks are zstd-compressed (mcap's default, and the best ratio for JSON) and finalised at least
-every `flush_interval` s of wall time (checked on every write) or when `chunk_size` bytes are
-pending; the file is flushed to the OS after each, so a run killed with SIGKILL leaves a log
+every `flush_interval` s of wall time (checked on every write; `math.inf`: only by `flush()`) or
+when `chunk_size` bytes are pending; the file is flushed to the OS after each, so a run killed with SIGKILL leaves a log
 readable up to its last chunk (`bench.logread` reads such a file). The DBC files are attached
 at open, so even a log killed early says which databases it was recorded with.
 """
@@ -527,7 +527,9 @@ class Recorder:
                 self._broken = True  # until the writer's state is whole again (KeyboardInterrupt, disk full)
                 self._add(channel_id, ns, payload)
                 self._pending += len(payload) + _RECORD_OVERHEAD
-                if self._pending >= self._chunk_bytes or time.monotonic() >= self._deadline:
+                # flush_interval=math.inf: the caller flushes (bench.logproc), and no write reads the clock
+                if self._pending >= self._chunk_bytes or (self._deadline != math.inf
+                                                          and time.monotonic() >= self._deadline):
                     self._finish_chunk()
                 self._broken = False
             finally:
