@@ -82,6 +82,7 @@ class BenchRun:
     # -- cases ---------------------------------------------------------------------------------------
     def begin_case(self, nodeid: str, name: str) -> Case:
         assert self.session is not None
+        self.session.clock.between_cases()   # real time: the garbage collector's full scans here, not in the case
         # "aborted" until the call phase reports: a case cut short by Ctrl-C stays aborted.
         result = CaseResult(nodeid=nodeid, name=name, outcome="aborted", sim_start=self.session.now(),
                             message="the run was interrupted during this case")
