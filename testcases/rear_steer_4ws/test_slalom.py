@@ -42,9 +42,9 @@ def course(y0: float) -> tuple[list[tuple[float, float]], Path]:
     spacing = oracle.SLALOM_SPACING
     transitions = [Transition(y0 - spacing, y0, AMPLITUDE)]
     side = AMPLITUDE
-    for _, y in cones[1:]:
+    for (_, previous), (_, y) in zip(cones, cones[1:], strict=False):
         side = -side
-        transitions.append(Transition(y - spacing, y, side))
+        transitions.append(Transition(previous, y, side))   # from the previous cone: y - spacing may round below it
     last = cones[-1][1]
     transitions.append(Transition(last, last + spacing, 0.0))
     return cones, Path(0.0, transitions)
