@@ -766,7 +766,8 @@ def open_bus(args: argparse.Namespace, filters: list[can.typechecking.CanFilter]
 def only_own_group(bus: can.BusABC) -> None:
     """Receive only our multicast group: python-can binds to the port on every address, and Linux then delivers
     every group any process on the host joined on that port (IP_MULTICAST_ALL defaults to 1). Other benches'
-    frames would look like a second sender to the E2E receivers (docs/spec/e2e.md)."""
+    frames would look like a second sender to the E2E receivers (docs/spec/e2e.md). What the socket queued
+    before the setting is dropped: nothing of our own group is due before the VCU says it is running."""
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
     if sock is None:
         return
@@ -777,7 +778,12 @@ def only_own_group(bus: can.BusABC) -> None:
         else:
             sock.setsockopt(socket.IPPROTO_IPV6, ipv6_multicast_all, 0)
     except OSError:
-        pass  # not Linux: no such leak to close
+        return  # not Linux: no such leak to close
+    while True:  # what arrived between python-can's bind and the setting above may be another group's
+        try:
+            sock.recv(65535, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return
 
 
 def main(argv: list[str] | None = None) -> int:

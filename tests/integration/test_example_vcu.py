@@ -15,7 +15,6 @@ import importlib.util
 import math
 import random
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -25,48 +24,24 @@ from pathlib import Path
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from tests.child import Child
 from tests.repo import ROOT
 
 EXAMPLE = ROOT / "examples" / "vcu_ecu.py"
 BENCH = [sys.executable, "-m", "bench"]
 
 
-def _start(command: list[str]) -> subprocess.Popen:
-    return subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-
-
-def _wait_for(process: subprocess.Popen, marker: str, seconds: float) -> str:
-    """Lines of the process's output up to the one containing marker (fails when it never comes)."""
-    assert process.stdout is not None
-    seen = []
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        line = process.stdout.readline()
-        if not line:
-            break
-        seen.append(line)
-        if marker in line:
-            return "".join(seen)
-    raise AssertionError(f"no {marker!r} within {seconds:g} s:\n{''.join(seen)}")
-
-
-def _stop(process: subprocess.Popen) -> str:
-    process.send_signal(signal.SIGINT)
-    output, _ = process.communicate(timeout=30)
-    return output
-
-
 def test_campaign_passes_against_the_example_vcu(tmp_path: Path) -> None:
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
     bus = ["--interface", "udp_multicast", "--channel", group]
-    plant = _start([*BENCH, "plant", *bus, "--external", "VCU", "--duration", "900"])
+    plant = Child([*BENCH, "plant", *bus, "--external", "VCU", "--duration", "900"], ROOT)
     vcu = None
     try:
-        started = _wait_for(plant, "simulating", 60)
+        started = plant.wait_for("simulating", 60)
         simulated = started.split("simulating", 1)[1].split(" on ", 1)[0]
         assert "VCU" not in simulated.replace(",", " ").split(), started   # the bench leaves the VCU alone
-        vcu = _start([sys.executable, str(EXAMPLE), *bus])
-        _wait_for(vcu, "running", 60)
+        vcu = Child([sys.executable, str(EXAMPLE), *bus], ROOT)
+        vcu.wait_for("running", 60)
         run = subprocess.run([*BENCH, "run", *bus, "--external", "all", "--dut", "VCU", "--out", str(tmp_path)],
                              cwd=ROOT, capture_output=True, text=True, timeout=1200)
         assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-3000:]
@@ -87,7 +62,7 @@ def test_campaign_passes_against_the_example_vcu(tmp_path: Path) -> None:
         report = (tmp_path / "report.html").read_text()           # the VCU's conformance table, as the real ECU
         assert re.search(r'<h2 id="node-VCU">VCU <span class="node-kind">external \(the real ECU\)', report)
     finally:
-        outputs = {"vcu": _stop(vcu) if vcu is not None else "", "plant": _stop(plant)}
+        outputs = {"vcu": vcu.stop() if vcu is not None else "", "plant": plant.stop()}
     assert vcu.returncode == 0 and "stopped" in outputs["vcu"], outputs["vcu"]
     assert plant.returncode == 0, outputs["plant"]
 
