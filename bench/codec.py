@@ -283,17 +283,7 @@ class MessageCodec:
                 raise DecodeError(f"{self.name}: {exc}") from None
             return {k: v if type(v) is int and not -_EXACT_LIMIT <= v <= _EXACT_LIMIT else float(v)
                     for k, v in decoded.items()}
-        if len(data) < self.length:
-            raise DecodeError(f"{self.name}: {len(data)} bytes, the message has {self.length}")
-        word = int.from_bytes(data, "little")
-        entry = self._entry
-        if word & self._body_mask != entry[0]:
-            entry = self._decode_word(word)
-        out = entry[1].copy()
-        if self._e2e_plain:
-            out["AliveCounter"] = _FLOATS[(word >> _COUNTER_SHIFT) & 0x0F]
-            out["Checksum"] = _FLOATS[(word >> _CHECKSUM_SHIFT) & 0xFF]
-        return out
+        return self._cached(data)[1]
 
     def decode_checked(self, data: bytes | bytearray) -> tuple[dict[str, float], tuple[str, ...]]:
         """`decode` and `out_of_range` of a frame (the monitor, every frame): the names out of range are
@@ -301,6 +291,17 @@ class MessageCodec:
         if not self.fast:
             values = self.decode(data)
             return values, tuple(self.out_of_range(values))
+        entry, values = self._cached(data)
+        bad = entry[2]
+        if bad is None:
+            bad = tuple(self.out_of_range(values))
+            self._entry = (entry[0], entry[1], bad)
+        return values, bad
+
+    def _cached(self, data: bytes | bytearray) -> tuple[tuple[int, dict[str, float], tuple[str, ...] | None],
+                                                        dict[str, float]]:
+        """The cache entry of a fast-path payload (decoded again when its body changed) and a copy of its values
+        with this frame's AliveCounter and Checksum."""
         if len(data) < self.length:
             raise DecodeError(f"{self.name}: {len(data)} bytes, the message has {self.length}")
         word = int.from_bytes(data, "little")
@@ -311,11 +312,7 @@ class MessageCodec:
         if self._e2e_plain:
             values["AliveCounter"] = _FLOATS[(word >> _COUNTER_SHIFT) & 0x0F]
             values["Checksum"] = _FLOATS[(word >> _CHECKSUM_SHIFT) & 0xFF]
-        bad = entry[2]
-        if bad is None:
-            bad = tuple(self.out_of_range(values))
-            self._entry = (entry[0], entry[1], bad)
-        return values, bad
+        return entry, values
 
     def _decode_word(self, word: int) -> tuple[int, dict[str, float], tuple[str, ...] | None]:
         out: dict[str, float] = {}

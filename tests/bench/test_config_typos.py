@@ -12,24 +12,12 @@ from bench.cli import main
 from bench.codec import load_codebook
 from bench.config import load_config
 from bench.errors import ConfigError
-from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
+from tests.repo import BENCH_DBC, CHASSIS_DBC, MINIMAL_PROJECT_TOML, ROOT
 
 MINI_CASES = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"
-GOOD = f"""\
-[bench]
-databases = ["{CHASSIS_DBC}", "{BENCH_DBC}"]
-stimulus = ["DRIVER", "TESTER"]
-plant = "chassis"
-testcases = "testcases"
-reports = "reports"
-
-[scenario]
-command = "BENCH_Control.ScenarioId"
-ack = "PLANT_Status.ScenarioIdAck"
-
-[timing]
-latency = [{{name = "FL", command = "VCU_WheelCmd_FL.SteerAngleCmd", status = "WHL_Status_FL.SteerAngle"}}]
-"""
+GOOD = (MINIMAL_PROJECT_TOML.replace("db/chassis.dbc", str(CHASSIS_DBC)).replace("db/bench.dbc", str(BENCH_DBC))
+        + '\n[timing]\nlatency = [{name = "FL", command = "VCU_WheelCmd_FL.SteerAngleCmd", '
+          'status = "WHL_Status_FL.SteerAngle"}]\n')
 
 
 def project_with(tmp_path: Path, old: str, new: str) -> Path:
