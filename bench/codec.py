@@ -193,12 +193,17 @@ class MessageCodec:
             values[s.name] = raw * s.scale + s.offset
         return values
 
+    def signal(self, name: str) -> SignalCodec:
+        """The signal of that name; a SignalError naming the message, the name meant and its signals if none."""
+        sig = self.by_name.get(name)
+        if sig is None:
+            raise SignalError(f"message {self.name} has no signal {name!r}{did_you_mean(name, self.signal_names)} "
+                              f"(signals: {', '.join(self.signal_names)})")
+        return sig
+
     def physical(self, signal: str, value: float | int | str) -> float:
         """A checked physical value: value-table names resolved, NaN and out-of-range refused."""
-        sig = self.by_name.get(signal)
-        if sig is None:
-            raise SignalError(f"message {self.name} has no signal {signal!r}{did_you_mean(signal, self.signal_names)} "
-                              f"(signals: {', '.join(self.signal_names)})")
+        sig = self.signal(signal)
         if isinstance(value, str):
             if value not in sig.choices:
                 raise SignalError(f"{self.name}.{signal}: {value!r} is not in its value table "

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from bench.bus import VIRTUAL, is_virtual
 from bench.busopts import BusOptions, positive_int
 from bench.contract import Requirement, load_requirements
-from bench.errors import ConfigError, did_you_mean
+from bench.errors import ConfigError, SignalError, did_you_mean
 
 if TYPE_CHECKING:
     from bench.codec import Codebook
@@ -65,13 +65,12 @@ class ScenarioProtocol:
 
 
 def signal_problem(where: str, codebook: Codebook, message: str, signal: str) -> str | None:
-    """What is wrong with a `Message.Signal` named in bench.toml, with the close name of a typo; None if fine."""
-    codec = codebook.by_name.get(message)
-    if codec is None:
-        return f"{where}: no message {message!r}{did_you_mean(message, codebook.by_name)} in the databases"
-    if signal not in codec.signal_names:
-        return (f"{where}: message {message} has no signal {signal!r}{did_you_mean(signal, codec.signal_names)} "
-                f"(signals: {', '.join(codec.signal_names)})")
+    """What is wrong with a `Message.Signal` named in bench.toml (the codec's own error, with the name meant
+    of a typo); None if fine."""
+    try:
+        codebook[message].signal(signal)
+    except SignalError as exc:
+        return f"{where}: {exc}"
     return None
 
 

@@ -45,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args, extras = parser.parse_known_args(argv)
     if extras:
-        chosen_parser(parser, args).error(unknown_arguments(chosen_parser(parser, args), extras))
+        chosen = chosen_parser(parser, args)
+        chosen.error(unknown_arguments(chosen, extras))
     try:
         return int(args.handler(args))
     except BenchError as exc:
