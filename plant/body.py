@@ -91,7 +91,10 @@ class PlanarBody:
 
     def advance(self, angles_deg: Sequence[float], speeds_rpm: Sequence[float], dt: float) -> None:
         """Move by dt with the wheels' states at the end of the step (trapezoid of old and new velocity)."""
-        vx, vy, om = self.fit(angles_deg, speeds_rpm)
+        self._advance_fitted(*self.fit(angles_deg, speeds_rpm), dt)
+
+    def _advance_fitted(self, vx: float, vy: float, om: float, dt: float) -> None:
+        """`advance` with the wheels' rigid fit already made (a subclass that fitted them need not fit twice)."""
         if self._fresh:
             self.vx, self.vy, self.omega, self._fresh = vx, vy, om, False
         if dt <= 0.0:

@@ -257,7 +257,7 @@ class VehicleBody(PlanarBody):
                 self._fresh = True          # the kinematic fit restarts from the wheels, no acceleration spike
             self.dynamic = want
         if not want:
-            super().advance(angles_deg, speeds_rpm, dt)
+            self._advance_fitted(vx, vy, om, dt)
             return
         if dt <= 0.0:
             return

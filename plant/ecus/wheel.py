@@ -41,6 +41,10 @@ class WheelFault(IntEnum):
 TWIST_RATE_DPS = 5.0      # steering rate at which the bore torque is fully developed (chosen)
 TWIST_FADE_MPS = 0.5      # rolling speed that halves the bore torque (chosen)
 
+_tanh = math.tanh
+_STEER_ANGLE, _WHEEL_SPEED, _CURRENT = ranges.STEER_ANGLE, ranges.WHEEL_SPEED, ranges.STEER_MOTOR_CURRENT
+_FAULT_CODE = {f: int(f) for f in WheelFault}     # the number WHL_Status carries (an int, not the enum)
+
 
 class WheelEcu:
     """One corner's wheel ECU; exposes its true state (angle_deg, speed_rpm) for the body model."""
@@ -60,7 +64,7 @@ class WheelEcu:
         self._k_twist = params.servo_twist_current
         self._mps_per_rpm = math.pi * params.wheel_radius / 30.0
         self._dt = -1.0
-        self._servo_gain = self._motor_gain = 0.0
+        self._servo_gain = self._motor_gain = self._max_move = self._ramp_step = 0.0
         self.reset()
 
     def reset(self) -> None:
@@ -80,6 +84,7 @@ class WheelEcu:
         return self.angle_deg, self.speed_rpm
 
     def _command(self, io: NodeIO) -> tuple[WheelFault, tuple[float, float] | None]:
+        """The fault of this tick and the (angle deg, speed rpm) to execute (None: hold, ramp down)."""
         cmd = io.latest(self.cmd_message)
         if cmd is None:
             return WheelFault.CMD_TIMEOUT, None
@@ -98,31 +103,38 @@ class WheelEcu:
             self._dt = dt
             self._servo_gain = 1.0 - math.exp(-dt / self._servo_tau) if dt > 0 else 0.0
             self._motor_gain = 1.0 - math.exp(-dt / self._motor_tau) if dt > 0 else 0.0
+            self._max_move = self._rate_limit * dt
+            self._ramp_step = self._ramp * dt
         fault, target = self._command(io)
         self.fault = fault
         if target is None:          # hold the angle, ramp the speed down
             move = 0.0
-            ramp = self._ramp * dt
+            ramp = self._ramp_step
             n = self.speed_rpm
             self.speed_rpm = 0.0 if abs(n) <= ramp else n - math.copysign(ramp, n)
         else:
             angle_cmd, speed_cmd = target
             move = (angle_cmd - self.angle_deg) * self._servo_gain
-            max_move = self._rate_limit * dt
+            max_move = self._max_move
             if move > max_move:
                 move = max_move
             elif move < -max_move:
                 move = -max_move
             self.speed_rpm += (speed_cmd - self.speed_rpm) * self._motor_gain
-        self.angle_deg += move
+        angle = self.angle_deg + move
+        self.angle_deg = angle
         rate = move / dt if dt > 0 else 0.0
         self.rate_dps = rate
-        v = abs(self.speed_rpm) * self._mps_per_rpm
-        self.current = (self._k_rate * rate
-                        + self._k_twist * math.tanh(rate / TWIST_RATE_DPS) / (1.0 + v / TWIST_FADE_MPS))
-        clamp = ranges.clamp
-        io.send_values(self.status_message,
-                       SteerAngle=clamp(self.angle_deg, ranges.STEER_ANGLE),
-                       WheelSpeed=clamp(self.speed_rpm, ranges.WHEEL_SPEED),
-                       SteerMotorCurrent=clamp(self.current, ranges.STEER_MOTOR_CURRENT),
-                       WheelFault=int(fault))
+        speed_rpm = self.speed_rpm
+        v = abs(speed_rpm) * self._mps_per_rpm
+        current = self._k_rate * rate + self._k_twist * _tanh(rate / TWIST_RATE_DPS) / (1.0 + v / TWIST_FADE_MPS)
+        self.current = current
+        # ranges.clamp written out (hot: four wheels every tick); a NaN, never expected, is sent as 0
+        lo, hi = _STEER_ANGLE
+        angle = 0.0 if angle != angle else lo if angle < lo else hi if angle > hi else angle
+        lo, hi = _WHEEL_SPEED
+        speed_rpm = 0.0 if speed_rpm != speed_rpm else lo if speed_rpm < lo else hi if speed_rpm > hi else speed_rpm
+        lo, hi = _CURRENT
+        current = 0.0 if current != current else lo if current < lo else hi if current > hi else current
+        io.send_values(self.status_message, SteerAngle=angle, WheelSpeed=speed_rpm, SteerMotorCurrent=current,
+                       WheelFault=_FAULT_CODE[fault])
