@@ -45,7 +45,9 @@ class PlantHost:
 
     def __init__(self, external: Collection[str], vehicle: str) -> None:
         self.external = frozenset(external)
-        self.vehicle = registry.vehicle(vehicle).name
+        declaration = registry.vehicle(vehicle)
+        self.vehicle = declaration.name
+        self._code = declaration.code       # BENCH_Control.Vehicle of self.vehicle (most ticks ask for it again)
         self.inner = assemble(self.vehicle, self.external)
         self.nodes = tuple(dict.fromkeys(n for b in self.inner for n in b.nodes))
         self.unavailable: int | None = None   # the code of a vehicle asked for that has no plant
@@ -57,17 +59,18 @@ class PlantHost:
 
     def step(self, io: NodeIO, t: float, dt: float) -> None:
         control = io.latest(CONTROL)
-        if control is not None:
-            code = int(control["Vehicle"])
+        if control is not None and (code := int(control["Vehicle"])) != self._code:
             wanted = registry.by_code(code)
             if wanted is not None and wanted.name != self.vehicle:
-                self.vehicle = wanted.name
+                self.vehicle, self._code = wanted.name, wanted.code
                 self.inner = wanted.build(self.external)
                 io.reset_outputs()          # nothing of the previous vehicle stays on the bus
             if wanted is None and self.unavailable != code:
                 log.warning("BENCH_Control.Vehicle = %d names no declared vehicle (%s): the plant stays %s",
                             code, ", ".join(vehicles()), self.vehicle)
             self.unavailable = code if wanted is None else None
+        elif control is not None:
+            self.unavailable = None
         if self._network != self.vehicle:
             self._set_network(io)
         for behaviour in self.inner:

@@ -67,6 +67,7 @@ class SbwFault(IntEnum):
 
 
 _OK, _RANGE, _STUCK = int(SbwFault.OK), int(SbwFault.HANDWHEEL_RANGE), int(SbwFault.HANDWHEEL_STUCK)
+_PINION_RANGE, _INPUT_TIMEOUT = int(SbwFault.PINION_RANGE), int(SbwFault.INPUT_TIMEOUT)
 
 
 class SteeringMode(IntEnum):
@@ -75,6 +76,9 @@ class SteeringMode(IntEnum):
     DIRECT = 0
     YAW_RATE = 1
     YAW_RATE_LAT_ACCEL = 2
+
+
+_MODES = {int(m): m for m in SteeringMode}   # a valid raw SteeringMode -> its member (no enum call per tick)
 
 
 class _Pid:
@@ -137,7 +141,19 @@ class SbwEcu:
         self.plausibility = p.plausibility_limit * _RAD
         self.stuck_motion = p.stuck_motion * _RAD
         self.ratio = p.steering_ratio
+        self._additional_angle_limit = p.additional_angle_limit * _RAD
+        self._dt = -1.0                     # the tick the factors below are for (the plant's dt is fixed)
+        self._reference_factor = self._smoothing = self._angle_step = self._rack_factor = 0.0
         self.reset()
+
+    def _set_dt(self, dt: float) -> None:
+        """The per-tick factors of `step` for the tick dt (the same expressions, evaluated once)."""
+        p = self.p
+        self._dt = dt
+        self._reference_factor = 1.0 - math.exp(-dt / p.yaw_reference_lag)
+        self._smoothing = 1.0 - math.exp(-dt / ADDITIONAL_ANGLE_FILTER)
+        self._angle_step = p.additional_angle_rate * _RAD * dt
+        self._rack_factor = 1.0 - math.exp(-dt / p.rack_force_filter)
 
     def reset(self) -> None:
         """Power-on state: centred, loops at rest, DIRECT mode, no fault."""
@@ -224,8 +240,8 @@ class SbwEcu:
         mode, gain = SteeringMode.DIRECT, self.p.ideal_yaw_gain
         if config is not None:
             raw_mode, raw_gain = config.get("SteeringMode", 0.0), config.get("IdealYawGain", gain)
-            if raw_mode in (0, 1, 2) and ranges.finite(raw_gain) and raw_gain > 0.0:
-                mode, gain = SteeringMode(int(raw_mode)), raw_gain
+            if raw_mode in _MODES and ranges.finite(raw_gain) and raw_gain > 0.0:
+                mode, gain = _MODES[int(raw_mode)], raw_gain
         self.mode, self.ideal_gain = mode, gain
 
     def _inputs(self, io: NodeIO) -> tuple[float, float, float] | None:
@@ -253,18 +269,20 @@ class SbwEcu:
         u, r, ay = inputs
         self.speed = u
         target = self.ideal_gain * self.hand_wheel
-        self.yaw_reference += (target - self.yaw_reference) * (1.0 - math.exp(-dt / p.yaw_reference_lag))
+        self.yaw_reference += (target - self.yaw_reference) * self._reference_factor
         error = self.yaw_reference - r
         if self.mode == SteeringMode.YAW_RATE_LAT_ACCEL:
             w = p.lat_accel_weight
             error = (1.0 - w) * error + w * (u * self.yaw_reference - ay) / u
-        limit = p.additional_angle_limit * _RAD
+        limit = self._additional_angle_limit
         demand = p.yaw_feedback_kp * error + self._yaw_integral
         if -limit < demand < limit or (demand > 0.0) != (error > 0.0):
             self._yaw_integral += p.yaw_feedback_ki * error * dt
         return _clamp(demand, -limit, limit)
 
     def step(self, io: NodeIO, t: float, dt: float) -> None:
+        if dt != self._dt:
+            self._set_dt(dt)
         self._read_config(io)
         inputs = self._inputs(io)
         self.input_fault = self.mode != SteeringMode.DIRECT and inputs is None
@@ -272,26 +290,29 @@ class SbwEcu:
             self.speed = inputs[0]
         demand = self._feedback(dt, inputs)
         if self.feedback_active:   # smooth the 10 ms staircase of the bus inputs (off: back to 0 at the rate limit)
-            smoothing = 1.0 - math.exp(-dt / ADDITIONAL_ANGLE_FILTER)
-            demand = self.additional_angle + (demand - self.additional_angle) * smoothing
-        step = self.p.additional_angle_rate * _RAD * dt
+            demand = self.additional_angle + (demand - self.additional_angle) * self._smoothing
+        step = self._angle_step
         self.additional_angle += _clamp(demand - self.additional_angle, -step, step)
         self.offset = self.ratio * self.additional_angle
         # rack force: the load the steering motor balances (quasi-static: motor torque minus the known
         # viscous part, at the pinion radius), first-order filtered
         load = -(self.kt_p * self.steer_current - self.b_p * self.pinion_rate) / self.p.pinion_radius
-        self.rack_force += (load - self.rack_force) * (1.0 - math.exp(-dt / self.p.rack_force_filter))
+        self.rack_force += (load - self.rack_force) * self._rack_factor
         self._publish(io)
 
     @property
     def fault(self) -> SbwFault:
+        return SbwFault(self._fault_code())
+
+    def _fault_code(self) -> int:
+        """SBW_Pinion.SbwFault: the first fault that applies (module docstring), as the number on the bus."""
         if self.pinion_fault:
-            return SbwFault.PINION_RANGE
+            return _PINION_RANGE
         if self.hand_fault != _OK:
-            return SbwFault(self.hand_fault)
+            return self.hand_fault
         if self.input_fault:
-            return SbwFault.INPUT_TIMEOUT
-        return SbwFault.OK
+            return _INPUT_TIMEOUT
+        return _OK
 
     def _publish(self, io: NodeIO) -> None:
         clamp = ranges.clamp                        # NaN-safe: a NaN (never expected) is sent as 0
@@ -305,4 +326,4 @@ class SbwEcu:
                        PinionAngleTarget=clamp((self.hand_wheel + self.offset) * _DEG, ranges.SBW_PINION_ANGLE),
                        SteerMotorCurrent=clamp(self.steer_current, ranges.SBW_STEER_MOTOR_CURRENT),
                        RackForce=clamp(self.rack_force, ranges.SBW_RACK_FORCE),
-                       SbwFault=int(self.fault))
+                       SbwFault=self._fault_code())
