@@ -147,7 +147,8 @@ class BrakingVehicle:
     def step(self, dt: float) -> None:
         spec = self.spec
         m, R, J = spec.mass, spec.wheel_radius, spec.wheel_inertia
-        braking = any(t > 0.0 for t in self.brake_torque)
+        brake_torque = self.brake_torque
+        braking = brake_torque[0] > 0.0 or brake_torque[1] > 0.0 or brake_torque[2] > 0.0 or brake_torque[3] > 0.0
         if self.stopped:
             if self.drive_torque <= 0.0:
                 self.long_accel = self.lat_accel = 0.0
@@ -178,8 +179,10 @@ class BrakingVehicle:
         fx_sum = fy_sum = mz = 0.0
         half_drive = 0.5 * self.drive_torque
         omega = self.omega
+        kappas, alphas, tyres, pos = self.kappa, self.alpha, self.tyres, self.pos
+        atan2 = math.atan2
         for i in range(4):
-            px, py = self.pos[i]
+            px, py = pos[i]
             vx = u - r * py
             vy = v + r * px
             if i < 2:
@@ -192,18 +195,17 @@ class BrakingVehicle:
                 den = floor
             w = omega[i]
             kappa = (w * R - v_long) / den
-            alpha = math.atan2(v_lat, den)
-            tyre = self.tyres[i]
+            alpha = atan2(v_lat, den)
+            tyre = tyres[i]
             fz_mu = mu * fz[i]
-            f_long, f_lat = tyre.forces(kappa, alpha, fz_mu)
+            f_long, f_lat, slope = tyre.forces_and_slope(kappa, alpha, fz_mu)
             f_lat = -f_lat
-            self.kappa[i], self.alpha[i] = kappa, alpha
+            kappas[i], alphas[i] = kappa, alpha
             # wheel spin, semi-implicit in the tyre's stiffness
-            slope = tyre.long_slope(kappa, fz_mu)
             j_eff = J + dt * R * R * (slope if slope > 0.0 else 0.0) / den
             drive = half_drive if i < 2 else 0.0
             w_free = w + dt * (drive - R * f_long) / j_eff
-            impulse = dt * self.brake_torque[i] / j_eff
+            impulse = dt * brake_torque[i] / j_eff
             if w_free > impulse:
                 w_new = w_free - impulse
             elif w_free < -impulse:

@@ -96,6 +96,7 @@ class SbwMechanics:
         self.ratio = p.steering_ratio
         self.trail = p.tyre_trail
         self.travel = p.pinion_travel * _RAD
+        self._r_m, self._r_M = p.road_feel_resistance, p.steer_motor_resistance
         self._h = -1.0
         self._decay_m = self._decay_M = 0.0
         self.reset()
@@ -166,49 +167,63 @@ class SbwMechanics:
 
     # -- dynamics -------------------------------------------------------------------------------------------
     def substep(self, h: float, u_m: float, u_M: float, driver: HandWheelDriver) -> None:
-        """Advance by h with the motor voltages held (V) and the robot acting on the hand wheel."""
-        p = self.p
+        """Advance by h with the motor voltages held (V) and the robot acting on the hand wheel.
+        (Hot: runs control_rate times a second; state in locals, the same operations in the same order.)"""
         if h != self._h:
+            p = self.p
             self._h = h
             self._decay_m = math.exp(-h * p.road_feel_resistance / p.road_feel_inductance)
             self._decay_M = math.exp(-h * p.steer_motor_resistance / p.steer_motor_inductance)
+        r_m, r_M = self._r_m, self._r_M
+        omega_c, omega_p = self.omega_c, self.omega_p
+        theta_h, theta_c = self.theta_h, self.theta_c
+        kt_c = self.kt_c
         # (5), (8): currents, exact for the voltage and the back-EMF held over h
-        i_ss = (u_m - self.kt_c * self.omega_c) / p.road_feel_resistance
-        self.i_m = i_ss + (self.i_m - i_ss) * self._decay_m
-        i_ss = (u_M - self.kt_p * self.omega_p) / p.steer_motor_resistance
-        self.i_M = i_ss + (self.i_M - i_ss) * self._decay_M
+        i_ss = (u_m - kt_c * omega_c) / r_m
+        i_m = i_ss + (self.i_m - i_ss) * self._decay_m
+        self.i_m = i_m
+        i_ss = (u_M - self.kt_p * omega_p) / r_M
+        i_M = i_ss + (self.i_M - i_ss) * self._decay_M
+        self.i_M = i_M
         # (2): torsion bar
-        f_m = self.k_h * (self.theta_h - self.theta_c)
+        f_m = self.k_h * (theta_h - theta_c)
         # (1): hand wheel, imposed by the robot or free under its torque
-        imposed, a, b, c = driver.advance(h, self.theta_h, self.omega_h)
+        imposed, a, b, c = driver.advance(h, theta_h, self.omega_h)
         if imposed:
             self.theta_h, self.omega_h = a, b
             self.driver_torque = self.j_h * c + self.b_h * b + f_m
         else:
             self.driver_torque = a
-            self.omega_h += h * (a - self.b_h * self.omega_h - f_m) / self.j_h
-            self.theta_h += h * self.omega_h
+            omega_h = self.omega_h + h * (a - self.b_h * self.omega_h - f_m) / self.j_h
+            self.omega_h = omega_h
+            self.theta_h = theta_h + h * omega_h
         # (3), (4): column and road-feel motor
-        self.omega_c += h * (self.kt_c * self.i_m - self.b_c * self.omega_c + f_m) / self.j_c
-        self.theta_c += h * self.omega_c
+        omega_c += h * (kt_c * i_m - self.b_c * omega_c + f_m) / self.j_c
+        self.omega_c = omega_c
+        self.theta_c = theta_c + h * omega_c
         # (6), (7), (9), (10): pinion with the steering motor, dry friction and aligning torque
-        t_a = -self.trail * self.front_lateral_force / self.ratio
+        theta_p = self.theta_p
+        ratio = self.ratio
+        t_a = -self.trail * (self._cf * (theta_p / ratio - self._slip_offset) + self._force_offset) / ratio
         self.aligning_torque = t_a
-        drive = self.kt_p * self.i_M - self.b_p * self.omega_p + t_a
-        w = self.omega_p
-        if w == 0.0 and abs(drive) <= self.friction:
+        drive = self.kt_p * i_M - self.b_p * omega_p + t_a
+        w = omega_p
+        friction = self.friction
+        if w == 0.0 and abs(drive) <= friction:
             pass                                                      # sticking: static friction holds
         else:
             direction = w if w != 0.0 else drive
-            w_new = w + h * (drive - math.copysign(self.friction, direction)) / self.j_p
+            w_new = w + h * (drive - math.copysign(friction, direction)) / self.j_p
             if w != 0.0 and w_new * w < 0.0:
                 w_new = 0.0                                           # reversal: stick for now
-            self.omega_p = w_new
-        theta = self.theta_p + h * self.omega_p
-        if theta > self.travel:
-            theta, self.omega_p = self.travel, min(self.omega_p, 0.0)
-        elif theta < -self.travel:
-            theta, self.omega_p = -self.travel, max(self.omega_p, 0.0)
+            omega_p = w_new
+        theta = theta_p + h * omega_p
+        travel = self.travel
+        if theta > travel:
+            theta, omega_p = travel, min(omega_p, 0.0)
+        elif theta < -travel:
+            theta, omega_p = -travel, max(omega_p, 0.0)
+        self.omega_p = omega_p
         self.theta_p = theta
 
     def advance(self, dt: float, controller: MotorController, driver: HandWheelDriver,
@@ -216,7 +231,8 @@ class SbwMechanics:
         """One plant tick dt: `substeps` times (read the sensors, let the ECU's fast loops set the
         voltages, move by dt/substeps). The ECU therefore runs at substeps/dt (≥ 1 kHz)."""
         h = dt / substeps
+        read, control, substep = self.read, controller.control, self.substep
         for _ in range(substeps):
-            self.read(sensors)
-            u_m, u_M = controller.control(sensors, h)
-            self.substep(h, u_m, u_M, driver)
+            read(sensors)
+            u_m, u_M = control(sensors, h)
+            substep(h, u_m, u_M, driver)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-_atan, _sin, _cos = math.atan, math.sin, math.cos
+_atan, _sin, _cos, _sqrt = math.atan, math.sin, math.cos, math.sqrt
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,13 +78,14 @@ class Shape:
 class CombinedSlipTyre:
     """One tyre: pure longitudinal and lateral Magic Formula curves and their combination (module doc)."""
 
-    __slots__ = ("long", "lat", "kappa_peak", "alpha_peak")
+    __slots__ = ("long", "lat", "kappa_peak", "alpha_peak", "_bce")
 
     def __init__(self, longitudinal: Shape, lateral: Shape) -> None:
         self.long = longitudinal
         self.lat = lateral
         self.kappa_peak = longitudinal.peak()
         self.alpha_peak = lateral.peak()
+        self._bce = (longitudinal.b, longitudinal.c, longitudinal.e, lateral.b, lateral.c, lateral.e)
 
     def forces(self, kappa: float, alpha: float, fz_mu: float) -> tuple[float, float]:
         """(Fx, Fy) in the wheel frame, N, for slip ratio kappa, slip angle alpha (rad) and fz_mu = D * Fz.
@@ -102,6 +103,28 @@ class CombinedSlipTyre:
         fx = sx / s * fz_mu * self.long.value(s * kp)
         fy = sy / s * fz_mu * self.lat.value(s * ap)
         return fx, fy
+
+    def forces_and_slope(self, kappa: float, alpha: float, fz_mu: float) -> tuple[float, float, float]:
+        """(`forces`..., `long_slope`) in one call: the vehicle's wheel loop needs all three every tick. The same
+        expressions as Shape.value and Shape.slope written out (the results are bit for bit those of the
+        separate calls; tests/plant/test_tyre.py checks it)."""
+        bl, cl, el, by, cy, ey = self._bce
+        bx = bl * kappa
+        inner = bx - el * (bx - _atan(bx))
+        slope = fz_mu * (cl * _cos(cl * _atan(inner)) * (bl - el * (bl - bl / (1.0 + bx * bx))) / (1.0 + inner * inner))
+        if fz_mu <= 0.0:
+            return 0.0, 0.0, slope
+        kp, ap = self.kappa_peak, self.alpha_peak
+        sx = kappa / kp
+        sy = alpha / ap
+        s = _sqrt(sx * sx + sy * sy)
+        if s < 1e-12:
+            return 0.0, 0.0, slope
+        bx = bl * (s * kp)
+        fx = sx / s * fz_mu * _sin(cl * _atan(bx - el * (bx - _atan(bx))))
+        bx = by * (s * ap)
+        fy = sy / s * fz_mu * _sin(cy * _atan(bx - ey * (bx - _atan(bx))))
+        return fx, fy, slope
 
     def long_slope(self, kappa: float, fz_mu: float) -> float:
         """dFx/dkappa of the pure longitudinal curve, N per unit slip (>= 0 is used for stiffness)."""

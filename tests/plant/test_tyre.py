@@ -91,3 +91,13 @@ def test_road_shape_picks_the_set_by_mu() -> None:
 def test_bad_shapes_are_refused(args: tuple) -> None:
     with pytest.raises(ValueError, match="Magic Formula"):
         Shape(*args)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from([DRY[0], WET[0]]), st.floats(-1.5, 1.5), st.floats(-1.6, 1.6), st.floats(-10.0, 1e4))
+def test_forces_and_slope_is_the_separate_calls_bit_for_bit(shape: Shape, kappa: float, alpha: float,
+                                                            fz_mu: float) -> None:
+    """The vehicle's one-call path (a cost cut) must give exactly what forces() and long_slope() give."""
+    tyre = CombinedSlipTyre(shape, LATERAL)
+    separate = (*tyre.forces(kappa, alpha, fz_mu), tyre.long_slope(kappa, fz_mu))
+    assert repr(tyre.forces_and_slope(kappa, alpha, fz_mu)) == repr(separate)     # repr: -0.0 is not 0.0
