@@ -36,6 +36,9 @@ class Valve(IntEnum):
     DECREASE = 2
 
 
+_INCREASE, _DECREASE = Valve.INCREASE, Valve.DECREASE    # an enum class attribute costs a lookup per tick
+
+
 class BrakeHydraulics:
     """Master cylinder and four wheel circuits (FL, FR, RL, RR)."""
 
@@ -93,16 +96,17 @@ class BrakeHydraulics:
         sqrt = math.sqrt
         k_in, k_out = self.k_in * dt, self.k_out * dt
         bypass = self.bypass
+        pressures, valves, duties = self.pressures, self.valves, self.duties
         for i in range(4):
-            p = self.pressures[i]
-            valve = Valve.INCREASE if bypass else self.valves[i]
-            if valve == Valve.INCREASE:
+            p = pressures[i]
+            valve = _INCREASE if bypass else valves[i]
+            if valve == _INCREASE:
                 diff = m - p
-                step = (1.0 if bypass else self.duties[i]) * k_in * sqrt(abs(diff))
+                step = (1.0 if bypass else duties[i]) * k_in * sqrt(abs(diff))
                 p = min(m, p + step) if diff > 0.0 else max(m, p - step)
-            elif valve == Valve.DECREASE:
+            elif valve == _DECREASE:
                 p = max(0.0, p - k_out * sqrt(p))
-            self.pressures[i] = p
+            pressures[i] = p
 
     def torques(self) -> tuple[float, float, float, float]:
         """Brake torque of each wheel, N*m (>= 0; it opposes the wheel's rotation)."""

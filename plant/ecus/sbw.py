@@ -79,6 +79,7 @@ class SteeringMode(IntEnum):
 
 
 _MODES = {int(m): m for m in SteeringMode}   # a valid raw SteeringMode -> its member (no enum call per tick)
+_DIRECT, _LAT_ACCEL = SteeringMode.DIRECT, SteeringMode.YAW_RATE_LAT_ACCEL   # (an enum attribute is a slow lookup)
 
 
 class _Pid:
@@ -237,7 +238,7 @@ class SbwEcu:
     # -- bus side (bench.node.Behaviour) --------------------------------------------------------------
     def _read_config(self, io: NodeIO) -> None:
         config = io.latest("BENCH_SbwConfig")
-        mode, gain = SteeringMode.DIRECT, self.p.ideal_yaw_gain
+        mode, gain = _DIRECT, self.p.ideal_yaw_gain
         if config is not None:
             raw_mode, raw_gain = config.get("SteeringMode", 0.0), config.get("IdealYawGain", gain)
             if raw_mode in _MODES and ranges.finite(raw_gain) and raw_gain > 0.0:
@@ -258,7 +259,7 @@ class SbwEcu:
     def _feedback(self, dt: float, inputs: tuple[float, float, float] | None) -> float:
         """δ_fa target (rad, road wheel) of [P3] §1.1/§1.2 for this tick; 0 and reset when off."""
         p = self.p
-        active = (self.mode != SteeringMode.DIRECT and inputs is not None and self.hand_fault == _OK
+        active = (self.mode != _DIRECT and inputs is not None and self.hand_fault == _OK
                   and not self.pinion_fault and inputs[0] >= p.feedback_min_speed * _KMH)
         self.feedback_active = active
         if not active:
@@ -271,7 +272,7 @@ class SbwEcu:
         target = self.ideal_gain * self.hand_wheel
         self.yaw_reference += (target - self.yaw_reference) * self._reference_factor
         error = self.yaw_reference - r
-        if self.mode == SteeringMode.YAW_RATE_LAT_ACCEL:
+        if self.mode == _LAT_ACCEL:
             w = p.lat_accel_weight
             error = (1.0 - w) * error + w * (u * self.yaw_reference - ay) / u
         limit = self._additional_angle_limit
@@ -285,7 +286,7 @@ class SbwEcu:
             self._set_dt(dt)
         self._read_config(io)
         inputs = self._inputs(io)
-        self.input_fault = self.mode != SteeringMode.DIRECT and inputs is None
+        self.input_fault = self.mode != _DIRECT and inputs is None
         if inputs is not None:
             self.speed = inputs[0]
         demand = self._feedback(dt, inputs)

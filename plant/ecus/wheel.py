@@ -44,6 +44,7 @@ TWIST_FADE_MPS = 0.5      # rolling speed that halves the bore torque (chosen)
 _tanh = math.tanh
 _STEER_ANGLE, _WHEEL_SPEED, _CURRENT = ranges.STEER_ANGLE, ranges.WHEEL_SPEED, ranges.STEER_MOTOR_CURRENT
 _FAULT_CODE = {f: int(f) for f in WheelFault}     # the number WHL_Status carries (an int, not the enum)
+_OK, _TIMEOUT, _INVALID = WheelFault.OK, WheelFault.CMD_TIMEOUT, WheelFault.CMD_INVALID   # (enum lookups are slow)
 
 
 class WheelEcu:
@@ -87,15 +88,15 @@ class WheelEcu:
         """The fault of this tick and the (angle deg, speed rpm) to execute (None: hold, ramp down)."""
         cmd = io.latest(self.cmd_message)
         if cmd is None:
-            return WheelFault.CMD_TIMEOUT, None
+            return _TIMEOUT, None
         angle, speed = cmd.get("SteerAngleCmd", math.nan), cmd.get("WheelSpeedCmd", math.nan)
         if not ranges.finite(angle, speed):
-            return WheelFault.CMD_INVALID, None
-        fault = WheelFault.CMD_INVALID if io.invalid(self.cmd_message) else WheelFault.OK
+            return _INVALID, None
+        fault = _INVALID if io.invalid(self.cmd_message) else _OK
         if abs(angle) > self._limit:
-            angle, fault = math.copysign(self._limit, angle), WheelFault.CMD_INVALID
+            angle, fault = math.copysign(self._limit, angle), _INVALID
         if abs(speed) > self._max_rpm:
-            speed, fault = math.copysign(self._max_rpm, speed), WheelFault.CMD_INVALID
+            speed, fault = math.copysign(self._max_rpm, speed), _INVALID
         return fault, (angle, speed)
 
     def step(self, io: NodeIO, t: float, dt: float) -> None:
