@@ -113,6 +113,7 @@ class SingleTrack:
         self._key: tuple[float, float] | None = None
         self._phi: Matrix = ((1.0, 0.0), (0.0, 1.0))
         self._gamma: Matrix = ((0.0, 0.0), (0.0, 0.0))
+        self._ab: tuple[Matrix, Matrix] = (((0.0, 0.0), (0.0, 0.0)), ((0.0, 0.0), (0.0, 0.0)))   # A, B at _key's u
         self.reset(speed)
 
     def reset(self, speed: float = 0.0, beta: float = 0.0, yaw_rate: float = 0.0) -> None:
@@ -184,7 +185,8 @@ class SingleTrack:
             self.yaw_angle += r * dt
             return
         if self._key != (dt, u):
-            self._phi, self._gamma = _discretise(self.params._a_matrix(u), self.params._b_matrix(u), dt)
+            self._ab = (self.params._a_matrix(u), self.params._b_matrix(u))
+            self._phi, self._gamma = _discretise(*self._ab, dt)
             self._key = (dt, u)
         (p00, p01), (p10, p11) = self._phi
         (g00, g01), (g10, g11) = self._gamma
@@ -193,8 +195,11 @@ class SingleTrack:
         new_r = p10 * beta + p11 * r + g10 * delta_f + g11 * delta_r
         self.yaw_angle += 0.5 * (r + new_r) * dt   # trapezoid: exact enough for the heading of ground truth
         self.beta, self.yaw_rate = new_beta, new_r
-        self.beta_rate, _ = self.derivatives(new_beta, new_r, delta_f, delta_r)
-        self.lat_accel = u * (self.beta_rate + new_r)
+        (a00, a01), _ = self._ab[0]        # derivatives() at this u, with the matrices of the key (not rebuilt)
+        (b00, b01), _ = self._ab[1]
+        beta_rate = a00 * new_beta + a01 * new_r + b00 * delta_f + b01 * delta_r
+        self.beta_rate = beta_rate
+        self.lat_accel = u * (beta_rate + new_r)
 
     def steady_state(self, delta_f: float, delta_r: float = 0.0) -> tuple[float, float, float]:
         """(β, r, a_y) this model settles to at its speed for constant inputs (ISO)."""
