@@ -25,6 +25,8 @@ from plant.scenario import ScenarioTracker
 _DEG = 180.0 / math.pi
 _RAD = math.pi / 180.0
 _SNAP_DEG = 1e-6   # rounding noise must not flip the sign of a sideways Speed
+_POS, _HEADING, _SPEED = ranges.PLANT_POS, ranges.PLANT_HEADING, ranges.PLANT_SPEED
+_YAW_RATE, _SIDESLIP, _ACCEL = ranges.PLANT_YAW_RATE, ranges.PLANT_SIDESLIP, ranges.PLANT_ACCEL
 
 
 
@@ -50,10 +52,11 @@ class VelocityFit:
         """(v_x m/s, v_y m/s, omega rad/s clockwise) of the geometric centre, body frame."""
         bx = by = bw = 0.0
         k = self._mps_per_rpm
+        sin, cos, rad = math.sin, math.cos, _RAD
         for (px, py), a, n in zip(self._pos, angles_deg, speeds_rpm):
             v = n * k
-            b = a * _RAD
-            ux, uy = v * math.sin(b), v * math.cos(b)
+            b = a * rad
+            ux, uy = v * sin(b), v * cos(b)
             bx += ux
             by += uy
             bw += py * ux - px * uy
@@ -233,20 +236,29 @@ class BodyNode:
         scenario = self.scenario
         if scenario.poll(io, t, dt) and scenario.control is not None:
             self._restart(scenario.control, t, dt)
-        angles, speeds = [], []
-        for wheel in self.wheels:
-            a, n = wheel.wheel_state(io)
-            angles.append(a)
-            speeds.append(n)
+        states = [wheel.wheel_state(io) for wheel in self.wheels]
         body = self.body
-        body.advance(angles, speeds, dt)
-        clamp = ranges.clamp
+        body.advance([a for a, _ in states], [n for _, n in states], dt)
         speed, sideslip = body.speed_and_sideslip()
-        io.send_values("PLANT_Position", PosX=clamp(body.x, ranges.PLANT_POS), PosY=clamp(body.y, ranges.PLANT_POS))
-        io.send_values("PLANT_Motion", Heading=clamp(body.heading_deg, ranges.PLANT_HEADING),
-                       Speed=clamp(speed, ranges.PLANT_SPEED),
-                       YawRate=clamp(body.yaw_rate_dps, ranges.PLANT_YAW_RATE))
-        io.send_values("PLANT_Dynamics", Sideslip=clamp(sideslip, ranges.PLANT_SIDESLIP),
-                       LatAccel=clamp(body.lat_accel, ranges.PLANT_ACCEL),
-                       LongAccel=clamp(body.long_accel, ranges.PLANT_ACCEL))
+        # ranges.clamp written out (hot: every tick); a NaN, never expected, is sent as 0
+        lo, hi = _POS
+        x, y = body.x, body.y
+        x = 0.0 if x != x else lo if x < lo else hi if x > hi else x
+        y = 0.0 if y != y else lo if y < lo else hi if y > hi else y
+        io.send_values("PLANT_Position", PosX=x, PosY=y)
+        heading, yaw = body.heading_deg, body.yaw_rate_dps
+        lo, hi = _HEADING
+        heading = 0.0 if heading != heading else lo if heading < lo else hi if heading > hi else heading
+        lo, hi = _SPEED
+        speed = 0.0 if speed != speed else lo if speed < lo else hi if speed > hi else speed
+        lo, hi = _YAW_RATE
+        yaw = 0.0 if yaw != yaw else lo if yaw < lo else hi if yaw > hi else yaw
+        io.send_values("PLANT_Motion", Heading=heading, Speed=speed, YawRate=yaw)
+        lo, hi = _SIDESLIP
+        sideslip = 0.0 if sideslip != sideslip else lo if sideslip < lo else hi if sideslip > hi else sideslip
+        lo, hi = _ACCEL
+        lat, lon = body.lat_accel, body.long_accel
+        lat = 0.0 if lat != lat else lo if lat < lo else hi if lat > hi else lat
+        lon = 0.0 if lon != lon else lo if lon < lo else hi if lon > hi else lon
+        io.send_values("PLANT_Dynamics", Sideslip=sideslip, LatAccel=lat, LongAccel=lon)
         scenario.acknowledge(io, t)

@@ -23,6 +23,7 @@ from plant import signal_ranges as ranges
 CONTROL = "BENCH_Control"
 SCENARIO_ID = "ScenarioId"
 STATUS = "PLANT_Status"
+_PLANT_TIME = ranges.PLANT_TIME
 
 
 class ScenarioTracker:
@@ -68,5 +69,8 @@ class ScenarioTracker:
 
     def acknowledge(self, io: NodeIO, t: float) -> None:
         """PLANT_Status: the acknowledged id (0 before any), the vehicle's code, the scenario's time."""
-        io.send_values(STATUS, ScenarioIdAck=self.scenario or 0, Vehicle=self.vehicle_code,
-                       PlantTime=ranges.clamp(self.elapsed(t), ranges.PLANT_TIME))
+        t0 = self.t0
+        elapsed = t - (t0 if t0 is not None else t)                     # self.elapsed(t), written out (every tick)
+        lo, hi = _PLANT_TIME                                              # ranges.clamp, written out
+        elapsed = 0.0 if elapsed != elapsed else lo if elapsed < lo else hi if elapsed > hi else elapsed
+        io.send_values(STATUS, ScenarioIdAck=self.scenario or 0, Vehicle=self.vehicle_code, PlantTime=elapsed)

@@ -170,29 +170,53 @@ class AclassPlant:
         self.y += speed * math.cos(direction) * dt
 
     def _publish(self, io: NodeIO, t: float) -> None:
+        # every value limited to its ranges.* bounds, NaN (never expected) sent as 0: ranges.clamp written out
+        # (hot: 14 values every tick)
         model = self.model
-        clamp = ranges.clamp
+        x, y = self.x, self.y
+        lo, hi = ranges.PLANT_POS
+        x = 0.0 if x != x else lo if x < lo else hi if x > hi else x
+        y = 0.0 if y != y else lo if y < lo else hi if y > hi else y
+        io.send_values("PLANT_Position", PosX=x, PosY=y)
         heading = (-model.yaw_angle * _DEG + 180.0) % 360.0 - 180.0
-        io.send_values("PLANT_Position", PosX=clamp(self.x, ranges.PLANT_POS), PosY=clamp(self.y, ranges.PLANT_POS))
-        io.send_values("PLANT_Motion", Heading=clamp(heading, ranges.PLANT_HEADING),
-                       Speed=clamp(model.speed, ranges.PLANT_SPEED),
-                       YawRate=clamp(self.yaw_rate_dps, ranges.PLANT_YAW_RATE))
-        io.send_values("PLANT_Dynamics", Sideslip=clamp(-model.beta * _DEG, ranges.PLANT_SIDESLIP),
-                       LatAccel=clamp(self.lat_accel, ranges.PLANT_ACCEL), LongAccel=0.0)
+        lo, hi = ranges.PLANT_HEADING
+        heading = 0.0 if heading != heading else lo if heading < lo else hi if heading > hi else heading
+        speed = model.speed
+        lo, hi = ranges.PLANT_SPEED
+        speed = 0.0 if speed != speed else lo if speed < lo else hi if speed > hi else speed
+        yaw = self.yaw_rate_dps
+        lo, hi = ranges.PLANT_YAW_RATE
+        yaw = 0.0 if yaw != yaw else lo if yaw < lo else hi if yaw > hi else yaw
+        io.send_values("PLANT_Motion", Heading=heading, Speed=speed, YawRate=yaw)
+        slip = -model.beta * _DEG
+        lo, hi = ranges.PLANT_SIDESLIP
+        slip = 0.0 if slip != slip else lo if slip < lo else hi if slip > hi else slip
+        lat = self.lat_accel
+        lo, hi = ranges.PLANT_ACCEL
+        lat = 0.0 if lat != lat else lo if lat < lo else hi if lat > hi else lat
+        io.send_values("PLANT_Dynamics", Sideslip=slip, LatAccel=lat, LongAccel=0.0)
         self.scenario.acknowledge(io, t)
         mech = self.mechanics
         if mech is None:
             return
         s = self.sensors
         mech.read(s)
-        io.send_values("PLANT_SbwAngles", HandWheelAngle=clamp(mech.theta_h * _DEG, ranges.PLANT_SBW_ANGLE),
-                       PinionAngle=clamp(mech.theta_p * _DEG, ranges.PLANT_SBW_ANGLE))
-        io.send_values("PLANT_SbwTorques", DriverTorque=clamp(mech.driver_torque, ranges.PLANT_SBW_TORQUE),
-                       RoadFeelTorque=clamp(mech.road_feel_torque, ranges.PLANT_SBW_TORQUE),
-                       AligningTorque=clamp(mech.aligning_torque, ranges.PLANT_SBW_TORQUE))
-        sensor_range = ranges.PLANT_SBW_SENSOR_ANGLE
-        io.send_values("PLANT_SbwSensors", HandWheelSensor=clamp(s.hand_wheel * _DEG, sensor_range),
-                       PinionSensor=clamp(s.pinion * _DEG, sensor_range))
+        lo, hi = ranges.PLANT_SBW_ANGLE
+        hand, pinion = mech.theta_h * _DEG, mech.theta_p * _DEG
+        hand = 0.0 if hand != hand else lo if hand < lo else hi if hand > hi else hand
+        pinion = 0.0 if pinion != pinion else lo if pinion < lo else hi if pinion > hi else pinion
+        io.send_values("PLANT_SbwAngles", HandWheelAngle=hand, PinionAngle=pinion)
+        lo, hi = ranges.PLANT_SBW_TORQUE
+        driver, feel, aligning = mech.driver_torque, mech.road_feel_torque, mech.aligning_torque
+        driver = 0.0 if driver != driver else lo if driver < lo else hi if driver > hi else driver
+        feel = 0.0 if feel != feel else lo if feel < lo else hi if feel > hi else feel
+        aligning = 0.0 if aligning != aligning else lo if aligning < lo else hi if aligning > hi else aligning
+        io.send_values("PLANT_SbwTorques", DriverTorque=driver, RoadFeelTorque=feel, AligningTorque=aligning)
+        lo, hi = ranges.PLANT_SBW_SENSOR_ANGLE
+        hand, pinion = s.hand_wheel * _DEG, s.pinion * _DEG
+        hand = 0.0 if hand != hand else lo if hand < lo else hi if hand > hi else hand
+        pinion = 0.0 if pinion != pinion else lo if pinion < lo else hi if pinion > hi else pinion
+        io.send_values("PLANT_SbwSensors", HandWheelSensor=hand, PinionSensor=pinion)
 
 
 class WheelSpeedSensors:
@@ -210,6 +234,7 @@ class WheelSpeedSensors:
         a, b = vehicle.cog_to_front_axle, vehicle.cog_to_rear_axle
         self.positions = (("FL", a, half, True), ("FR", a, -half, True),
                           ("RL", -b, half, False), ("RR", -b, -half, False))
+        self._signals = tuple(f"WheelSpeed{name}" for name, *_ in self.positions)
 
     def reset(self) -> None:
         pass
@@ -221,10 +246,11 @@ class WheelSpeedSensors:
         delta = -self.plant.road_wheel_angle          # ISO
         c, s = math.cos(delta), math.sin(delta)
         out = {}
-        for name, x, y, steered in self.positions:
+        lo, hi = ranges.ABS_WHEEL_SPEED
+        for signal, (_, x, y, steered) in zip(self._signals, self.positions):
             vx, vy = u - r * y, v + r * x
-            speed = vx * c + vy * s if steered else vx
-            out[f"WheelSpeed{name}"] = ranges.clamp(abs(speed) * _KMH, ranges.ABS_WHEEL_SPEED)
+            speed = abs(vx * c + vy * s if steered else vx) * _KMH
+            out[signal] = 0.0 if speed != speed else lo if speed < lo else hi if speed > hi else speed   # ranges.clamp
         io.send_values("ABS_WheelSpeeds", **out)
 
 

@@ -15,6 +15,8 @@ from typing import Protocol
 from bench.node import NodeIO
 from plant import signal_ranges as ranges
 
+_YAW_RATE, _ACCEL = ranges.IMU_YAW_RATE, ranges.IMU_ACCEL
+
 
 class MotionSource(Protocol):
     """The in-process body the IMU reads: plant.body.PlanarBody, or a vehicle's own plant (the A-class)."""
@@ -63,6 +65,10 @@ class Imu:
         if sy or sl or sg:
             gauss = self._rng.gauss
             yaw, lat, lon = yaw + gauss(0.0, sy), lat + gauss(0.0, sl), lon + gauss(0.0, sg)
-        clamp = ranges.clamp
-        io.send_values("IMU_Motion", YawRate=clamp(yaw, ranges.IMU_YAW_RATE),
-                       LatAccel=clamp(lat, ranges.IMU_ACCEL), LongAccel=clamp(lon, ranges.IMU_ACCEL))
+        # ranges.clamp written out (every tick); a NaN, never expected, is sent as 0
+        lo, hi = _YAW_RATE
+        yaw = 0.0 if yaw != yaw else lo if yaw < lo else hi if yaw > hi else yaw
+        lo, hi = _ACCEL
+        lat = 0.0 if lat != lat else lo if lat < lo else hi if lat > hi else lat
+        lon = 0.0 if lon != lon else lo if lon < lo else hi if lon > hi else lon
+        io.send_values("IMU_Motion", YawRate=yaw, LatAccel=lat, LongAccel=lon)

@@ -316,15 +316,28 @@ class SbwEcu:
         return _OK
 
     def _publish(self, io: NodeIO) -> None:
-        clamp = ranges.clamp                        # NaN-safe: a NaN (never expected) is sent as 0
-        io.send_values("SBW_HandWheel",
-                       HandWheelAngle=clamp(self.hand_wheel * _DEG, ranges.SBW_HAND_WHEEL_ANGLE),
-                       DriverTorque=clamp(self.driver_torque, ranges.SBW_DRIVER_TORQUE),
-                       RoadFeelTorque=clamp(self.kt_c * self.road_feel_current, ranges.SBW_ROAD_FEEL_TORQUE),
-                       RoadFeelMotorCurrent=clamp(self.road_feel_current, ranges.SBW_ROAD_FEEL_CURRENT))
-        io.send_values("SBW_Pinion",
-                       PinionAngle=clamp(self.pinion * _DEG, ranges.SBW_PINION_ANGLE),
-                       PinionAngleTarget=clamp((self.hand_wheel + self.offset) * _DEG, ranges.SBW_PINION_ANGLE),
-                       SteerMotorCurrent=clamp(self.steer_current, ranges.SBW_STEER_MOTOR_CURRENT),
-                       RackForce=clamp(self.rack_force, ranges.SBW_RACK_FORCE),
-                       SbwFault=self._fault_code())
+        # every value limited to its ranges.* bounds, a NaN (never expected) sent as 0: ranges.clamp written out
+        # (hot: every tick)
+        hand, torque = self.hand_wheel * _DEG, self.driver_torque
+        feel, current = self.kt_c * self.road_feel_current, self.road_feel_current
+        lo, hi = ranges.SBW_HAND_WHEEL_ANGLE
+        hand = 0.0 if hand != hand else lo if hand < lo else hi if hand > hi else hand
+        lo, hi = ranges.SBW_DRIVER_TORQUE
+        torque = 0.0 if torque != torque else lo if torque < lo else hi if torque > hi else torque
+        lo, hi = ranges.SBW_ROAD_FEEL_TORQUE
+        feel = 0.0 if feel != feel else lo if feel < lo else hi if feel > hi else feel
+        lo, hi = ranges.SBW_ROAD_FEEL_CURRENT
+        current = 0.0 if current != current else lo if current < lo else hi if current > hi else current
+        io.send_values("SBW_HandWheel", HandWheelAngle=hand, DriverTorque=torque, RoadFeelTorque=feel,
+                       RoadFeelMotorCurrent=current)
+        pinion, target = self.pinion * _DEG, (self.hand_wheel + self.offset) * _DEG
+        lo, hi = ranges.SBW_PINION_ANGLE
+        pinion = 0.0 if pinion != pinion else lo if pinion < lo else hi if pinion > hi else pinion
+        target = 0.0 if target != target else lo if target < lo else hi if target > hi else target
+        current, force = self.steer_current, self.rack_force
+        lo, hi = ranges.SBW_STEER_MOTOR_CURRENT
+        current = 0.0 if current != current else lo if current < lo else hi if current > hi else current
+        lo, hi = ranges.SBW_RACK_FORCE
+        force = 0.0 if force != force else lo if force < lo else hi if force > hi else force
+        io.send_values("SBW_Pinion", PinionAngle=pinion, PinionAngleTarget=target, SteerMotorCurrent=current,
+                       RackForce=force, SbwFault=self._fault_code())
