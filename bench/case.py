@@ -167,7 +167,7 @@ class Case:
 
     def stop_sending(self, message: str) -> None:
         """Stop sending a stimulus message until `resume_sending` (its receivers time it out after
-        3 × its cycle time); its AliveCounter carries on where it stopped. Records no step."""
+        3 × its cycle time); its E2E counter carries on where it stopped. Records no step."""
         self._runner.restbus.stop_sending(message)
 
     def resume_sending(self, message: str) -> None:

@@ -61,12 +61,12 @@ _EXACT_LIMIT = 1 << 52
 #: A decoded value may exceed the DBC range by this fraction of the scale (rounding) and still be valid.
 RANGE_SLACK = 0.5
 
-#: The plain AliveCounter's and Checksum's place in a decoded word, and their values as floats (raw * 1.0).
+#: The place of a plain counter and checksum in a decoded word, and their values as floats (raw * 1.0).
 _COUNTER_SHIFT = 8 * e2e.COUNTER_BYTE
 _CHECKSUM_SHIFT = 8 * e2e.CHECKSUM_BYTE
 _FLOATS = tuple(float(raw) for raw in range(256))
 
-#: Frames whose E2E check a message's codec remembers (two payloads' worth of AliveCounters, and then some).
+#: Frames whose E2E check a message's codec remembers (two payloads' worth of counters, and then some).
 INTACT_CACHE = 64
 
 
@@ -123,11 +123,14 @@ class MessageCodec:
         )
         self.by_name: dict[str, SignalCodec] = {s.name: s for s in self.signals}
         self.signal_names: tuple[str, ...] = tuple(s.name for s in self.signals)
-        # The contract's end-to-end layout (docs/spec/k-matrix.md): only messages that carry it are checked for it.
-        layout = {s.name: (s.start, s.length, s.byte_order) for s in message.signals}
-        self.e2e = (message.length == 8
-                    and layout.get("AliveCounter") == (e2e.COUNTER_BYTE * 8, 4, "little_endian")
-                    and layout.get("Checksum") == (e2e.CHECKSUM_BYTE * 8, 8, "little_endian"))
+        # The end-to-end layout (docs/spec/e2e.md): a message is protected when signals sit at the counter's and
+        # the checksum's places, whatever the database calls them; only such messages are checked for it.
+        self.e2e_layout: e2e.Layout | None = e2e.layout(
+            message.length, ((s.name, s.start, s.length, s.byte_order == "little_endian") for s in message.signals))
+        self.e2e: bool = self.e2e_layout is not None
+        #: The names of this message's counter and checksum signals (empty when it is not protected).
+        self.e2e_signals: frozenset[str] = frozenset(
+            () if self.e2e_layout is None else (self.e2e_layout.counter, self.e2e_layout.checksum))
         self.fast = (
             not message.is_multiplexed()
             and all(s.byte_order == "little_endian" and not s.is_float and _float_exact(s)
@@ -142,20 +145,22 @@ class MessageCodec:
         # which a positive scale never gives); one loop either way, so the values come in signal order.
         self._no_offset = all(s.offset == 0 and s.scale > 0 for s in self.signals)
         # Decode once per distinct payload: in one process the sender's and the receiver's monitors see the same
-        # frame, and most frames repeat their values with only AliveCounter and Checksum new. The cache is keyed
+        # frame, and most frames repeat their values with only the counter and the checksum new. The cache is keyed
         # by the payload without those two fields when they are plain raw numbers whose DBC range covers their
         # whole field (scale 1, offset 0, unsigned: the contract's layout), so a repeat costs a copy and two
         # numbers, and its range check is the one of the payload's first frame. One entry (key, values, names
         # out of range or None until asked), replaced whole, so a reader on another thread never pairs a payload
         # with other values.
         full = (1 << (8 * self.length)) - 1
-        self._e2e_plain = self.fast and self.e2e and all(
-            _plain_raw(self.by_name[n]) for n in ("AliveCounter", "Checksum"))
+        self._e2e_plain = self.fast and self.e2e_layout is not None and all(
+            _plain_raw(self.by_name[n]) for n in (self.e2e_layout.counter, self.e2e_layout.checksum))
+        self._counter_name, self._checksum_name = \
+            ("", "") if self.e2e_layout is None else (self.e2e_layout.counter, self.e2e_layout.checksum)
         self._body_mask = full & ~((0x0F << 8 * e2e.COUNTER_BYTE) | (0xFF << 8 * e2e.CHECKSUM_BYTE)) \
             if self._e2e_plain else full
         self._entry: tuple[int, dict[str, float], tuple[str, ...] | None] = (-1, {}, None)
         # The E2E check of a frame, once per distinct frame: both monitors of a process check each frame, and a
-        # message whose values stay the same repeats its 16 frames (one per AliveCounter).
+        # message whose values stay the same repeats its 16 frames (one per counter value).
         self._intact: dict[bytes, int | None] = {}
         self._unpack: tuple[tuple[Any, ...], ...] = tuple(
             (s.name, s.start, (1 << s.length) - 1, (1 << (s.length - 1)) if s.signed else 0,
@@ -171,7 +176,7 @@ class MessageCodec:
         self._pack_linear = tuple(f for f in fields if f[6] != 0)
 
     def counter_if_intact(self, data: bytes | bytearray) -> int | None:
-        """`bench.e2e.counter_if_intact` of a frame of this message (its AliveCounter if its Checksum is right,
+        """`bench.e2e.counter_if_intact` of a frame of this message (its counter if its checksum is right,
         else None), computed once per distinct frame."""
         if type(data) is not bytes:
             return e2e.counter_if_intact(self.frame_id, data)
@@ -292,7 +297,7 @@ class MessageCodec:
 
     def decode_checked(self, data: bytes | bytearray) -> tuple[dict[str, float], tuple[str, ...]]:
         """`decode` and `out_of_range` of a frame (the monitor, every frame): the names out of range are
-        computed once per distinct payload (the fields of a plain AliveCounter and Checksum are never out)."""
+        computed once per distinct payload (the fields of a plain counter and checksum are never out)."""
         if not self.fast:
             values = self.decode(data)
             return values, tuple(self.out_of_range(values))
@@ -306,7 +311,7 @@ class MessageCodec:
     def _cached(self, data: bytes | bytearray) -> tuple[tuple[int, dict[str, float], tuple[str, ...] | None],
                                                         dict[str, float]]:
         """The cache entry of a fast-path payload (decoded again when its body changed) and a copy of its values
-        with this frame's AliveCounter and Checksum."""
+        with this frame's counter and checksum."""
         if len(data) < self.length:
             raise DecodeError(f"{self.name}: {len(data)} bytes, the message has {self.length}")
         word = int.from_bytes(data, "little")
@@ -315,8 +320,8 @@ class MessageCodec:
             entry = self._decode_word(word)
         values = entry[1].copy()
         if self._e2e_plain:
-            values["AliveCounter"] = _FLOATS[(word >> _COUNTER_SHIFT) & 0x0F]
-            values["Checksum"] = _FLOATS[(word >> _CHECKSUM_SHIFT) & 0xFF]
+            values[self._counter_name] = _FLOATS[(word >> _COUNTER_SHIFT) & 0x0F]
+            values[self._checksum_name] = _FLOATS[(word >> _CHECKSUM_SHIFT) & 0xFF]
         return entry, values
 
     def _decode_word(self, word: int) -> tuple[int, dict[str, float], tuple[str, ...] | None]:

@@ -14,10 +14,12 @@ rejected); a *warning* is something the contract asks for (docs/spec/k-matrix.md
 range, start value and comment on everything; value tables for enumerations) whose absence the bench
 survives.
 
-End-to-end layout (`--e2e`): `required` makes a missing or misplaced AliveCounter (4 bits at bit 48,
-Intel, unsigned) or Checksum (8 bits at bit 56) an error, `optional` a warning; `auto` (the default)
-is `required` when the file declares a signal named AliveCounter or Checksum anywhere (it means to
-follow the contract) and `optional` otherwise (a foreign database, e.g. a customer's k-matrix).
+End-to-end layout (`--e2e`): the profile is positional (docs/spec/e2e.md), a counter of 4 unsigned Intel
+bits at bit 48 and a checksum of 8 at bit 56, whatever the database calls them. `required` makes a missing
+or misplaced counter or checksum an error in every message, `optional` a warning in the messages that mean to
+carry the profile (an 8-byte frame with a 4-bit signal over bits 48-51, or with an 8-bit one over byte 7 beside a
+4-bit one in byte 6); `auto` (the default) is `required` when some message of the file means to (it follows the
+profile) and `optional` otherwise (a foreign database, e.g. a customer's k-matrix).
 """
 
 from __future__ import annotations
@@ -38,9 +40,9 @@ from bench.errors import DatabaseError
 ERROR, WARNING = "error", "warning"
 E2E_MODES = ("auto", "required", "optional")
 FRAME_LENGTH = 8                     # docs/spec/k-matrix.md: classical CAN, 8-byte frames
-COUNTER_NAME, CHECKSUM_NAME = "AliveCounter", "Checksum"
-COUNTER_START, COUNTER_LENGTH = e2e.COUNTER_BYTE * 8, 4
-CHECKSUM_START, CHECKSUM_LENGTH = e2e.CHECKSUM_BYTE * 8, 8
+#: The profile's two places (docs/spec/e2e.md): what a finding calls each, its first bit and its length.
+E2E_PLACES = (("counter", e2e.COUNTER_START, e2e.COUNTER_LENGTH),
+              ("checksum", e2e.CHECKSUM_START, e2e.CHECKSUM_LENGTH))
 MAX_QUOTE = 160                      # characters of a parser message kept in a finding
 MAX_SIGNAL_BITS = 64                 # the longest integer or float signal a CAN database can mean
 MAX_FRAME_BYTES = 64                 # CAN FD; cantools' loader is slow in larger numbers (quadratic in the start bit)
@@ -215,7 +217,7 @@ def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = "auto") -
     messages = list(database.messages)
     result.messages = len(messages)
     result.signals = sum(len(m.signals) for m in messages)
-    declares_e2e = any(s.name in (COUNTER_NAME, CHECKSUM_NAME) for m in messages for s in m.signals)
+    declares_e2e = any(_means_e2e(m) for m in messages)
     required = e2e_mode == "required" or (e2e_mode == "auto" and declares_e2e)
     result.e2e = "required" if required else "optional"
     if not messages:
@@ -226,9 +228,9 @@ def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = "auto") -
         _check_message(message, lines, attribute_defaults, required, findings)
     if messages and not required and not declares_e2e:
         findings.append(Finding(
-            WARNING, "e2e", "no message carries the contract's end-to-end layout (AliveCounter 4 bits at bit 48, "
-            "Checksum 8 bits at bit 56): the bench writes bytes 6-7 of every frame it sends and judges a "
-            "received frame invalid unless byte 7 is the contract's CRC-8", 1))
+            WARNING, "e2e", "no message carries the end-to-end layout (a 4-bit counter at bit 48, an 8-bit "
+            "checksum at bit 56, docs/spec/e2e.md): the bench sends and judges every message without end-to-end "
+            "protection", 1))
     if strict_error is not None:
         _add_strict_error(strict_error, lines, findings)
     return _sorted(result)
@@ -327,7 +329,7 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
             "monitors 11-bit identifiers only")
     if message.length != FRAME_LENGTH:
         add(ERROR, "frame-length", f"length {message.length} byte{'s' * (message.length != 1)}: the bench sends "
-            "classical 8-byte frames and writes the AliveCounter and Checksum into bytes 6 and 7 of every message")
+            "classical 8-byte frames and writes the end-to-end counter and checksum into bytes 6 and 7")
     if message.is_multiplexed():
         add(ERROR, "multiplex", "multiplexed message: the bench's codec and monitor need every signal in "
             "every frame")
@@ -539,17 +541,53 @@ def _check_value_table(message: Message, signal: Signal, lines: _Lines, add: _Ad
 
 
 # -- end-to-end layout -------------------------------------------------------------------------------
+def _at_place(signal: Signal, start: int, length: int) -> bool:
+    """A signal of a place's size over exactly its bits, in either byte order: what a database that means the
+    profile declares there, rightly or not."""
+    return signal.length == length and sorted(_bits(signal)) == list(range(start, start + length))
+
+
+def _means_e2e(message: Message) -> bool:
+    """Whether an 8-byte message means to carry the profile: a 4-bit signal over bits 48-51, or an 8-bit one over
+    byte 7 beside a 4-bit one in byte 6. An 8-bit signal in byte 7 alone is common in foreign databases (the
+    corpus has five) and says nothing; a 4-bit signal at bit 48 of an 8-byte frame is the counter's mark."""
+    if message.length != FRAME_LENGTH:
+        return False
+    (_, counter_start, counter_length), (_, checksum_start, checksum_length) = E2E_PLACES
+    if any(_at_place(s, counter_start, counter_length) for s in message.signals):
+        return True
+    counter_byte = range(counter_start - counter_start % 8, counter_start - counter_start % 8 + 8)
+    return (any(_at_place(s, checksum_start, checksum_length) for s in message.signals)
+            and any(s.length == counter_length and all(b in counter_byte for b in _bits(s)) for s in message.signals))
+
+
+def _holder(message: Message, start: int, length: int) -> Signal | None:
+    """The signal that holds a place, or is meant to: one over exactly its bits, else one over its first bit,
+    else one of its size inside its byte (a counter moved within byte 6); None when nothing is there."""
+    first_byte = start - start % 8
+    tests: tuple[Callable[[Signal], bool], ...] = (
+        lambda s: _at_place(s, start, length),
+        lambda s: start in _bits(s),
+        lambda s: s.length == length and all(first_byte <= b < first_byte + 8 for b in _bits(s)),
+    )
+    for test in tests:
+        found = next((s for s in message.signals if test(s)), None)
+        if found is not None:
+            return found
+    return None
+
+
 def _check_e2e(message: Message, lines: _Lines, required: bool, findings: list[Finding]) -> None:
+    """The counter and the checksum of one message, found by their places (docs/spec/e2e.md); checked in every
+    message when the profile is required, else only in messages that mean to carry it."""
+    if not required and not _means_e2e(message):
+        return
     severity = ERROR if required else WARNING
-    by_name = {s.name: s for s in message.signals}
-    for name, start, length in ((COUNTER_NAME, COUNTER_START, COUNTER_LENGTH),
-                                (CHECKSUM_NAME, CHECKSUM_START, CHECKSUM_LENGTH)):
-        signal = by_name.get(name)
+    for what, start, length in E2E_PLACES:
+        signal = _holder(message, start, length)
         if signal is None:
-            if required:
-                findings.append(Finding(severity, "e2e", f"no {name} signal ({length} bits at bit {start}, "
-                                        "docs/spec/e2e.md)", lines.of_message(message),
-                                        message.name))
+            findings.append(Finding(severity, "e2e", f"no {length}-bit {what} at bit {start} (docs/spec/e2e.md)",
+                                    lines.of_message(message), message.name))
             continue
         wrong = []
         if signal.start != start or signal.length != length:
@@ -561,9 +599,9 @@ def _check_e2e(message: Message, lines: _Lines, required: bool, findings: list[F
         if float(signal.scale) != 1 or float(signal.offset) != 0:
             wrong.append(f"has scale {_g(float(signal.scale))}, offset {_g(float(signal.offset))}")
         if wrong:
-            findings.append(Finding(severity, "e2e", f"{'; '.join(wrong)}: the contract puts it as {length} "
-                                    f"unsigned Intel bits at bit {start}, scale 1", lines.of_signal(message, signal),
-                                    message.name, signal.name))
+            findings.append(Finding(severity, "e2e", f"{'; '.join(wrong)}: the end-to-end {what} is {length} "
+                                    f"unsigned Intel bits at bit {start}, scale 1 (docs/spec/e2e.md)",
+                                    lines.of_signal(message, signal), message.name, signal.name))
 
 
 def summary_line(result: CheckResult) -> str:

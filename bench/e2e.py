@@ -3,17 +3,60 @@
 One implementation used by both the sender (restbus) and the receiver (monitor), so that
 sending and checking can never disagree (the opendbc packer/parser idea). The receiver's rules
 (docs/spec/e2e.md "Receiver") are the small state machine `Receiver` at the end of this module.
+
+The profile is positional: an 8-byte frame carries the counter in the low nibble of byte 6 and the
+checksum in byte 7. A database marks a message as protected by declaring a signal at each of those
+places; their names are the database's own (`Layout` records them per message), the bench never
+assumes one.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import Enum
 
-COUNTER_BYTE = 6          # AliveCounter: 4 bits at bit 48 = low nibble of byte 6
-CHECKSUM_BYTE = 7         # Checksum: byte 7
+FRAME_LENGTH = 8          # the profile protects classical 8-byte frames only
+COUNTER_BYTE = 6          # the counter: 4 bits at bit 48 = low nibble of byte 6
+CHECKSUM_BYTE = 7         # the checksum: byte 7
+COUNTER_START, COUNTER_LENGTH = 8 * COUNTER_BYTE, 4
+CHECKSUM_START, CHECKSUM_LENGTH = 8 * CHECKSUM_BYTE, 8
 COUNTER_MODULO = 16
+
+
+@dataclass(frozen=True, slots=True)
+class Layout:
+    """The names a database gives one protected message's counter and checksum: code that keys decoded values
+    or sets values by name (the value cache, the monitor's E2E column) asks here instead of assuming a name."""
+
+    counter: str
+    checksum: str
+
+
+def is_counter(start: int, length: int, little_endian: bool) -> bool:
+    """Whether a signal sits where the profile's counter does (4 little-endian bits at bit 48)."""
+    return little_endian and start == COUNTER_START and length == COUNTER_LENGTH
+
+
+def is_checksum(start: int, length: int, little_endian: bool) -> bool:
+    """Whether a signal sits where the profile's checksum does (8 little-endian bits at bit 56)."""
+    return little_endian and start == CHECKSUM_START and length == CHECKSUM_LENGTH
+
+
+def layout(frame_length: int, signals: Iterable[tuple[str, int, int, bool]]) -> Layout | None:
+    """The E2E layout of a message from its length and its signals as (name, start, length, little_endian):
+    an 8-byte frame with a signal at the counter's place and one at the checksum's (the first of each, in
+    signal order), else None (the message is not protected)."""
+    if frame_length != FRAME_LENGTH:
+        return None
+    counter = checksum = None
+    for name, start, length, little_endian in signals:
+        if counter is None and is_counter(start, length, little_endian):
+            counter = name
+        elif checksum is None and is_checksum(start, length, little_endian):
+            checksum = name
+    return None if counter is None or checksum is None else Layout(counter, checksum)
 
 _POLY = 0x1D
 _INIT = 0xFF
@@ -54,22 +97,22 @@ def checksum(frame_id: int, data: bytes | bytearray) -> int:
 
 
 def counter_of(data: bytes | bytearray) -> int:
-    """AliveCounter of a frame (low nibble of byte 6)."""
+    """The counter of a frame (low nibble of byte 6)."""
     return data[COUNTER_BYTE] & 0x0F
 
 
 def checksum_of(data: bytes | bytearray) -> int:
-    """The Checksum a frame carries (byte 7), right or wrong."""
+    """The checksum a frame carries (byte 7), right or wrong."""
     return data[CHECKSUM_BYTE]
 
 
 def set_checksum(data: bytearray, value: int) -> None:
-    """Write a Checksum byte (value mod 256) into an 8-byte payload, in place, whatever it should be."""
+    """Write a checksum byte (value mod 256) into an 8-byte payload, in place, whatever it should be."""
     data[CHECKSUM_BYTE] = value & 0xFF
 
 
 def counter_if_intact(frame_id: int, data: bytes | bytearray) -> int | None:
-    """The AliveCounter of a frame whose Checksum is right; None when it is wrong (a damaged frame's counter
+    """The counter of a frame whose checksum is right; None when it is wrong (a damaged frame's counter
     is not read). The receiver's hot path: one call per frame, the CRC of `checksum` written out here."""
     crc = _INIT
     table = _TABLE
@@ -83,13 +126,13 @@ def counter_if_intact(frame_id: int, data: bytes | bytearray) -> int | None:
 
 
 def payload(data: bytes) -> bytes:
-    """The frame without its E2E bytes (AliveCounter nibble cleared, Checksum byte left out): what stays the
+    """The frame without its E2E bytes (counter nibble cleared, checksum byte left out): what stays the
     same from one frame of a message to the next while its signals do."""
     return data[:COUNTER_BYTE] + bytes((data[COUNTER_BYTE] & 0xF0,))
 
 
 def protect(frame_id: int, data: bytearray, counter: int) -> None:
-    """Write the AliveCounter and then the Checksum into an 8-byte payload, in place."""
+    """Write the counter and then the checksum into an 8-byte payload, in place."""
     data[COUNTER_BYTE] = (data[COUNTER_BYTE] & 0xF0) | (counter & 0x0F)
     data[CHECKSUM_BYTE] = checksum(frame_id, data)
 

@@ -138,7 +138,7 @@ class Bitflip(_Corruption):
 
 
 class CounterFreeze(_Corruption):
-    name, summary = "counter_freeze", "the AliveCounter keeps its value at the fault's start (checksum right)"
+    name, summary = "counter_freeze", "the counter keeps its value at the fault's start (checksum right)"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
         if fault.frozen is None:
@@ -149,7 +149,7 @@ class CounterFreeze(_Corruption):
 
 class CounterJump(_Corruption):
     name, param, param_doc = "counter_jump", "STEP", "counter values"
-    summary = "the AliveCounter is STEP ahead (mod 16; checksum right)"
+    summary = "the counter is STEP ahead (mod 16; checksum right)"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
         counter = (e2e.counter_of(data) + int(fault.param)) % e2e.COUNTER_MODULO
@@ -159,7 +159,7 @@ class CounterJump(_Corruption):
 
 class ChecksumValue(_Corruption):
     name, param, param_doc = "checksum_value", "VALUE", "0..255"
-    summary = "the Checksum is VALUE"
+    summary = "the checksum is VALUE"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
         e2e.set_checksum(data, int(fault.param))
@@ -167,7 +167,7 @@ class ChecksumValue(_Corruption):
 
 
 class ChecksumFreeze(_Corruption):
-    name, summary = "checksum_freeze", "the Checksum keeps its value at the fault's start"
+    name, summary = "checksum_freeze", "the checksum keeps its value at the fault's start"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
         if fault.frozen is None:
@@ -177,7 +177,7 @@ class ChecksumFreeze(_Corruption):
 
 
 class ChecksumRandom(_Corruption):
-    name, summary = "checksum_random", "the Checksum is a random byte (the same sequence on every run)"
+    name, summary = "checksum_random", "the checksum is a random byte (the same sequence on every run)"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
         e2e.set_checksum(data, out.rng.randrange(256))
@@ -186,7 +186,7 @@ class ChecksumRandom(_Corruption):
 
 class ChecksumOffset(_Corruption):
     name, param, param_doc = "checksum_offset", "OFFSET", "added mod 256"
-    summary = "OFFSET is added to the Checksum the sender computed"
+    summary = "OFFSET is added to the checksum the sender computed"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
         e2e.set_checksum(data, e2e.checksum_of(data) + int(fault.param))

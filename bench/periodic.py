@@ -5,10 +5,10 @@ check in a test case); the kernel's BCM sends a cyclic frame on its own timer, h
 and costs the process nothing per frame. python-can exposes it as `bus.send_periodic(msgs, period)`; a
 sequence of frames becomes one BCM task that sends them in turn (`nframes`).
 
-How (docs/spec/e2e.md: AliveCounter +1 per transmission, 15 -> 0; Checksum over it):
-- A message whose payload (every byte but the AliveCounter nibble and the Checksum) is unchanged for
-  STABLE_CYCLES cycles is handed to the kernel as 16 frames carrying AliveCounter c, c+1, ... c+15 (mod 16),
-  each with its Checksum: one whole counter cycle, so the kernel's walk through the frames is the counter
+How (docs/spec/e2e.md: the counter +1 per transmission, 15 -> 0; the checksum over it):
+- A message whose payload (every byte but the counter nibble and the checksum) is unchanged for
+  STABLE_CYCLES cycles is handed to the kernel as 16 frames carrying the counter c, c+1, ... c+15 (mod 16),
+  each with its checksum: one whole counter cycle, so the kernel's walk through the frames is the counter
   sequence. c is the counter of the frame due now, which the kernel sends at once (STARTTIMER announces),
   then one frame per cycle time on its own timer.
 - PRECHECK_S before each of the kernel's frames the values are compared with the ones it holds; a change
@@ -71,12 +71,12 @@ def _raw_socket() -> socket.socket:
     return socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
 
 
-_payload = e2e.payload   # the frame without its E2E bytes (AliveCounter nibble, Checksum)
+_payload = e2e.payload   # the frame without its E2E bytes (counter nibble, checksum)
 
 
 def counter_cycle(frame_id: int, data: bytes, first_counter: int) -> list[can.Message]:
-    """16 frames of one payload with AliveCounter first_counter, first_counter + 1, ... (mod 16) and their
-    Checksums: what the BCM sends in turn."""
+    """16 frames of one payload with the counter first_counter, first_counter + 1, ... (mod 16) and their
+    checksums: what the BCM sends in turn."""
     frames = []
     for k in range(e2e.COUNTER_MODULO):
         frame = bytearray(data)
@@ -94,12 +94,12 @@ class _Task:
         self.frame_id = frame_id
         self.task = task                 # python-can's CyclicSendTask (a BCM TX_SETUP)
         self.payload = payload
-        self.base = base                 # AliveCounter of frame 0 of the sequence
+        self.base = base                 # the counter of frame 0 of the sequence
         self.period: float = slot.codec.cycle_time
         self.t0 = t0                     # _clock() when the kernel sent frame 0
         self.changes = 0                 # consecutive cycles whose payload changed
         self.stopping = False            # back to the tick scheduler at the next quiet moment
-        self.last_counter: int | None = None   # AliveCounter of the last frame seen back from the kernel
+        self.last_counter: int | None = None   # the counter of the last frame seen back from the kernel
         self.next_check = t0             # _clock() of the next look at this task
         self.checked = 0                 # index of the kernel frame whose values were last checked
 
@@ -288,7 +288,7 @@ class KernelPeriodic:
     def _await_last_echo(self, task: _Task) -> None:
         """The kernel's loopback of its last frame may still be on its way to the echo socket (a busy machine
         delivers it from a softirq that may run late): without it the restbus would send that frame's
-        AliveCounter again. The kernel started at t0 and sends one frame per period, so by now it can have
+        counter again. The kernel started at t0 and sends one frame per period, so by now it can have
         sent frame `possible - 1` at most; wait (sleeping, which lets the kernel deliver) up to ECHO_WAIT_S for
         that frame's echo. When it does not come, the kernel did not send it (the stop came first)."""
         if not task.slot.codec.e2e:
@@ -324,7 +324,7 @@ class KernelPeriodic:
         yield from self._read_echoes()
 
     def _read_echoes(self) -> Iterator[tuple[int, bytes, float]]:
-        """What the echo socket holds now (noting each task's last AliveCounter)."""
+        """What the echo socket holds now (noting each task's last counter)."""
         if not self.tasks:
             return      # the echo socket's filter is empty
         if self.echo_idle:

@@ -1,13 +1,13 @@
 """Restbus simulation: every message of the simulated nodes, sent at its DBC cycle time.
 
 Values start at the DBC start values; code (a test case or a node's behaviour) sets them by name.
-AliveCounter and Checksum are filled here, per the contract, through `bench.e2e`.
+The E2E counter and checksum are filled here, per the contract, through `bench.e2e`.
 Values are checked when a frame is built (once per cycle), so a behaviour may set values every
 plant tick at no cost; a NaN or out-of-range value stops the sender with an error naming it.
 
 Most frames repeat their values (77 % of a PIVOT run's frames): a message whose values equal those of its last
 frame reuses that frame's checked and encoded payload, and a payload keeps its 16 protected frames (one per
-AliveCounter), so a repeat costs one dict comparison. Every new value is checked and encoded as before.
+counter value), so a repeat costs one dict comparison. Every new value is checked and encoded as before.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class _Periodic:
         self.enabled = True
         # The cache of unchanged values (fast codecs only: equal values give equal raw numbers there; cantools'
         # float signals would not, -0.0 == 0.0): the values of the last frame as they were set (checked),
-        # its payload without E2E bytes, and that payload's frames by AliveCounter.
+        # its payload without E2E bytes, and that payload's frames by counter.
         self.sent_values: dict[str, float | int | str] | None = None
         self.payload = b""
         self.frames: list[bytes | None] = [None] * e2e.COUNTER_MODULO
@@ -133,7 +133,7 @@ class Restbus:
 
     def build(self, slot: _Periodic) -> bytes:
         """The next frame of a message: its values checked and encoded (or the last frame's payload when they
-        are unchanged), then its AliveCounter and Checksum."""
+        are unchanged), then its counter and checksum."""
         codec = slot.codec
         values = slot.values
         if values != slot.sent_values:

@@ -27,7 +27,6 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from bench import e2e
 from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 from bench.cli.common import add_bus_options, bus_options_for, reject_virtual
 from bench.codec import MessageCodec
@@ -165,18 +164,12 @@ def _id_text(frame_id: int, extended: bool = False) -> str:
     return f"0x{frame_id:08X}" if extended else f"0x{frame_id:03X}"
 
 
-def _e2e_signal(codec: MessageCodec, name: str) -> bool:
-    """AliveCounter and Checksum (by their place, bench.e2e): shown in the E2E column, not among the values."""
-    s = codec.by_name[name]
-    return (s.start, s.length) in ((e2e.COUNTER_BYTE * 8, 4), (e2e.CHECKSUM_BYTE * 8, 8))
-
-
 def values_text(codec: MessageCodec, values: dict[str, float] | None) -> str:
     if values is None:
         return "–"
     parts = []
     for name, value in values.items():
-        if _e2e_signal(codec, name):
+        if name in codec.e2e_signals:   # the counter and the checksum: shown in the E2E column, not here
             continue
         names = {raw: label for label, raw in codec.by_name[name].choices.items()}
         label = names.get(int(value)) if value == int(value) else None

@@ -253,7 +253,7 @@ def test_e2e_checksum_signed_big_endian() -> None:
 def test_e2e_missing_checksum() -> None:
     text = GOOD.replace(' SG_ Checksum : 56|8@1+ (1,0) [0|255] "-" TESTER\n', "")
     finding = only(errors(check_text(text), "e2e"))
-    assert "no Checksum" in finding.text and finding.line == line_of(text, "BO_ 256 ECU_Status")
+    assert "no 8-bit checksum at bit 56" in finding.text and finding.line == line_of(text, "BO_ 256 ECU_Status")
 
 
 def test_e2e_auto_is_optional_for_a_foreign_database() -> None:
