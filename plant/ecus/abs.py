@@ -62,6 +62,9 @@ class AbsFault(IntEnum):
     INPUT_TIMEOUT = 2
 
 
+_FAULT_OK = AbsFault.OK      # (an enum class attribute is a slow lookup; the control step compares it often)
+
+
 class AbsHardware(Protocol):
     """What the ECU is wired to in the plant."""
 
@@ -157,7 +160,7 @@ class AbsEcu:
         period = self.control.period
         pedals = io.latest("DRV_Pedals")
         speeds = self.hardware.read_sensors(period)
-        fault = AbsFault.OK
+        fault = _FAULT_OK
         if not all(math.isfinite(v) and ranges.ABS_WHEEL_SPEED[0] <= v <= ranges.ABS_WHEEL_SPEED[1] for v in speeds):
             fault = AbsFault.WHEEL_SPEED_INVALID
             speeds = [_clamp(v, ranges.ABS_WHEEL_SPEED) for v in speeds]
@@ -165,21 +168,22 @@ class AbsEcu:
         self._history.append(speeds)
         braking = pedals is not None and brake_demand(pedals, p.pedal_to_pressure) >= p.brake_switch_pressure
         self.braking = braking
-        lost = any(speeds[i] < SENSOR_LOST_KMH and all(speeds[j] > SENSOR_OTHERS_KMH for j in range(4) if j != i)
-                   for i in range(4)) and not braking
+        lost = not braking and any(speeds[i] < SENSOR_LOST_KMH and all(speeds[j] > SENSOR_OTHERS_KMH
+                                                                       for j in range(4) if j != i)
+                                   for i in range(4))
         self._lost_time = self._lost_time + period if lost else 0.0
         if self._lost_time >= SENSOR_LOST_S:
             fault = AbsFault.WHEEL_SPEED_INVALID
-        if fault == AbsFault.OK and pedals is None:
+        if fault == _FAULT_OK and pedals is None:
             fault = AbsFault.INPUT_TIMEOUT
         if fault != self.fault:
-            if fault != AbsFault.OK:
+            if fault != _FAULT_OK:
                 for w in self.wheels:
                     w.reset()
             else:
                 self.estimator.reset()
             self.fault = fault
-        if fault != AbsFault.OK:
+        if fault != _FAULT_OK:
             self.valves = [Valve.INCREASE] * 4
             self.hardware.release_valves()
             return
@@ -224,8 +228,8 @@ class AbsEcu:
     def _output_step(self, io: NodeIO, t: float) -> None:
         speeds = self.speeds
         states = [int(w.cycle_state) for w in self.wheels]
-        active = self.active and self.fault == AbsFault.OK
-        if self.fault == AbsFault.OK:
+        active = self.active and self.fault == _FAULT_OK
+        if self.fault == _FAULT_OK:
             est = self.estimator.update(speeds, states, active, self.braking)
             self.estimate, self._est_t = est, t
             turn, ref, angle = est.turn, est.ref_speed, -est.delta_deg   # bus: angle positive right

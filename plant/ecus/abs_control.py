@@ -73,6 +73,18 @@ class ControlConfig:
     reapply_timeout: float = 0.6  # s (chosen)
 
 
+#: enum members as module constants: an enum class attribute is a slow lookup in 3.11, and the phase machine
+#: compares a dozen of them per wheel and control period
+_P_OFF = Phase.OFF
+_P_HOLD_ENTRY = Phase.HOLD_ENTRY
+_P_DECREASE = Phase.DECREASE
+_P_HOLD_REACCEL = Phase.HOLD_REACCEL
+_P_REAPPLY = Phase.REAPPLY
+_P_STEP_HOLD = Phase.STEP_HOLD
+_P_RELEASED = Phase.RELEASED
+_V_INCREASE, _V_HOLD, _V_DECREASE = Valve.INCREASE, Valve.HOLD, Valve.DECREASE
+
+
 class WheelController:
     """One wheel's phase machine (module doc)."""
 
@@ -83,7 +95,7 @@ class WheelController:
         self.reset()
 
     def reset(self) -> None:
-        self.phase = Phase.OFF
+        self.phase = _P_OFF
         self.time_in_phase = 0.0
         self.seen_plus = False
 
@@ -100,66 +112,66 @@ class WheelController:
         lam = c.slip_threshold if slip_threshold is None else slip_threshold
         self.time_in_phase += c.period
         if not braking or ref_kmh < c.abs_min_speed:
-            if self.phase != Phase.OFF:
-                self._go(Phase.OFF)
-            return Valve.INCREASE, 1.0
+            if self.phase != _P_OFF:
+                self._go(_P_OFF)
+            return _V_INCREASE, 1.0
         slip = (ref_kmh - wheel_kmh) / ref_kmh
         minus_a = -c.decel_threshold
         phase = self.phase
-        if phase == Phase.OFF:
+        if phase == _P_OFF:
             if slip > c.slip_max:
-                self._go(Phase.DECREASE)
+                self._go(_P_DECREASE)
             elif (accel < minus_a and slip > 0.5 * lam) or (accel < 0.0 and slip > lam):
-                self._go(Phase.HOLD_ENTRY)
-        elif phase in (Phase.HOLD_ENTRY, Phase.STEP_HOLD):
+                self._go(_P_HOLD_ENTRY)
+        elif phase in (_P_HOLD_ENTRY, _P_STEP_HOLD):
             if slip > lam:
-                self._go(Phase.DECREASE)
+                self._go(_P_DECREASE)
             elif accel > minus_a:
-                self._go(Phase.REAPPLY)
+                self._go(_P_REAPPLY)
                 self.time_in_phase = c.fast_reapply_time    # straight into the stepped increase
-        elif phase == Phase.DECREASE:
+        elif phase == _P_DECREASE:
             if accel > c.decrease_end and slip < c.slip_max:
-                self._go(Phase.HOLD_REACCEL)
-        elif phase == Phase.HOLD_REACCEL:
+                self._go(_P_HOLD_REACCEL)
+        elif phase == _P_HOLD_REACCEL:
             if accel > c.accel_threshold:
                 self.seen_plus = True
             if accel < minus_a or slip > c.slip_max:
-                self._go(Phase.DECREASE)
+                self._go(_P_DECREASE)
             elif (self.seen_plus and accel < c.accel_threshold) or (
                     slip < 0.5 * lam and accel < c.accel_threshold):
-                self._go(Phase.REAPPLY)
+                self._go(_P_REAPPLY)
             elif not self.seen_plus and slip > lam and self.time_in_phase >= c.hold_timeout:
-                self._go(Phase.DECREASE)
-        elif phase == Phase.RELEASED:
+                self._go(_P_DECREASE)
+        elif phase == _P_RELEASED:
             pass
-        elif phase == Phase.REAPPLY:
+        elif phase == _P_REAPPLY:
             if slip > c.slip_max or (accel < 0.0 and slip > lam):
-                self._go(Phase.DECREASE)
+                self._go(_P_DECREASE)
             elif accel < minus_a:
-                self._go(Phase.STEP_HOLD)
+                self._go(_P_STEP_HOLD)
             elif self.time_in_phase >= c.reapply_timeout:
-                self._go(Phase.OFF)
+                self._go(_P_OFF)
         return self.command()
 
     def command(self) -> tuple[Valve, float]:
         phase = self.phase
-        if phase == Phase.OFF:
-            return Valve.INCREASE, 1.0
-        if phase in (Phase.HOLD_ENTRY, Phase.HOLD_REACCEL, Phase.STEP_HOLD):
-            return Valve.HOLD, 1.0
-        if phase in (Phase.DECREASE, Phase.RELEASED):
-            return Valve.DECREASE, 1.0
-        return Valve.INCREASE, (1.0 if self.time_in_phase < self.c.fast_reapply_time else self.c.step_duty)
+        if phase == _P_OFF:
+            return _V_INCREASE, 1.0
+        if phase in (_P_HOLD_ENTRY, _P_HOLD_REACCEL, _P_STEP_HOLD):
+            return _V_HOLD, 1.0
+        if phase in (_P_DECREASE, _P_RELEASED):
+            return _V_DECREASE, 1.0
+        return _V_INCREASE, (1.0 if self.time_in_phase < self.c.fast_reapply_time else self.c.step_duty)
 
     def release(self) -> None:
         """Dump the pressure and keep the outlet open (the ECU's rear axle in an identified braked turn)."""
-        if self.phase != Phase.RELEASED:
-            self._go(Phase.RELEASED)
+        if self.phase != _P_RELEASED:
+            self._go(_P_RELEASED)
 
     def resume(self) -> None:
         """Back from RELEASED: re-apply (fast, then stepped) as after a cycle."""
-        if self.phase == Phase.RELEASED:
-            self._go(Phase.REAPPLY)
+        if self.phase == _P_RELEASED:
+            self._go(_P_REAPPLY)
 
     @property
     def cycle_state(self) -> Valve:
@@ -170,12 +182,12 @@ class WheelController:
         INCREASE. The end of the re-acceleration hold, DECREASE ->
         INCREASE on the bus, is the hold->increase switching point of [P4] §3.2-3.3."""
         phase = self.phase
-        if phase in (Phase.DECREASE, Phase.HOLD_REACCEL, Phase.RELEASED):
-            return Valve.DECREASE
-        if phase == Phase.HOLD_ENTRY:
-            return Valve.HOLD
-        return Valve.INCREASE
+        if phase in (_P_DECREASE, _P_HOLD_REACCEL, _P_RELEASED):
+            return _V_DECREASE
+        if phase == _P_HOLD_ENTRY:
+            return _V_HOLD
+        return _V_INCREASE
 
     @property
     def active(self) -> bool:
-        return self.phase != Phase.OFF
+        return self.phase != _P_OFF
