@@ -1,9 +1,10 @@
 """The layers and their import rule (docs/architecture.md "The layers and their import rule").
 
 bench/ is a generic bench: it knows no vehicle, so no message, signal or vehicle-specific node name of this
-project's databases appears in it (code, docstrings, help text, report templates), nor the repository's file
-layout; a project names what the bench needs in its bench.toml. The import direction holds: plant/ imports
-only the bench's behaviour API (bench.node), testcases/ never imports plant/, bench/ imports neither.
+project's databases appears in it (code, docstrings, help text, report templates), not even the end-to-end
+signals' (the bench finds the counter and the checksum by their places), nor the repository's file layout;
+a project names what the bench needs in its bench.toml. The import direction holds: plant/ imports only the
+bench's behaviour API (bench.node), testcases/ never imports plant/, bench/ imports neither.
 """
 
 from __future__ import annotations
@@ -21,14 +22,6 @@ from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 BENCH = ROOT / "bench"
 TEXT_SUFFIXES = {".py", ".j2", ".html", ".css", ".js", ".toml", ".md", ".txt", ".json"}
 
-#: Names the bench may use although a database of this project carries them, each with its reason.
-ALLOWED = {
-    # The bench's end-to-end profile (bench/e2e.py, docs/spec/e2e.md) is the bench's own, like its CRC
-    # polynomial: a database marks a protected message by these two signal names at their fixed places, the
-    # restbus fills them and the monitor judges them. Any project's database uses the same names.
-    "AliveCounter": "the bench's E2E profile",
-    "Checksum": "the bench's E2E profile",
-}
 #: Node names that are roles every bench project has (the stimulus and the plant), not parts of a vehicle.
 ROLE_NODES = {"DRIVER", "TESTER", "PLANT"}
 
@@ -66,7 +59,7 @@ def bench_files() -> Iterator[Path]:
 
 def occurrences(names: dict[str, str], files: list[Path]) -> list[str]:
     """'file:line: name (what) | text' for each whole-word occurrence (case-sensitive)."""
-    wanted = sorted(set(names) - set(ALLOWED), key=len, reverse=True)
+    wanted = sorted(names, key=len, reverse=True)
     pattern = re.compile(r"(?<![A-Za-z0-9_])(" + "|".join(re.escape(n) for n in wanted) + r")(?![A-Za-z0-9_])")
     found = []
     for path in files:
@@ -93,19 +86,15 @@ def test_bench_names_no_message_signal_or_vehicle_of_this_project() -> None:
 
 
 def test_the_grep_finds_a_planted_name(tmp_path: Path) -> None:
-    """The search itself works: a message name in a docstring, a signal in an f-string, a vehicle code."""
+    """The search itself works: a message name in a docstring, a signal in an f-string, a vehicle code, and the
+    end-to-end signals' names (the bench finds the counter and the checksum by their places, docs/spec/e2e.md)."""
     sample = tmp_path / "sample.py"
     sample.write_text('"""Sends BENCH_Control."""\nx = f"{a}.ScenarioIdAck"\ny = "EV4WIS"\n'
-                      'z = "BENCH_ControlX"  # not a whole word\nw = "AliveCounter"  # allowed\n', encoding="utf-8")
+                      'z = "BENCH_ControlX"  # not a whole word\nw = ("AliveCounter", "Checksum")\n',
+                      encoding="utf-8")
     found = occurrences(project_names(), [sample])
-    assert [line.split(": ")[1].split(" ")[0] for line in found] == ["BENCH_Control", "ScenarioIdAck", "EV4WIS"]
-
-
-def test_allow_list_is_still_needed() -> None:
-    """An allowed name that the bench no longer uses leaves the list."""
-    text = "\n".join(path.read_text(encoding="utf-8") for path in bench_files())
-    unused = [name for name in ALLOWED if not re.search(rf"(?<![A-Za-z0-9_]){name}(?![A-Za-z0-9_])", text)]
-    assert not unused
+    assert [line.split(": ")[1].split(" ")[0] for line in found] == \
+        ["BENCH_Control", "ScenarioIdAck", "EV4WIS", "AliveCounter", "Checksum"]
 
 
 # -- the import rule ------------------------------------------------------------------------------------------
