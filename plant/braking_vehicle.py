@@ -166,10 +166,15 @@ class BrakingVehicle:
         d_lat_r = m_rear * self._lat_accel_lag * h / B
         st = self.static
         fz = self.fz
-        fz[0] = max(0.0, st[0] + d_long - d_lat_f)
-        fz[1] = max(0.0, st[1] + d_long + d_lat_f)
-        fz[2] = max(0.0, st[2] - d_long - d_lat_r)
-        fz[3] = max(0.0, st[3] - d_long + d_lat_r)
+        # max(0.0, x) written out: x if x > 0.0 else 0.0 (also for -0.0 and NaN, as max gives)
+        f = st[0] + d_long - d_lat_f
+        fz[0] = f if f > 0.0 else 0.0
+        f = st[1] + d_long + d_lat_f
+        fz[1] = f if f > 0.0 else 0.0
+        f = st[2] - d_long - d_lat_r
+        fz[2] = f if f > 0.0 else 0.0
+        f = st[3] - d_long + d_lat_r
+        fz[3] = f if f > 0.0 else 0.0
 
         u, v, r = self.u, self.v, self.r
         delta = self.delta
