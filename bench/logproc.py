@@ -23,12 +23,13 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from bench.errors import LogError
+from bench.errors import BenchError, LogError
+from bench.recorder import Decoder, Recorder
 
 BATCH_FRAMES = 2000      # hand over at least this often ...
 BATCH_SECONDS = 0.2      # ... and at least every 0.2 s of wall time
@@ -122,8 +123,6 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
     except OSError as exc:   # not fatal: the log is only written later than it could be
         logging.getLogger("bench.logproc").warning("log process: nice(%d) failed: %s", LOG_NICE, exc)
     from bench.codec import load_codebook, load_dbc
-    from bench.errors import BenchError
-    from bench.recorder import Recorder
 
     try:
         codebook = load_codebook(databases)
@@ -145,28 +144,24 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
                 break
             if batch is None:
                 break
+            frames: list[tuple[Any, ...]] = []   # a run of frames between other items, written in one call
             for item in batch:
+                if type(item[0]) is not str:
+                    frames.append(item)
+                    continue
+                rejected += _write_frames(recorder, frames, channel, by_id, path, rejected)
+                frames = []
                 try:
                     if item[0] == _STEP:
                         recorder.step(item[1], item[2], item[3], item[4])
-                        continue
-                    if item[0] == _META:
+                    elif item[0] == _META:
                         recorder.metadata(item[1], item[2])
-                        continue
-                    if item[0] == _ORIGIN:
+                    elif item[0] == _ORIGIN:
                         recorder.set_origin(item[1], "real" if item[2] else "virtual")
-                        continue
-                    t, arbitration_id, data, direction, valid, error = item
-                    recorder.frame(t, arbitration_id, data, channel=channel, direction=direction, valid=valid,
-                                   error=error)
-                    codec = by_id.get(arbitration_id) if valid else None
-                    if codec is not None:
-                        recorder.decoded(t, codec.name, codec.decode(data))
                 except (BenchError, ValueError, TypeError) as exc:   # one bad record must not end the log
                     rejected += 1
-                    if rejected == 1:
-                        print(f"bench log: {path}: record not written ({exc}); later ones are counted",
-                              file=sys.stderr, flush=True)
+                    _report_first(path, rejected, str(exc))
+            rejected += _write_frames(recorder, frames, channel, by_id, path, rejected)
             now = time.monotonic()   # one clock read per batch
             if now >= flush_at:
                 recorder.flush()     # on disk: a run killed now loses at most this batch's successors
@@ -179,6 +174,31 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
         reply.send("closed")
     except (BrokenPipeError, OSError):
         pass
+
+
+def _write_frames(recorder: Recorder, frames: list[tuple[Any, ...]], channel: str,
+                  codecs: Mapping[int, Decoder], path: str, rejected: int) -> int:
+    """Write a run of frames with their decoded values; how many records were refused (reported as they come)."""
+    if not frames:
+        return 0
+    try:
+        problems = recorder.frames(frames, channel=channel, codecs=codecs)
+    except (BenchError, ValueError, TypeError):   # a malformed item: one record at a time, as before
+        problems = []
+        for frame in frames:
+            try:
+                problems += recorder.frames([frame], channel=channel, codecs=codecs)
+            except (BenchError, ValueError, TypeError) as exc:
+                problems.append(str(exc))
+    for count, problem in enumerate(problems, rejected + 1):
+        _report_first(path, count, problem)
+    return len(problems)
+
+
+def _report_first(path: str, count: int, problem: str) -> None:
+    if count == 1:
+        print(f"bench log: {path}: record not written ({problem}); later ones are counted", file=sys.stderr,
+              flush=True)
 
 
 if __name__ == "__main__":
