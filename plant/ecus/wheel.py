@@ -41,7 +41,7 @@ class WheelFault(IntEnum):
 TWIST_RATE_DPS = 5.0      # steering rate at which the bore torque is fully developed (chosen)
 TWIST_FADE_MPS = 0.5      # rolling speed that halves the bore torque (chosen)
 
-_tanh = math.tanh
+_tanh, _isfinite = math.tanh, math.isfinite
 _STEER_ANGLE, _WHEEL_SPEED, _CURRENT = ranges.STEER_ANGLE, ranges.WHEEL_SPEED, ranges.STEER_MOTOR_CURRENT
 _FAULT_CODE = {f: int(f) for f in WheelFault}     # the number WHL_Status carries (an int, not the enum)
 _OK, _TIMEOUT, _INVALID = WheelFault.OK, WheelFault.CMD_TIMEOUT, WheelFault.CMD_INVALID   # (enum lookups are slow)
@@ -90,7 +90,11 @@ class WheelEcu:
         if cmd is None:
             return _TIMEOUT, None
         angle, speed = cmd.get("SteerAngleCmd", math.nan), cmd.get("WheelSpeedCmd", math.nan)
-        if not ranges.finite(angle, speed):
+        try:                                    # ranges.finite(angle, speed) written out (four wheels every tick)
+            usable = _isfinite(angle) and _isfinite(speed)
+        except TypeError:
+            usable = False
+        if not usable:
             return _INVALID, None
         fault = _INVALID if io.invalid(self.cmd_message) else _OK
         if abs(angle) > self._limit:
