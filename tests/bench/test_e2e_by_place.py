@@ -51,7 +51,9 @@ def dbc(counter: str, checksum: str, counter_at: str = "48|4@1+") -> str:
 
 
 def codebook(text: str) -> Codebook:
-    return Codebook([("test.dbc", cantools.database.load_string(text, database_format="dbc", strict=False))])
+    database = cantools.database.load_string(text, database_format="dbc", strict=False)
+    assert isinstance(database, cantools.database.can.Database)
+    return Codebook([("test.dbc", database)])
 
 
 def frames(book: Codebook, count: int) -> list[bytes]:
