@@ -1,8 +1,9 @@
 """The run's MCAP log, written by a child process.
 
 Logging every frame (JSON of the raw frame and of its decoded values, then mcap's chunking and
-compression) costs about 13 µs of CPU per frame, a fifth of a campaign's CPU (docs/performance.md,
-2026-11-24); in a child process it runs on the machine's other core while the simulation goes on.
+compression) cost about 13 µs of CPU per frame, a fifth of a campaign's CPU; the child writes each run of
+frames with `Recorder.frames` (the texts of a repeated frame built once), about half that (docs/performance.md,
+2026-11-24, issue 18). In a child process it runs on the machine's other core while the simulation goes on.
 The simulation hands over raw frames in batches (no decoded values: the child decodes them again
 with the same codec, which is cheaper than pickling them). The child
 ignores SIGINT/SIGTERM and finishes the file when the run closes the pipe, or when the run dies:
@@ -26,10 +27,12 @@ import time
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bench.errors import BenchError, LogError
-from bench.recorder import Decoder, Recorder
+
+if TYPE_CHECKING:   # the run's process needs neither (nor mcap's import); the child imports them
+    from bench.recorder import Decoder, Recorder
 
 BATCH_FRAMES = 2000      # hand over at least this often ...
 BATCH_SECONDS = 0.2      # ... and at least every 0.2 s of wall time
@@ -123,6 +126,7 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
     except OSError as exc:   # not fatal: the log is only written later than it could be
         logging.getLogger("bench.logproc").warning("log process: nice(%d) failed: %s", LOG_NICE, exc)
     from bench.codec import load_codebook, load_dbc
+    from bench.recorder import Recorder
 
     try:
         codebook = load_codebook(databases)

@@ -4,7 +4,8 @@ The sweep: benchmarks/cases/test_sweep_rotation_centres.py, N random rotation ce
 each checked against docs/spec/formulas.md §2. Measured: wall time of `bench run -n 2 <sweep>` (two workers, each with
 its own in-process virtual-time bus and MCAP log; the controller merges one report); baseline in the same
 run: `bench run <sweep>` (one process, no xdist). Speed-up = baseline wall / measured wall (the whole
-command: start-up, the cases, the reports). With --with-n1 also `-n 1` (the cost of xdist itself).
+command: start-up, the cases, the reports); with --repeat N the pairs run back to back N times and the median
+pair's ratio is reported. With --with-n1 also `-n 1` (the cost of xdist itself).
 Target (issue 9): >= 1.7x on this machine's 2 cores.
 """
 
@@ -66,9 +67,16 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
         result.error = "bench run has no -n option (pytest-xdist scale-out not available in this version)"
         return
     n = 40 if args.quick else 200
-    single = one_run(args.work / "single", n, None)
-    parallel = one_run(args.work / "n2", n, "2")
+    pairs = []   # one process then -n 2, back to back, --repeat times: the shared machine's load moves
+    for i in range(args.repeat):
+        pairs.append((one_run(args.work / f"single{i}", n, None), one_run(args.work / f"n2_{i}", n, "2")))
+    ratios = sorted(a["wall_s"] / b["wall_s"] for a, b in pairs)
+    single, parallel = _median_run([a for a, _ in pairs]), _median_run([b for _, b in pairs])
     runs = {"single": single, "n2": parallel}
+    if args.repeat > 1:
+        result.details["pairs"] = [{"single_wall_s": a["wall_s"], "n2_wall_s": b["wall_s"],
+                                    "load_before": (a["load_before"], b["load_before"]),
+                                    "speedup": a["wall_s"] / b["wall_s"]} for a, b in pairs]
     if args.with_n1:
         runs["n1"] = one_run(args.work / "n1", n, "1")
     result.details.update(centres=n, runs=runs)
@@ -77,7 +85,7 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
             result.details.setdefault("problems", []).append(
                 f"{label}: exit {run['exit_code']}, {run['cases']} cases, {run['failures']} failed, "
                 f"{run['errors']} errors")
-    speedup = single["wall_s"] / parallel["wall_s"]
+    speedup = ratios[len(ratios) // 2]   # the median pair's ratio
     result.add("sweep wall time, bench run -n 2", parallel["wall_s"], "s", single["wall_s"],
                "bench run, one process",
                note=f"{n} centres; logs {', '.join(parallel['mcap_logs'])}; "
@@ -106,8 +114,15 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
                    "× real time", single["bench_s"] / single["wall_s"], "one process")
 
 
+def _median_run(runs: list[dict]) -> dict:
+    """The run of median wall time (its CPU and roles go with it)."""
+    return sorted(runs, key=lambda run: run["wall_s"])[len(runs) // 2]
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--with-n1", action="store_true", help="also run with -n 1 (one xdist worker)")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="pairs (one process, then -n 2) run back to back; the median pair's ratio is reported")
 
 
 if __name__ == "__main__":
