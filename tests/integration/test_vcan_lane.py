@@ -106,6 +106,21 @@ def test_every_lane_selects_test_files() -> None:
             assert files, f"{name}: {path} holds no test file"
 
 
+@on_host
+def test_time_travel_kernel_config_is_checked_not_trusted() -> None:
+    """The lane's UML kernel is built with time travel and CAN built in; a .config that lost one of them
+    (olddefconfig drops an option whose dependencies are missing) is named, and a module (=m) does not count:
+    the time-travel guest loads no modules."""
+    lane = load_lane_script()
+    assert {"UML_TIME_TRAVEL_SUPPORT", "CAN_RAW", "CAN_BCM", "CAN_VCAN", "HOSTFS"} <= set(lane.UML_TT_OPTIONS)
+    complete = "".join(f"CONFIG_{name}=y\n" for name in lane.UML_TT_OPTIONS)
+    assert lane.options_absent("# a comment\n" + complete) == []
+    lost = complete.replace("CONFIG_CAN_BCM=y\n", "# CONFIG_CAN_BCM is not set\n") \
+                   .replace("CONFIG_CAN_VCAN=y", "CONFIG_CAN_VCAN=m")
+    assert lane.options_absent(lost) == ["CAN_BCM", "CAN_VCAN"]
+    assert lane.parse_args(["--out", "unused"]).uml_clock == "time-travel"
+
+
 @pytest.fixture(scope="module")
 def fault_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A bench run (virtual bus) of one fault case: a counter jump on DRV_MotionRequest makes invalid frames."""
