@@ -5,6 +5,7 @@ its MCAP and written again, in this process, the way the log process writes them
 frame's record, a decode, the decoded record), CPU time per frame, median of 3:
   - the recorder as it is (bench/recorder.py: one pack per message record and per message index);
   - the same with mcap's own `Writer.add_message` (the recorder's fallback; what it did before);
+  - `Recorder.frames` per batch of 2000, what the log process does since issue 18 (the same records);
 and the parts, on the same frames: decode; the decoded values as JSON by the json module, by the recorder's
 %-template, and by orjson when installed (not a dependency: for comparison only); the frame's JSON; chunk
 compression of the records, zstd at levels 3 (mcap's default, the recorder's), 1 and -1, lz4 and none, with the
@@ -79,8 +80,23 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     finally:
         bench.recorder._fast_adder = fast_adder
     base = "the recorder through mcap's Writer.add_message"
-    result.add("log writing, the recorder (frame + decode + decoded)", fast, "µs CPU per frame", slow, base,
+    result.add("log writing, the recorder per frame (frame + decode + decoded)", fast, "µs CPU per frame", slow, base,
                note=f"{n} frames of {seconds:g} s of bench time; {size / n:.0f} bytes per frame in the file")
+
+    def write_batched() -> int:
+        """What bench/logproc.py does since issue 18: Recorder.frames per batch (the same records)."""
+        path = args.work / "batched.mcap"
+        recorder = bench.recorder.Recorder(path, loaded, attachments=databases)
+        for start in range(0, n, 2000):
+            recorder.frames(frames[start:start + 2000], channel="bench", codecs=by_id)
+        recorder.close()
+        return path.stat().st_size
+
+    batched, batched_size = _cpu_per_frame(write_batched, n)
+    distinct = len({(frame_id, data) for _, frame_id, data, _, _, _ in frames})
+    result.add("log writing, Recorder.frames in batches of 2000 (the log process)", batched, "µs CPU per frame", fast,
+               "the recorder per frame", note=f"{distinct / n:.0%} of the frames distinct; "
+                                              f"{batched_size / n:.0f} bytes per frame in the file")
 
     codecs = [by_id[frame_id] for _, frame_id, _, _, valid, _ in frames if valid and frame_id in by_id]
     payloads = [data for _, frame_id, data, _, valid, _ in frames if valid and frame_id in by_id]

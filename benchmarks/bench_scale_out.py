@@ -36,8 +36,8 @@ def one_run(out: Path, n: int, workers: str | None) -> dict:
     argv = [sys.executable, "-m", "bench", "run", "--out", str(out), *(["-n", workers] if workers else []), str(CASE)]
     load = common.load_average()
     wall0, cpu0 = time.perf_counter(), common.cpu_seconds()
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "bench-run.log", "w") as log:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out.parent / f"{out.name}.log", "w") as log:   # beside: bench run wants an empty or new --out
         proc = subprocess.Popen(argv, cwd=common.ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
         roles = common.ProcessCpu(proc.pid)
         while proc.poll() is None and time.perf_counter() - wall0 < 1800:
