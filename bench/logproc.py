@@ -125,13 +125,13 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
         os.nice(LOG_NICE)
     except OSError as exc:   # not fatal: the log is only written later than it could be
         logging.getLogger("bench.logproc").warning("log process: nice(%d) failed: %s", LOG_NICE, exc)
-    from bench.codec import load_codebook, load_dbc
+    from bench.codec import load_codebook
     from bench.recorder import Recorder
 
     try:
         codebook = load_codebook(databases)
         # flush_interval inf: the Recorder reads no clock per record; the chunks are finalised below, per batch
-        recorder = Recorder(Path(path), [load_dbc(p) for p in databases], attachments=[Path(p) for p in databases],
+        recorder = Recorder(Path(path), [db for _, db in codebook.databases], attachments=[Path(p) for p in databases],
                             flush_interval=math.inf)
     except BenchError as exc:
         reply.send(str(exc))
