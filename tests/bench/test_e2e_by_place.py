@@ -13,41 +13,18 @@ from bench.dbccheck import check_text
 from bench.e2e import Layout
 from bench.monitor import Monitor
 from bench.restbus import Restbus
+from tests.bench.test_dbc_check import GOOD
 from tests.reference import contract_checksum
 
-FRAME_ID = 0x123
+FRAME_ID = 256            # test_dbc_check's ECU_Status
 CONTRACT_NAMES = ("AliveCounter", "Checksum")
 
 
 def dbc(counter: str, checksum: str, counter_at: str = "48|4@1+") -> str:
-    """One 8-byte message sent by ECU every 10 ms: two values, then the counter and the checksum under the
-    given names (the counter at `counter_at`)."""
-    return (
-        'VERSION ""\n\nNS_ :\n\nBS_:\n\nBU_: ECU TESTER\n\n'
-        f"BO_ {FRAME_ID} ECU_Status: 8 ECU\n"
-        ' SG_ Speed : 0|16@1- (0.01,0) [-300|300] "m/s" TESTER\n'
-        ' SG_ Mode : 16|4@1+ (1,0) [0|3] "-" TESTER\n'
-        f' SG_ {counter} : {counter_at} (1,0) [0|15] "-" TESTER\n'
-        f' SG_ {checksum} : 56|8@1+ (1,0) [0|255] "-" TESTER\n\n'
-        f'CM_ BO_ {FRAME_ID} "Status of the ECU.";\n'
-        f'CM_ SG_ {FRAME_ID} Speed "Speed.";\n'
-        f'CM_ SG_ {FRAME_ID} Mode "Mode.";\n'
-        f'CM_ SG_ {FRAME_ID} {counter} "Counter.";\n'
-        f'CM_ SG_ {FRAME_ID} {checksum} "CRC-8.";\n'
-        'BA_DEF_ BO_  "GenMsgCycleTime" INT 0 65535;\n'
-        'BA_DEF_ BO_  "GenMsgSendType" ENUM  "Cyclic","NoMsgSendType";\n'
-        'BA_DEF_ SG_  "GenSigStartValue" INT -2147483648 2147483647;\n'
-        'BA_DEF_DEF_  "GenMsgCycleTime" 0;\n'
-        'BA_DEF_DEF_  "GenMsgSendType" "NoMsgSendType";\n'
-        'BA_DEF_DEF_  "GenSigStartValue" 0;\n'
-        f'BA_ "GenMsgCycleTime" BO_ {FRAME_ID} 10;\n'
-        f'BA_ "GenMsgSendType" BO_ {FRAME_ID} 0;\n'
-        f'BA_ "GenSigStartValue" SG_ {FRAME_ID} Speed 0;\n'
-        f'BA_ "GenSigStartValue" SG_ {FRAME_ID} Mode 0;\n'
-        f'BA_ "GenSigStartValue" SG_ {FRAME_ID} {counter} 0;\n'
-        f'BA_ "GenSigStartValue" SG_ {FRAME_ID} {checksum} 0;\n'
-        f'VAL_ {FRAME_ID} Mode 0 "OFF" 1 "LOW" 2 "HIGH" 3 "AUTO" ;\n'
-    )
+    """test_dbc_check's database (ECU_Status, 8 bytes, every 10 ms: two values, the counter, the checksum) with
+    the counter and the checksum under the given names, the counter at `counter_at`."""
+    return GOOD.replace(" AliveCounter ", f" {counter} ").replace(" Checksum ", f" {checksum} ") \
+               .replace("48|4@1+", counter_at)
 
 
 def codebook(text: str) -> Codebook:
