@@ -14,6 +14,12 @@ layer by layer, to show what each layer costs:
       monitors (decode, checks, history) + the tick loop;
   B2  B1 plus the run's log and timing collector (bench.run.BenchRun, as a campaign runs), without pytest.
 Target (issue 9): >= 50x real time for the campaign, every frame logged and decoded.
+
+The plant's floor: the campaign once more, with the CPU time (this thread's) of every `step` of the plant's
+behaviours counted (its bus I/O calls, io.latest and io.send_values, included; the two clock reads per tick
+subtracted as calibrated here). Bench time over that CPU is the campaign's bench seconds per CPU-second if the
+bench itself, the test cases and the log cost nothing: no change outside the plant can take the campaign past it.
+A run of its own, so the headline figures above carry no counting overhead.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import math
 import resource
 import time
 from pathlib import Path
+from typing import Any
 
 import common
 
@@ -119,6 +126,48 @@ def run_with_log(seconds: float, out: Path) -> dict[str, float]:
             "log_process_cpu_s": log_cpu, "frames": frames, "finish_s": finish}
 
 
+def plant_floor(out: Path, paths: list[str]) -> dict[str, float]:
+    """The campaign with the plant's CPU counted (module docstring): bench s, the plant's CPU s, ticks."""
+    import bench.session as session_module
+
+    spent = [0.0, 0]
+    clock = time.thread_time
+    original = session_module.load_plant
+
+    def counting_factory(name: str) -> Any:
+        factory = original(name)
+
+        def build(*args: Any, **kwargs: Any) -> Any:
+            behaviours = factory(*args, **kwargs)
+            for behaviour in behaviours:
+                step = behaviour.step
+
+                def counted(io: Any, t: float, dt: float, step: Any = step) -> None:
+                    start = clock()
+                    step(io, t, dt)
+                    spent[0] += clock() - start
+                    spent[1] += 1
+
+                behaviour.step = counted   # an instance attribute: the same object, its step counted
+            return behaviours
+        return build
+
+    session_module.load_plant = counting_factory
+    try:
+        code, run, _, _ = common.bench_inprocess(["run", "--out", str(out), *paths])
+    finally:
+        session_module.load_plant = original
+    if run is None:
+        raise RuntimeError(f"bench run (plant floor) finished no run (exit code {code})")
+    calls = 200_000
+    start = clock()
+    for _ in range(calls):
+        clock()
+    per_read = (clock() - start) / (calls + 1)
+    return {"bench_s": run.sim_time, "plant_cpu_s_raw": spent[0], "steps": spent[1], "clock_read_s": per_read,
+            "plant_cpu_s": spent[0] - spent[1] * per_read, "verdict_passed": run.counts.get("passed", 0)}
+
+
 def _children_cpu() -> float:
     """CPU seconds of this process's waited-for children (the run's log process once finish() waited)."""
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -173,6 +222,9 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
                   "frames": run.frames, "invalid_frames": run.invalid_frames, "mcap": counts,
                   "every_frame_logged_and_decoded": logged_all})
 
+    floor = plant_floor(args.work / "plant_floor", argv[3:])
+    result.details["plant_floor"] = floor
+
     b0f, b1f, b2f = (b["bench_s"] / b["wall_s"] for b in (b0, b1, b2))
     note_b = f"B1 session without log {b1f:.1f}×, B2 with log {b2f:.1f}× (same scenario)"
     result.add("campaign, whole command (bench time / wall time)", run.sim_time / wall, "× real time", b0f,
@@ -184,6 +236,12 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     result.add("campaign per CPU-second (incl. the log process)", run.sim_time / cpu, "bench s / CPU-s", b0f,
                "B0 bare plant tick loop, no bus",
                note="load-independent; all the campaign's processes")
+    result.add("campaign's plant alone per CPU-second (the floor)", floor["bench_s"] / floor["plant_cpu_s"],
+               "bench s / CPU-s", run.sim_time / cpu, "the campaign per CPU-second, all processes",
+               note=f"the plant's behaviours took {floor['plant_cpu_s']:.2f} s of CPU over {floor['steps']} steps "
+                    f"({floor['plant_cpu_s'] / floor['steps'] * 1e6:.1f} µs each, bus I/O calls included) for "
+                    f"{floor['bench_s']:.1f} s of bench time: the bound for the campaign per CPU-second if "
+                    "nothing but the plant cost CPU")
     result.add("B0 bare plant tick loop (EV4WIS, no bus)", b0f, "× real time",
                note=f"{b0['us_per_tick']:.1f} µs per 1 ms tick; per CPU-second {b0['bench_s'] / b0['cpu_s']:.1f}×; "
                     "per vehicle (CPU, start values): " + ", ".join(
