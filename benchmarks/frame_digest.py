@@ -10,6 +10,7 @@ time, topic and JSON text.
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import sys
@@ -40,8 +41,14 @@ def digests(path: Path) -> dict[str, str | int]:
 
 
 def main(argv: list[str]) -> int:
-    results = [digests(Path(p)) for p in argv]
-    for path, result in zip(argv, results):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("mcap", nargs="+", type=Path, help="a run's MCAP log (two or more: compared)")
+    paths = parser.parse_args(argv).mcap
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        parser.error(f"no such file: {', '.join(missing)}")
+    results = [digests(p) for p in paths]
+    for path, result in zip(paths, results, strict=True):
         print(path, result)
     same = all(r == results[0] for r in results)
     if len(results) > 1:
