@@ -63,6 +63,7 @@ class Restbus:
         # them; a stopped message that falls due waits aside (parked) until it is resumed.
         self._queue: list[tuple[int, int, _Periodic]] = [(p.next_due, p.order, p) for p in self.periodic.values()]
         heapq.heapify(self._queue)
+        self.schedule = self._queue   # the same list, read-only for others: schedule[0][0] is the next due tick
         self._parked: dict[int, _Periodic] = {}
 
     def set(self, message: str, **signals: float | int | str) -> None:
@@ -158,5 +159,5 @@ class Restbus:
             data = bytearray(slot.payload)
             e2e.protect(codec.frame_id, data, counter)
             frame = slot.frames[index] = bytes(data)
-        slot.counter = e2e.next_counter(counter)
+        slot.counter = (counter + 1) % e2e.COUNTER_MODULO   # e2e.next_counter, written out (every frame)
         return frame
