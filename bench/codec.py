@@ -162,6 +162,10 @@ class MessageCodec:
         # The E2E check of a frame, once per distinct frame: both monitors of a process check each frame, and a
         # message whose values stay the same repeats its 16 frames (one per counter value).
         self._intact: dict[bytes, int | None] = {}
+        # `decode_checked` of a frame, once per distinct frame (both monitors of a process judge every frame, and
+        # a message whose values stay the same repeats its 16 frames): its values dict is shared by the callers,
+        # who only read it (a Mapping to behaviours, the log and the timing collector).
+        self._checked: dict[bytes, tuple[dict[str, float], tuple[str, ...]]] = {}
         self._unpack: tuple[tuple[Any, ...], ...] = tuple(
             (s.name, s.start, (1 << s.length) - 1, (1 << (s.length - 1)) if s.signed else 0,
              1 << s.length, s.scale, s.offset)[: 6 if self._no_offset else 7]
@@ -301,11 +305,20 @@ class MessageCodec:
         if not self.fast:
             values = self.decode(data)
             return values, tuple(self.out_of_range(values))
+        memo = self._checked
+        if type(data) is bytes:
+            found = memo.get(data)
+            if found is not None:
+                return found
         entry, values = self._cached(data)
         bad = entry[2]
         if bad is None:
             bad = tuple(self.out_of_range(values))
             self._entry = (entry[0], entry[1], bad)
+        if type(data) is bytes:   # a pure function of the frame's bytes: remembered whole
+            if len(memo) >= INTACT_CACHE:
+                memo.clear()
+            memo[data] = values, bad
         return values, bad
 
     def _cached(self, data: bytes | bytearray) -> tuple[tuple[int, dict[str, float], tuple[str, ...] | None],
