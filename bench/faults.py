@@ -150,9 +150,15 @@ class FaultPlan:
         for fault in faults:
             self.add(fault)
 
+    def expire(self, t: float) -> None:
+        """Forget the faults whose window ended by bench time `t` (bench time only goes on: none can act again;
+        each stays in `history`, on the record). With none left, `any` is false and frames skip the plan."""
+        self.faults[:] = [fault for fault in self.faults if fault.end > t]
+
     def begin_case(self, t: float) -> list[Fault]:
         """A case starts at bench time `t`: every case+ fault gets its window in this case."""
         self.end_case(t)
+        self.expire(t)
         for template in self.templates:
             instance = Fault(template.kind, template.target, t + template.start, t + template.end, template.param,
                              source=template.source, parent=template)
@@ -196,15 +202,19 @@ class FaultPlan:
         codec = self.codebook.by_id.get(frame_id)
         if codec is None:
             return [(0.0, data)]
-        out = Outgoing(frame_id, [data], self._rng)
+        out: Outgoing | None = None
         for fault in self.faults:
-            if not fault.active(t):
+            if not fault.start <= t < fault.end:   # Fault.active, written out (every frame asks every fault)
                 continue
             kind = KINDS[fault.kind]
             if not kind.applies(fault, frame_id, codec):
                 continue
+            if out is None:
+                out = Outgoing(frame_id, [data], self._rng)
             fault.hit()
             kind.act(fault, out)
             if out.dropped:
                 return []
+        if out is None:
+            return [(0.0, data)]
         return [(out.delay, f) for f in out.frames]
