@@ -714,7 +714,14 @@ class Recorder:
                 if self._closed or self._broken:
                     return
                 self._broken = True
-                ends = list(itertools.accumulate(map(_RECORD_OVERHEAD.__add__, map(len, payloads))))
+                total = sum(map(len, payloads)) + _RECORD_OVERHEAD * len(payloads)
+                if self._pending + total < self._chunk_bytes:   # the batch ends no chunk: no split to find
+                    self._add_many(channels, nss, payloads)
+                    self._pending += total
+                    payloads = []
+                else:
+                    ends = list(itertools.accumulate(map(operator.add, map(len, payloads),
+                                                         itertools.repeat(_RECORD_OVERHEAD))))
                 start = 0
                 while start < len(payloads):
                     base = ends[start - 1] if start else 0
