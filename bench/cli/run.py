@@ -45,6 +45,11 @@ OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "
 RUN_OPTIONS = ("keyword", "dut", "shard", "durations", "out", "force", "workers")
 #: Everything `bench run` hands to pytest (the plugin's --bench-* options and pytest's -k, -n).
 HANDED_TO_PYTEST = (*BUS_OPTIONS, *NODE_OPTIONS, *RUN_OPTIONS)
+#: pytest-xdist's distribution with -n. Its default ("load") hands out the cases in chunks in collection order, so
+#: a long case late in the order (the 4WS slalom: a fifth of the campaign's recorded duration) ends the run with
+#: one worker alone; "worksteal" lets an idle worker take half of the other's queue. Replayed with the campaign's
+#: .test_durations through xdist's own schedulers (2 workers): load 12 % over an even split, worksteal 1 %.
+DIST = "worksteal"
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -194,6 +199,8 @@ def run(args: argparse.Namespace) -> int:
     args.config, args.out = str(project.path), str(out_dir)   # as resolved here, for the plugin
     pytest_args = [*paths, "-p", "no:terminal", "-p", "no:cacheprovider",
                    "--rootdir", str(_rootdir(project, paths)), *options.pytest_args(args, HANDED_TO_PYTEST)]
+    if args.workers:
+        pytest_args += ["--dist", DIST]
     progress = _Progress(console)
     try:
         code = pytest.main(pytest_args, plugins=[progress])

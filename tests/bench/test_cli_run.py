@@ -94,6 +94,24 @@ def test_progress_counts_the_cases_with_workers(tmp_path: Path) -> None:
     assert "bench: 3 cases" in result.stdout
 
 
+def test_workers_steal_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """-n hands pytest-xdist --dist worksteal (an idle worker takes from the other's queue; bench.cli.run.DIST);
+    without -n no --dist at all."""
+    from bench.cli import build_parser
+    from bench.cli import run as cli_run
+
+    (tmp_path / "test_user.py").write_text(CASES, encoding="utf-8")
+    handed: list[list[str]] = []
+    monkeypatch.setattr(cli_run.pytest, "main", lambda args, plugins: handed.append(list(args)) or 0)
+    for workers in (["-n", "2"], []):
+        args = build_parser().parse_args(["run", str(tmp_path / "test_user.py"), "--out", str(tmp_path / "out"),
+                                          *workers])
+        cli_run.run(args)
+    with_n, without = handed
+    assert with_n[with_n.index("-n") + 1] == "2" and with_n[with_n.index("--dist") + 1] == "worksteal"
+    assert "--dist" not in without and "-n" not in without
+
+
 # -- each run option declared once (issue 17): bench.options builds both sides ----------------------------------
 class _PytestGroup:
     """pytest's option group is argparse underneath: the plugin's declarations, onto a plain parser."""
