@@ -63,7 +63,8 @@ class LogProcess:
         if status != "ready":
             self._process.wait(10)
             raise LogError(status)
-        self._batch: list[tuple[Any, ...]] = []
+        self._batch: list[tuple[Any, ...]] = []          # frames
+        self._others: list[tuple[int, tuple[Any, ...]]] = []   # (how many frames of the batch come before, item)
         self._deadline = time.monotonic() + BATCH_SECONDS
         self._closed = False
         self.path = path
@@ -77,20 +78,22 @@ class LogProcess:
             self._hand_over()
 
     def step(self, t: float, level: int, name: str, message: str) -> None:
-        self._batch.append((_STEP, t, level, name, message))
+        self._others.append((len(self._batch), (_STEP, t, level, name, message)))
 
     def origin(self, epoch_ns: int, realtime: bool) -> None:
         """The epoch time (ns) of bench time 0: log times become epoch times (Foxglove shows the date)."""
-        self._batch.append((_ORIGIN, int(epoch_ns), bool(realtime)))
+        self._others.append((len(self._batch), (_ORIGIN, int(epoch_ns), bool(realtime))))
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         """A metadata record (e.g. an injected fault) in the log."""
-        self._batch.append((_META, name, {str(k): str(v) for k, v in data.items()}))
+        self._others.append((len(self._batch), (_META, name, {str(k): str(v) for k, v in data.items()})))
 
     def _hand_over(self) -> None:
-        if self._batch and not self._closed:
-            self._to_child.send(self._batch)
+        if (self._batch or self._others) and not self._closed:
+            # the frames apart from the rare other items: the child writes runs of frames without a look at each
+            self._to_child.send((self._batch, self._others))
             self._batch = []
+            self._others = []
         self._deadline = time.monotonic() + BATCH_SECONDS
 
     def close(self) -> None:
@@ -154,13 +157,11 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
                 break
             if batch is None:
                 break
-            frames: list[tuple[Any, ...]] = []   # a run of frames between other items, written in one call
-            for item in batch:
-                if type(item[0]) is not str:
-                    frames.append(item)
-                    continue
-                rejected += _write_frames(recorder, frames, channel, by_id, path, rejected)
-                frames = []
+            frames, others = batch
+            start = 0   # each run of frames between other items is written in one call
+            for position, item in others:
+                rejected += _write_frames(recorder, frames[start:position], channel, by_id, path, rejected)
+                start = position
                 try:
                     if item[0] == _STEP:
                         recorder.step(item[1], item[2], item[3], item[4])
@@ -171,7 +172,7 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
                 except (BenchError, ValueError, TypeError) as exc:   # one bad record must not end the log
                     rejected += 1
                     _report_first(path, rejected, str(exc))
-            rejected += _write_frames(recorder, frames, channel, by_id, path, rejected)
+            rejected += _write_frames(recorder, frames[start:] if start else frames, channel, by_id, path, rejected)
             now = time.monotonic()   # one clock read per batch
             if now >= flush_at:
                 recorder.flush()     # on disk: a run killed now loses at most this batch's successors

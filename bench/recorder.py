@@ -566,9 +566,10 @@ class Recorder:
                                 else f"run log {self.path}: bad frame {arbitration_id!r} on {channel!r}: {exc}")
                 continue
             tail, decoded_id, decoded, problem = known
+            sec, nsec = divmod(ns, 1_000_000_000)   # a plain tuple below, not one built from an unpacked one
             add_ns(ns)
             add_channel(frames_id)
-            add_payload(head % (*divmod(ns, 1_000_000_000), tail))
+            add_payload(head % (sec, nsec, tail))
             if decoded is not None:
                 add_ns(ns)
                 add_channel(decoded_id)
