@@ -167,3 +167,17 @@ def test_bus_options_of_the_other_commands_come_from_the_same_table(command: str
     assert (args.interface, args.channel, args.bitrate, args.fd) == ("udp_multicast", "239.0.0.1", 125000, True)
     with pytest.raises(SystemExit):
         build_parser().parse_args([command, *extra, "--bitrate", "fast"])
+
+
+def test_a_subcommand_loads_only_its_own_module() -> None:
+    """`bench run ...` builds only run's parser (the other subcommands' modules stay unimported); a command line
+    that names no subcommand first gets the whole parser, so its help and its typo hints list them all."""
+    from bench.cli import SUBCOMMANDS, _subcommand
+
+    assert _subcommand(["run", "-n", "2"]) == "run" and _subcommand(["log", "x"]) == "log"
+    assert _subcommand(["--help"]) is None and _subcommand(["rn"]) is None and _subcommand([]) is None
+    code = ("import sys; from bench.cli import build_parser; build_parser('run'); "
+            "print(sorted(m for m in sys.modules if m.startswith('bench.cli.')))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.stdout.split("\n")[0] == str(["bench.cli.common", "bench.cli.run"]), out.stdout + out.stderr
+    assert len(SUBCOMMANDS) > 2
