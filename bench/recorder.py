@@ -29,7 +29,7 @@ import platform
 import struct
 import threading
 import time
-from collections import Counter, deque
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
@@ -331,9 +331,10 @@ def _fast_bulk_adder(writer: Writer) -> Callable[[list[int], list[int], list[byt
             if index is None:
                 index = indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
             entries[channel_id] = index.records
+            counts[channel_id] -= len(index.records)   # + the index's length below: the channel's new messages
         deque(map(list.append, map(entries.__getitem__, channels), zip(nss, offsets)), 0)
-        for channel_id, count in Counter(channels).items():
-            counts[channel_id] += count
+        for channel_id, records_of_channel in entries.items():
+            counts[channel_id] += len(records_of_channel)
         stats.message_count += len(payloads)
         builder.num_messages += len(payloads)
         if records.count > limit:
