@@ -13,16 +13,20 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import subprocess
 import sys
+import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import IO
 
 import common
 
 CASE = common.CASES / "test_sweep_rotation_centres.py"
 TARGET = 1.7
+PROGRESS = re.compile(r"^\[\s*\d+/\d+\] ")   # bench run's line per case: [  3/200] passed  ...
 
 
 def has_workers_option() -> bool:
@@ -38,7 +42,8 @@ def one_run(out: Path, n: int, workers: str | None) -> dict:
     wall0, cpu0 = time.perf_counter(), common.cpu_seconds()
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out.parent / f"{out.name}.log", "w") as log:   # beside: bench run wants an empty or new --out
-        proc = subprocess.Popen(argv, cwd=common.ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(argv, cwd=common.ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        lines = _Lines(proc, log, wall0)
         roles = common.ProcessCpu(proc.pid)
         while proc.poll() is None and time.perf_counter() - wall0 < 1800:
             roles.sample()
@@ -46,6 +51,7 @@ def one_run(out: Path, n: int, workers: str | None) -> dict:
         if proc.poll() is None:
             proc.kill()
         proc.wait()
+        lines.join()
     wall, cpu = time.perf_counter() - wall0, common.cpu_seconds() - cpu0
     tests = failures = errors = 0
     bench_s = None
@@ -58,8 +64,34 @@ def one_run(out: Path, n: int, workers: str | None) -> dict:
                 bench_s = float(prop.get("value"))
     return {"workers": workers or "none (one process)", "exit_code": proc.returncode, "wall_s": wall,
             "cpu_s_all_processes": cpu, "cpu_s_by_role": roles.by_role(), "cases": tests, "failures": failures,
-            "errors": errors, "bench_s": bench_s,
+            "errors": errors, "bench_s": bench_s, "phases_s": lines.phases(wall),
             "mcap_logs": sorted(p.name for p in out.glob("*.mcap")), "load_before": load}
+
+
+class _Lines(threading.Thread):
+    """Copies the run's console to its log and notes when the case lines came: the phases of a run's wall time
+    (start until the first case's line, cases, and the tail after the last one: merge, reports, exit)."""
+
+    def __init__(self, proc: subprocess.Popen, log: IO[str], wall0: float) -> None:
+        super().__init__(daemon=True)
+        self.proc, self.log, self.wall0 = proc, log, wall0
+        self.case_lines: list[float] = []
+        self.start()
+
+    def run(self) -> None:
+        assert self.proc.stdout is not None
+        for raw in self.proc.stdout:
+            line = raw.decode(errors="replace")
+            self.log.write(line)
+            if PROGRESS.match(line):
+                self.case_lines.append(time.perf_counter() - self.wall0)
+
+    def phases(self, wall: float) -> dict[str, float]:
+        if not self.case_lines:
+            return {}
+        first, last = self.case_lines[0], self.case_lines[-1]
+        return {"until the first case's line": round(first, 2), "first to last case line": round(last - first, 2),
+                "after the last case line (merge, reports, exit)": round(wall - last, 2)}
 
 
 def measure(result: common.Result, args: argparse.Namespace) -> None:
@@ -76,7 +108,9 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     if args.repeat > 1:
         result.details["pairs"] = [{"single_wall_s": a["wall_s"], "n2_wall_s": b["wall_s"],
                                     "load_before": (a["load_before"], b["load_before"]),
-                                    "speedup": a["wall_s"] / b["wall_s"]} for a, b in pairs]
+                                    "speedup": a["wall_s"] / b["wall_s"],
+                                    "cpu_s": (a["cpu_s_all_processes"], b["cpu_s_all_processes"]),
+                                    "phases_s": (a["phases_s"], b["phases_s"])} for a, b in pairs]
     if args.with_n1:
         runs["n1"] = one_run(args.work / "n1", n, "1")
     result.details.update(centres=n, runs=runs)
@@ -105,6 +139,11 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
                note="the log process works beside the run: CPU by role "
                     f"{', '.join(f'{k} {v:.1f} s' for k, v in roles.items())}; "
                     f"so {cores} cores allow at most ~{cores / demand:.2f}× over one run, on an otherwise idle machine")
+    for label, run in runs.items():
+        phases = run["phases_s"]
+        if phases:
+            result.add(f"tail of the median run, {label}", phases["after the last case line (merge, reports, exit)"],
+                       "s", note="; ".join(f"{k} {v:.2f} s" for k, v in phases.items()))
     if "n1" in runs:
         result.add("sweep wall time, bench run -n 1 (xdist overhead)", runs["n1"]["wall_s"], "s", single["wall_s"],
                    "bench run, one process")
