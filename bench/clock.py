@@ -239,19 +239,20 @@ class Scheduler:
         # missed ticks would cost more time than they cover when the machine is short of CPU, and the
         # run would fall further behind for ever. A plant's models step every tick, late or not.
         may_skip = self.clock.realtime and not any(station.every_tick for station in self.stations)
+        stations, dt, wait_until = self.stations, self.dt, self.clock.wait_until   # (every tick: locals)
         while self.tick < last:
-            self.tick += 1
-            t = self.tick * self.dt
-            self.clock.wait_until(t, self.stations)
+            tick = self.tick = self.tick + 1
+            t = tick * dt
+            wait_until(t, stations)
             if may_skip:
-                behind = min(int(self.clock.recent() / self.dt) - self.tick, last - self.tick)   # the read
+                behind = min(int(self.clock.recent() / dt) - tick, last - tick)   # the read
                 # that ended the wait: no second read
                 if behind > 0:
-                    self.tick += behind
+                    tick = self.tick = tick + behind
                     self.skipped += behind
-                    t = self.tick * self.dt
-            for station in self.stations:
-                station.tick(self.tick, t, self.dt)
+                    t = tick * dt
+            for station in stations:
+                station.tick(tick, t, dt)
             if stop is not None and stop():
                 self._catch_up()
                 return True

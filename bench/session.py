@@ -98,7 +98,8 @@ class BenchSession:
         bus = open_bus(self.settings.interface, self.channel, self.bus_options)
         stamp = getattr(self.clock, "stamp", None)   # real time: frames get their receive timestamps
         return Station(name, bus, Restbus(self.codebook, nodes), monitor, self.now, behaviours, stamp,
-                       every_tick=every_tick, recent_monotonic=getattr(self.clock, "recent_monotonic", None))
+                       every_tick=every_tick, recent_monotonic=getattr(self.clock, "recent_monotonic", None),
+                       frozen_now=not self.clock.realtime)
 
     def now(self) -> float:
         return self.scheduler.now if not self.clock.realtime else self.clock.now()

@@ -74,7 +74,7 @@ class Station:
     def __init__(self, name: str, bus: can.BusABC, restbus: Restbus, monitor: Monitor,
                  now: Callable[[], float], behaviours: Sequence[Behaviour] = (),
                  stamp: Callable[[float], float] | None = None, *, every_tick: bool = True,
-                 recent_monotonic: Callable[[], float] | None = None) -> None:
+                 recent_monotonic: Callable[[], float] | None = None, frozen_now: bool = False) -> None:
         self.name = name
         self.bus = bus
         self.restbus = restbus
@@ -87,6 +87,9 @@ class Station:
         # own lateness, and a frame costs no clock read. None: the time of reading.
         self.stamp = stamp
         self._last_rx = float("-inf")
+        # `now` does not move during a poll (the virtual clock: bench time is the tick's): without a stamp, a
+        # frame gets the time read once per poll instead of a read of its own (the same number).
+        self.frozen_now = frozen_now
         # A plant's models integrate every tick; a runner's timers and restbus are due-based and may skip
         # ticks when late (bench.clock.Scheduler).
         self.every_tick = every_tick
@@ -146,6 +149,8 @@ class Station:
         else:
             frames = self._recv(timeout, limit)
         count = 0
+        frozen = self.frozen_now
+        t_poll: float | None = None
         for msg in frames:
             count += 1
             data = bytes(msg.data)
@@ -154,7 +159,12 @@ class Station:
                 pending.remove(data)   # our own frame looped back (udp_multicast does): already logged as tx
             else:
                 if stamp is None:
-                    t = now()
+                    if not frozen:
+                        t = now()
+                    elif t_poll is None:
+                        t = t_poll = now()
+                    else:
+                        t = t_poll
                 else:   # one socket delivers in order: a stamp never goes back (one of another base could)
                     t = self._last_rx = max(self._last_rx, stamp(msg.timestamp))
                 monitor.on_frame(t, msg.arbitration_id, data, "rx", msg.is_extended_id, msg.is_error_frame)
