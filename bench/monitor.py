@@ -132,14 +132,15 @@ class Monitor:
                  is_extended: bool = False, is_error: bool = False) -> bool:
         """Check one frame; apply it only when valid. Returns the verdict. Never raises on bus data."""
         self.frames += 1
+        sink = self.sink
         state = None if (is_extended or is_error) else self.states.get(arbitration_id)
         if state is None:
             self.unknown_frames += 1
             reason = "error frame" if is_error else "unknown identifier"
             self._invalid(InvalidFrame(t, arbitration_id, "error frame" if is_error else
                                        f"0x{arbitration_id:X}", reason))
-            if self.sink:
-                self.sink(t, arbitration_id, data, direction, False, reason, None, None)
+            if sink:
+                sink(t, arbitration_id, data, direction, False, reason, None, None)
             return False
         codec = state.codec
         last_valid = state.last_valid
@@ -191,8 +192,8 @@ class Monitor:
             state.invalid[kind] = state.invalid.get(kind, 0) + 1
             state.last_invalid = True
             self._invalid(InvalidFrame(t, arbitration_id, codec.name, reason))
-            if self.sink:
-                self.sink(t, arbitration_id, data, direction, False, reason, codec, None)
+            if sink:
+                sink(t, arbitration_id, data, direction, False, reason, codec, None)
             return False
         assert values is not None
         state.latest = values
@@ -205,8 +206,8 @@ class Monitor:
             if len(state.history_t) > 2 * HISTORY_CAP:
                 _trim(state.history_v, HISTORY_CAP)
                 state.history_dropped += _trim(state.history_t, HISTORY_CAP)
-        if self.sink:
-            self.sink(t, arbitration_id, data, direction, True, "", codec, values)
+        if sink:
+            sink(t, arbitration_id, data, direction, True, "", codec, values)
         return True
 
     def _follow_counters(self, state: MessageState, t: float, frame_id: int, data: bytes, kind: str,
