@@ -95,6 +95,9 @@ class _Lines(threading.Thread):
 
 
 def measure(result: common.Result, args: argparse.Namespace) -> None:
+    if args.schedule:
+        replay_schedules(result, args.schedule)
+        return
     if not has_workers_option():
         result.error = "bench run has no -n option (pytest-xdist scale-out not available in this version)"
         return
@@ -158,8 +161,87 @@ def _median_run(runs: list[dict]) -> dict:
     return sorted(runs, key=lambda run: run["wall_s"])[len(runs) // 2]
 
 
+class _Node:
+    """What pytest-xdist's schedulers talk to: a worker that queues the case indices it is sent."""
+
+    def __init__(self, i: int) -> None:
+        self.gateway = type("Gateway", (), {"id": f"gw{i}"})()
+        self.shutting_down = False
+        self.queue: list[int] = []
+        self.steal: list[int] = []
+
+    def send_runtest_some(self, indices: list[int]) -> None:
+        self.queue.extend(indices)
+
+    def send_runtest_all(self) -> None:
+        raise NotImplementedError
+
+    def send_steal(self, indices: list[int]) -> None:
+        self.steal.extend(indices)
+
+    def shutdown(self) -> None:
+        self.shutting_down = True
+
+
+def _makespan(scheduler_class: type, ids: list[str], seconds: list[float], workers: int) -> float:
+    """The campaign's cases through one of xdist's own schedulers, each case taking its recorded duration; the
+    run ends when the last worker is done (start-up and the merge not counted)."""
+    config = argparse.Namespace(option=argparse.Namespace(maxschedchunk=None, tx=["popen"] * workers,
+                                                          numprocesses=workers, dist="load"))
+    config.getvalue = lambda name: getattr(config.option, name, None)
+    config.getoption = config.getvalue
+    scheduler = scheduler_class(config)
+    nodes = [_Node(i) for i in range(workers)]
+    for node in nodes:
+        scheduler.add_node(node)
+    for node in nodes:
+        scheduler.add_node_collection(node, ids)
+    scheduler.schedule()
+    clock = [0.0] * workers
+    while any(node.queue for node in nodes):
+        i = min((clock[i] + seconds[n.queue[0]], i) for i, n in enumerate(nodes) if n.queue)[1]
+        item = nodes[i].queue.pop(0)
+        clock[i] += seconds[item]
+        scheduler.mark_test_complete(nodes[i], item, seconds[item])
+        for node in nodes:   # a steal request: the victim hands back what it has not started
+            if node.steal:
+                back = [x for x in node.steal if x in node.queue]
+                node.queue = [x for x in node.queue if x not in back]
+                node.steal = []
+                scheduler.remove_pending_tests_from_node(node, back)
+    return max(clock)
+
+
+def replay_schedules(result: common.Result, durations: Path, workers: int = 2) -> None:
+    """How pytest-xdist's --dist modes would share the campaign between two workers, from the recorded case
+    durations (pytest-split's .test_durations) in collection order: why `bench run -n` uses worksteal."""
+    import contextlib
+    import io
+    import json
+
+    from xdist.scheduler.load import LoadScheduling
+    from xdist.scheduler.worksteal import WorkStealingScheduling
+
+    recorded = json.loads(durations.read_text())
+    collected = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+                                "testcases"], cwd=common.ROOT, capture_output=True, text=True).stdout
+    ids = [line.strip() for line in collected.splitlines() if "::" in line]
+    seconds = [float(recorded.get(i, 0.0)) for i in ids]
+    even = sum(seconds) / workers
+    result.details.update(cases=len(ids), without_duration=sum(1 for i in ids if i not in recorded),
+                          longest={ids[seconds.index(max(seconds))]: max(seconds)})
+    for name, cls in (("load", LoadScheduling), ("worksteal", WorkStealingScheduling)):
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):   # their log
+            span = _makespan(cls, ids, seconds, workers)
+        result.add(f"campaign on {workers} workers, --dist {name}", span, "s", even, "an even split of the "
+                   "recorded durations", note=f"{span / even - 1:+.1%} over an even split; {len(ids)} cases")
+
+
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--with-n1", action="store_true", help="also run with -n 1 (one xdist worker)")
+    parser.add_argument("--schedule", type=Path, metavar="DURATIONS", default=None,
+                        help="instead of running: replay the campaign's recorded case durations (.test_durations) "
+                             "through pytest-xdist's load and worksteal schedulers, 2 workers")
     parser.add_argument("--repeat", type=int, default=1,
                         help="pairs (one process, then -n 2) run back to back; the median pair's ratio is reported")
 
