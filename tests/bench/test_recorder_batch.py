@@ -52,10 +52,10 @@ def frames_of(codebook: Codebook, count: int, seed: int) -> list[Frame]:
     return out
 
 
-def per_frame(path: Path, frames: list[Frame], codebook: Codebook, batch: int) -> int:
+def per_frame(path: Path, frames: list[Frame], codebook: Codebook, batch: int, chunk_size: int = 4096) -> int:
     """What bench.logproc wrote before the batch path: frame() and decoded() per frame; the refusals."""
     recorder = Recorder(path, [load_dbc(CHASSIS_DBC), load_dbc(BENCH_DBC)], flush_interval=math.inf,
-                        chunk_size=4096)
+                        chunk_size=chunk_size)
     recorder.set_origin(ORIGIN_NS, "virtual")
     refused = 0
     for start in range(0, len(frames), batch):
@@ -73,9 +73,9 @@ def per_frame(path: Path, frames: list[Frame], codebook: Codebook, batch: int) -
     return refused
 
 
-def batched(path: Path, frames: list[Frame], codebook: Codebook, batch: int) -> list[str]:
+def batched(path: Path, frames: list[Frame], codebook: Codebook, batch: int, chunk_size: int = 4096) -> list[str]:
     recorder = Recorder(path, [load_dbc(CHASSIS_DBC), load_dbc(BENCH_DBC)], flush_interval=math.inf,
-                        chunk_size=4096)
+                        chunk_size=chunk_size)
     recorder.set_origin(ORIGIN_NS, "virtual")
     problems: list[str] = []
     for start in range(0, len(frames), batch):
@@ -129,3 +129,16 @@ def test_a_refused_frame_writes_nothing_and_says_why(tmp_path: Path, codebook: C
     assert all(problem.startswith(f"run log {path}: bad frame ") for problem in problems)   # frame()'s text
     assert [f.t for f in read_frames(path)] == [0.001, 0.001]
     assert [name for _, name, _ in read_decoded(path)] == [codec.name, codec.name]
+
+
+def test_batches_inside_one_chunk_write_what_frame_and_decoded_write(tmp_path: Path, codebook: Codebook) -> None:
+    """Batches that end no chunk (the log process's usual case: chunks of 1 MiB, batches of 2000 frames) take
+    `_write_many`'s path without a split; the chunks then end at the flushes only."""
+    frames = [frame for frame in frames_of(codebook, 3000, seed=11) if type(frame[2]) is bytes]
+    reference, batch = tmp_path / "per_frame.mcap", tmp_path / "batch.mcap"
+    refused = per_frame(reference, frames, codebook, batch=500, chunk_size=1 << 20)
+    problems = batched(batch, frames, codebook, batch=500, chunk_size=1 << 20)
+    expected, got = records(reference), records(batch)
+    assert sum(type(r).__name__ == "Chunk" for r in got) == -(-len(frames) // 500)   # one per batch (its flush)
+    assert got == expected
+    assert len(problems) == refused > 0
