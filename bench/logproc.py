@@ -5,7 +5,8 @@ compression) cost about 13 µs of CPU per frame, a fifth of a campaign's CPU; th
 frames with `Recorder.frames` (the texts of a repeated frame built once), about half that (docs/performance.md,
 2026-11-24, issue 18). In a child process it runs on the machine's other core while the simulation goes on.
 The simulation hands over raw frames in batches (no decoded values: the child decodes them again
-with the same codec, which is cheaper than pickling them). The child
+with the same codec, which is cheaper than pickling them), each batch's frames as one list and its few other
+items (steps, metadata, the time origin) apart with their place among the frames. The child
 ignores SIGINT/SIGTERM and finishes the file when the run closes the pipe, or when the run dies:
 a run killed with SIGKILL still leaves a complete log of every frame handed over before the kill
 (at most BATCH_SECONDS of wall time of frames are lost).
