@@ -60,10 +60,10 @@ class Restbus:
             # Spread messages of equal cycle over the period so the bus load is even (deterministic).
             self.periodic[codec.name] = _Periodic(codec, period, codec.frame_id % period, len(self.periodic))
         # The schedule: (next due tick, order, message), so a tick looks at the messages due then, not at all of
-        # them; a stopped message that falls due waits aside (parked) until it is resumed.
-        self._queue: list[tuple[int, int, _Periodic]] = [(p.next_due, p.order, p) for p in self.periodic.values()]
-        heapq.heapify(self._queue)
-        self.schedule = self._queue   # the same list, read-only for others: schedule[0][0] is the next due tick
+        # them; a stopped message that falls due waits aside (parked) until it is resumed. Read-only for others:
+        # schedule[0][0] is the next due tick (a station skips `due` before it).
+        self.schedule: list[tuple[int, int, _Periodic]] = [(p.next_due, p.order, p) for p in self.periodic.values()]
+        heapq.heapify(self.schedule)
         self._parked: dict[int, _Periodic] = {}
 
     def set(self, message: str, **signals: float | int | str) -> None:
@@ -96,7 +96,7 @@ class Restbus:
         slot = self._slot(message)
         slot.enabled = True
         if self._parked.pop(slot.order, None) is not None:
-            heapq.heappush(self._queue, (slot.next_due, slot.order, slot))
+            heapq.heappush(self.schedule, (slot.next_due, slot.order, slot))
 
     def _slot(self, message: str) -> _Periodic:
         slot = self.periodic.get(message)
@@ -108,7 +108,7 @@ class Restbus:
 
     def due(self, tick: int) -> Iterator[tuple[int, bytes]]:
         """The frames due at this tick, each with its counter and checksum, in the messages' order."""
-        queue = self._queue
+        queue = self.schedule
         if not queue or queue[0][0] > tick:
             return
         ready = []
