@@ -150,15 +150,9 @@ class FaultPlan:
         for fault in faults:
             self.add(fault)
 
-    def expire(self, t: float) -> None:
-        """Forget the faults whose window ended by bench time `t` (bench time only goes on: none can act again;
-        each stays in `history`, on the record). With none left, `any` is false and frames skip the plan."""
-        self.faults[:] = [fault for fault in self.faults if fault.end > t]
-
     def begin_case(self, t: float) -> list[Fault]:
         """A case starts at bench time `t`: every case+ fault gets its window in this case."""
         self.end_case(t)
-        self.expire(t)
         for template in self.templates:
             instance = Fault(template.kind, template.target, t + template.start, t + template.end, template.param,
                              source=template.source, parent=template)
@@ -183,6 +177,10 @@ class FaultPlan:
 
     @property
     def any(self) -> bool:
+        """Whether a fault was ever added (or case+ ones wait). It stays true after a window ends: on socketcan
+        it keeps a message on the tick scheduler, so no frame of a later fault's window can still come from the
+        kernel's broadcast manager, which a fault cannot reach (bench/periodic.py stops a task only at its next
+        quiet moment)."""
         return bool(self.faults or self.templates)
 
     # -- applied by stations ----------------------------------------------------------------------
