@@ -59,6 +59,16 @@ MAX_DATA = 64  # CAN FD
 _MAX_T = 1.8e10  # s: log times are uint64 ns (~584 years)
 _EXACT_T = 2.0 ** 22  # s: below it t * 1e9 < 2**53, an exact float product
 _RECORD_OVERHEAD = 31  # bytes of an MCAP Message record besides its data
+
+
+def _records_size(payloads: list[bytes]) -> int:
+    """Bytes of the MCAP Message records of these payloads."""
+    return sum(map(len, payloads)) + _RECORD_OVERHEAD * len(payloads)
+
+
+def _record_ends(payloads: list[bytes]) -> list[int]:
+    """Where each payload's record ends, counted from the first one's start."""
+    return list(itertools.accumulate(map(operator.add, map(len, payloads), itertools.repeat(_RECORD_OVERHEAD))))
 _DECIMAL = [str(i) for i in range(256)]
 _PAD = [bytes(8 - n) for n in range(8)]
 _FRAME_HEAD = b'{"header":{"stamp":{"sec":%d,"nsec":%d},%b'   # a frame record: its stamp, then its tail
@@ -292,11 +302,11 @@ def _fast_bulk_adder(writer: Writer) -> Callable[[list[int], list[int], list[byt
     def add_many(channels: list[int], nss: list[int], payloads: list[bytes]) -> None:
         # mcap's writer closes its chunk after the record that takes it past its own limit (only a chunk that
         # holds many schemas, with a small chunk_size, gets there first): split the messages where it would
-        if builder.record_writer.count + sum(map(len, payloads)) + _RECORD_OVERHEAD * len(payloads) <= limit:
+        if builder.record_writer.count + _records_size(payloads) <= limit:
             add_within(channels, nss, payloads)   # the usual case (the recorder's own limit comes first)
             return
         start = 0
-        ends = list(itertools.accumulate(map(add, map(len, payloads), repeat(_RECORD_OVERHEAD))))
+        ends = _record_ends(payloads)
         while True:
             stop = bisect.bisect_right(ends, limit - builder.record_writer.count + (ends[start - 1] if start else 0),
                                        start) + 1
@@ -716,25 +726,12 @@ class Recorder:
                 if self._closed or self._broken:
                     return
                 self._broken = True
-                total = sum(map(len, payloads)) + _RECORD_OVERHEAD * len(payloads)
+                total = _records_size(payloads)
                 if self._pending + total < self._chunk_bytes:   # the batch ends no chunk: no split to find
                     self._add_many(channels, nss, payloads)
                     self._pending += total
-                    payloads = []
                 else:
-                    ends = list(itertools.accumulate(map(operator.add, map(len, payloads),
-                                                         itertools.repeat(_RECORD_OVERHEAD))))
-                start = 0
-                while start < len(payloads):
-                    base = ends[start - 1] if start else 0
-                    # the first record after which the chunk holds chunk_bytes (as _write checks after each)
-                    stop = bisect.bisect_left(ends, self._chunk_bytes - self._pending + base, start) + 1
-                    stop = min(stop, len(payloads))
-                    self._add_many(channels[start:stop], nss[start:stop], payloads[start:stop])
-                    self._pending += ends[stop - 1] - base
-                    if self._pending >= self._chunk_bytes:
-                        self._finish_chunk()
-                    start = stop
+                    self._add_in_chunks(channels, nss, payloads)
                 if self._deadline != math.inf and time.monotonic() >= self._deadline:
                     self._finish_chunk()
                 self._broken = False
@@ -742,6 +739,21 @@ class Recorder:
                 self._busy = False
                 if self._close_pending:
                     self._close_locked()
+
+    def _add_in_chunks(self, channels: list[int], nss: list[int], payloads: list[bytes]) -> None:
+        """Add a batch that fills the open chunk: finish each chunk after the record that fills it."""
+        ends = _record_ends(payloads)
+        start = 0
+        while start < len(payloads):
+            base = ends[start - 1] if start else 0
+            # the first record after which the chunk holds chunk_bytes (as _write checks after each)
+            stop = bisect.bisect_left(ends, self._chunk_bytes - self._pending + base, start) + 1
+            stop = min(stop, len(payloads))
+            self._add_many(channels[start:stop], nss[start:stop], payloads[start:stop])
+            self._pending += ends[stop - 1] - base
+            if self._pending >= self._chunk_bytes:
+                self._finish_chunk()
+            start = stop
 
     def _add_one_by_one(self, channels: list[int], nss: list[int], payloads: list[bytes]) -> None:
         for channel_id, ns, payload in zip(channels, nss, payloads):
