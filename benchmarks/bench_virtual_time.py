@@ -16,9 +16,10 @@ layer by layer, to show what each layer costs:
 Target (issue 9): >= 50x real time for the campaign, every frame logged and decoded.
 
 The plant's floor: the campaign once more, with the CPU time (this thread's) of every `step` of the plant's
-behaviours counted (its bus I/O calls, io.latest and io.send_values, included; the two clock reads per tick
-subtracted as calibrated here). Bench time over that CPU is the campaign's bench seconds per CPU-second if the
-bench itself, the test cases and the log cost nothing: no change outside the plant can take the campaign past it.
+behaviours counted (its bus I/O calls, io.latest and io.send_values, included, and the counting wrapper's own
+call; the cost of one clock read per step, calibrated here, subtracted). Bench time over that CPU is the
+campaign's bench seconds per CPU-second if the bench itself, the test cases and the log cost nothing: no change
+outside the plant can take the campaign past it.
 A run of its own, so the headline figures above carry no counting overhead.
 """
 

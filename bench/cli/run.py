@@ -124,11 +124,8 @@ def _settle_at_exit() -> None:
     """Once per process: when the interpreter exits, collect once and freeze what is left (bench.clock.settle_heap).
     Python's shutdown otherwise runs several full collections over a heap that a run made large (0.3-0.5 s after
     the report is out, measured on a 200-case run); the garbage present at exit is still collected."""
-    if not _exit_hook:
-        _exit_hook.append(atexit.register(settle_heap))
-
-
-_exit_hook: list[Callable[[], None]] = []
+    atexit.unregister(settle_heap)   # registered once however often run() is called
+    atexit.register(settle_heap)
 
 
 def _short(nodeid: str) -> str:
