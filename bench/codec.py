@@ -61,11 +61,6 @@ _EXACT_LIMIT = 1 << 52
 #: A decoded value may exceed the DBC range by this fraction of the scale (rounding) and still be valid.
 RANGE_SLACK = 0.5
 
-#: The place of a plain counter and checksum in a decoded word, and their values as floats (raw * 1.0).
-_COUNTER_SHIFT = 8 * e2e.COUNTER_BYTE
-_CHECKSUM_SHIFT = 8 * e2e.CHECKSUM_BYTE
-_FLOATS = tuple(float(raw) for raw in range(256))
-
 #: Frames whose E2E check a message's codec remembers (two payloads' worth of counters, and then some).
 INTACT_CACHE = 64
 
@@ -101,7 +96,7 @@ class SignalCodec:
 class MessageCodec:
     """Encode and decode one message; E2E bytes are left to `bench.e2e`."""
 
-    def __init__(self, message: Message, database_name: str) -> None:
+    def __init__(self, message: Message, database_name: str, protection: e2e.Protection | None = None) -> None:
         self.message = message
         self.database = database_name
         self.name: str = message.name
@@ -123,14 +118,15 @@ class MessageCodec:
         )
         self.by_name: dict[str, SignalCodec] = {s.name: s for s in self.signals}
         self.signal_names: tuple[str, ...] = tuple(s.name for s in self.signals)
-        # The end-to-end layout (docs/spec/e2e.md): a message is protected when signals sit at the counter's and
-        # the checksum's places, whatever the database calls them; only such messages are checked for it.
-        self.e2e_layout: e2e.Layout | None = e2e.layout(
-            message.length, ((s.name, s.start, s.length, s.byte_order == "little_endian") for s in message.signals))
-        self.e2e: bool = self.e2e_layout is not None
-        #: The names of this message's counter and checksum signals (empty when it is not protected).
+        # The end-to-end protection (docs/spec/e2e.md): from the database (DBC attributes or ARXML) or bench.toml,
+        # checked by the Codebook; None: the message is unprotected (judged on its length, timing and ranges).
+        self.protection: e2e.Protection | None = protection
+        self.e2e: bool = protection is not None
+        #: The signals that sit on the protection's CRC or counter field (shown as E2E, never set by hand).
         self.e2e_signals: frozenset[str] = frozenset(
-            () if self.e2e_layout is None else (self.e2e_layout.counter, self.e2e_layout.checksum))
+            () if protection is None else
+            (s.name for s in message.signals if s.byte_order == "little_endian"
+             and (protection.crc.covers(s.start, s.length) or protection.counter.covers(s.start, s.length))))
         self.fast = (
             not message.is_multiplexed()
             and all(s.byte_order == "little_endian" and not s.is_float and _float_exact(s)
@@ -152,15 +148,20 @@ class MessageCodec:
         # out of range or None until asked), replaced whole, so a reader on another thread never pairs a payload
         # with other values.
         full = (1 << (8 * self.length)) - 1
-        self._e2e_plain = self.fast and self.e2e_layout is not None and all(
-            _plain_raw(self.by_name[n]) for n in (self.e2e_layout.counter, self.e2e_layout.checksum))
-        self._counter_name, self._checksum_name = \
-            ("", "") if self.e2e_layout is None else (self.e2e_layout.counter, self.e2e_layout.checksum)
-        self._body_mask = full & ~((0x0F << 8 * e2e.COUNTER_BYTE) | (0xFF << 8 * e2e.CHECKSUM_BYTE)) \
-            if self._e2e_plain else full
+        self._e2e_fields: tuple[tuple[str, int, int], ...] = ()   # (signal, shift, mask) of the plain E2E fields
+        if self.fast and protection is not None:
+            plain = []
+            for field_ in (protection.counter, protection.crc):
+                sig = next((s for s in self.signals if s.start == field_.start and s.length == field_.length), None)
+                # (an E2E field's DBC range does not matter here: the profile's check judges it before any decode)
+                if sig is not None and not sig.signed and sig.scale == 1 and sig.offset == 0:
+                    plain.append((sig.name, field_.start, (1 << field_.length) - 1))
+            if len(plain) == len([s for s in self.signals if s.name in self.e2e_signals]):
+                self._e2e_fields = tuple(plain)
+        self._body_mask = full & ~protection.header_mask if self._e2e_fields and protection is not None else full
         self._entry: tuple[int, dict[str, float], tuple[str, ...] | None] = (-1, {}, None)
         # The E2E check of a frame, once per distinct frame: both monitors of a process check each frame, and a
-        # message whose values stay the same repeats its 16 frames (one per counter value).
+        # message whose values stay the same repeats its frames (one per counter value).
         self._intact: dict[bytes, int | None] = {}
         # `decode_checked` of a frame, once per distinct frame (both monitors of a process judge every frame, and
         # a message whose values stay the same repeats its 16 frames): its values dict is shared by the callers,
@@ -180,14 +181,16 @@ class MessageCodec:
         self._pack_linear = tuple(f for f in fields if f[6] != 0)
 
     def counter_if_intact(self, data: bytes | bytearray) -> int | None:
-        """`bench.e2e.counter_if_intact` of a frame of this message (its counter if its checksum is right,
-        else None), computed once per distinct frame."""
+        """The counter of a frame of this protected message if its CRC is right, else None (the profile's
+        check, `bench.e2e.Protection.counter_if_intact`), computed once per distinct frame."""
+        protection = self.protection
+        assert protection is not None, f"{self.name} is not E2E-protected"
         if type(data) is not bytes:
-            return e2e.counter_if_intact(self.frame_id, data)
+            return protection.counter_if_intact(data)
         cache = self._intact
         found = cache.get(data, -1)
         if found == -1:
-            found = e2e.counter_if_intact(self.frame_id, data)
+            found = protection.counter_if_intact(data)
             if len(cache) >= INTACT_CACHE:
                 cache.clear()
             cache[data] = found
@@ -332,9 +335,8 @@ class MessageCodec:
         if word & self._body_mask != entry[0]:
             entry = self._decode_word(word)
         values = entry[1].copy()
-        if self._e2e_plain:
-            values[self._counter_name] = _FLOATS[(word >> _COUNTER_SHIFT) & 0x0F]
-            values[self._checksum_name] = _FLOATS[(word >> _CHECKSUM_SHIFT) & 0xFF]
+        for name, shift, mask in self._e2e_fields:
+            values[name] = float((word >> shift) & mask)
         return entry, values
 
     def _decode_word(self, word: int) -> tuple[int, dict[str, float], tuple[str, ...] | None]:
@@ -405,13 +407,25 @@ def _float_exact(signal: Signal) -> bool:
 class Codebook:
     """Every message of the loaded databases, by identifier and by name."""
 
-    def __init__(self, databases: Iterable[tuple[str, Database]]) -> None:
+    def __init__(self, databases: Iterable[tuple[str, Database]],
+                 e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+        """`e2e_overrides`: bench.toml's `[e2e]` table, message name -> AUTOSAR parameters over the database's."""
         self.databases: list[tuple[str, Database]] = list(databases)
         self.by_id: dict[int, MessageCodec] = {}
         self.by_name: dict[str, MessageCodec] = {}
+        overrides = dict(e2e_overrides or {})
+        names = [m.name for _, db in self.databases for m in db.messages]
+        for name in overrides:
+            if name not in names:
+                raise DatabaseError(f"bench.toml: [e2e] {name}: no such message{did_you_mean(name, names)}")
         for db_name, db in self.databases:
+            definitions = getattr(db.dbc, "attribute_definitions", None) or {} if db.dbc is not None else {}
             for message in db.messages:
-                codec = MessageCodec(message, db_name)
+                try:
+                    protection = e2e.protection(message, definitions, overrides.get(message.name))
+                except e2e.ProtectionError as exc:
+                    raise DatabaseError(f"{db_name}: {exc}") from None
+                codec = MessageCodec(message, db_name, protection)
                 other = self.by_id.get(codec.frame_id) or self.by_name.get(codec.name)
                 if other is not None:
                     raise DatabaseError(
@@ -441,15 +455,17 @@ class Codebook:
 
 
 def load_dbc(path: Path | str) -> Database:
-    """Load a DBC strictly; any problem becomes a DatabaseError naming the file."""
+    """Load a DBC (or an ARXML system description, by its suffix) strictly; any problem becomes a DatabaseError
+    naming the file."""
     path = Path(path)
     if not path.is_file():
         raise DatabaseError(f"{path}: no such DBC file")
+    kind = "arxml" if path.suffix.lower() == ".arxml" else "dbc"
     try:
-        return cast(Database, cantools.database.load_file(str(path), database_format="dbc", strict=True))
+        return cast(Database, cantools.database.load_file(str(path), database_format=kind, strict=True))
     except Exception as exc:  # cantools raises several types; every one is a bad file for us
         raise DatabaseError(f"{path}: {exc}") from None
 
 
-def load_codebook(paths: Iterable[Path | str]) -> Codebook:
-    return Codebook((Path(p).name, load_dbc(p)) for p in paths)
+def load_codebook(paths: Iterable[Path | str], e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> Codebook:
+    return Codebook(((Path(p).name, load_dbc(p)) for p in paths), e2e_overrides)

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
-from bench import e2e
 from bench.codec import Codebook, MessageCodec
+from bench.e2e import Protection
 
 if TYPE_CHECKING:
     from bench.faults import Fault
@@ -41,6 +41,7 @@ class Outgoing:
     frame_id: int
     frames: list[bytes]
     rng: random.Random
+    protection: Protection | None = None   # the message's E2E protection (what counter and CRC kinds act on)
     delay: float = 0.0                   # s, 0: now
     dropped: bool = False                # no frame goes on the bus
 
@@ -98,6 +99,25 @@ class _Corruption(FaultKind):
         raise NotImplementedError
 
 
+class _E2ECorruption(_Corruption):
+    """A kind that acts on the E2E counter or CRC field of a protected message, as its profile places them."""
+
+    def check_target(self, target: str, codebook: Codebook) -> str | None:
+        problem = super().check_target(target, codebook)
+        if problem is None and codebook.by_name[target].protection is None:
+            return f"{target} is not E2E-protected: {self.name} acts on its profile's counter or CRC"
+        return problem
+
+    def act(self, fault: Fault, out: Outgoing) -> None:
+        if out.protection is not None:
+            super().act(fault, out)
+
+    @staticmethod
+    def protection(out: Outgoing) -> Protection:
+        assert out.protection is not None   # act() runs only for a protected message
+        return out.protection
+
+
 # -- frame kinds (TARGET: a message) --------------------------------------------------------------------
 class Drop(FaultKind):
     name, summary = "drop", "the message's frames are not sent"
@@ -137,59 +157,63 @@ class Bitflip(_Corruption):
         return bytes(data)
 
 
-class CounterFreeze(_Corruption):
-    name, summary = "counter_freeze", "the counter keeps its value at the fault's start (checksum right)"
+class CounterFreeze(_E2ECorruption):
+    name, summary = "counter_freeze", "the E2E counter keeps its value at the fault's start (CRC right)"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
+        protection = self.protection(out)
         if fault.frozen is None:
-            fault.frozen = e2e.counter_of(data)
-        e2e.protect(out.frame_id, data, fault.frozen)      # a correct checksum over the wrong counter
+            fault.frozen = protection.counter_of(data)
+        protection.protect(data, fault.frozen)      # a correct CRC over the wrong counter
         return bytes(data)
 
 
-class CounterJump(_Corruption):
+class CounterJump(_E2ECorruption):
     name, param, param_doc = "counter_jump", "STEP", "counter values"
-    summary = "the counter is STEP ahead (mod 16; checksum right)"
+    summary = "the E2E counter is STEP ahead (modulo its profile's range; CRC right)"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
-        counter = (e2e.counter_of(data) + int(fault.param)) % e2e.COUNTER_MODULO
-        e2e.protect(out.frame_id, data, counter)           # a correct checksum over the wrong counter
+        protection = self.protection(out)
+        protection.protect(data, protection.counter_of(data) + int(fault.param))   # a correct CRC, wrong counter
         return bytes(data)
 
 
-class ChecksumValue(_Corruption):
-    name, param, param_doc = "checksum_value", "VALUE", "0..255"
-    summary = "the checksum is VALUE"
+class ChecksumValue(_E2ECorruption):
+    name, param, param_doc = "checksum_value", "VALUE", "0..255 (P05: 0..65535)"
+    summary = "the E2E CRC is VALUE"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
-        e2e.set_checksum(data, int(fault.param))
+        self.protection(out).set_checksum(data, int(fault.param))
         return bytes(data)
 
 
-class ChecksumFreeze(_Corruption):
-    name, summary = "checksum_freeze", "the checksum keeps its value at the fault's start"
+class ChecksumFreeze(_E2ECorruption):
+    name, summary = "checksum_freeze", "the E2E CRC keeps its value at the fault's start"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
+        protection = self.protection(out)
         if fault.frozen is None:
-            fault.frozen = e2e.checksum_of(data)
-        e2e.set_checksum(data, fault.frozen)
+            fault.frozen = protection.checksum_of(data)
+        protection.set_checksum(data, fault.frozen)
         return bytes(data)
 
 
-class ChecksumRandom(_Corruption):
-    name, summary = "checksum_random", "the checksum is a random byte (the same sequence on every run)"
+class ChecksumRandom(_E2ECorruption):
+    name, summary = "checksum_random", "the E2E CRC is a random number (the same sequence on every run)"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
-        e2e.set_checksum(data, out.rng.randrange(256))
+        protection = self.protection(out)
+        protection.set_checksum(data, out.rng.randrange(1 << protection.crc.length))
         return bytes(data)
 
 
-class ChecksumOffset(_Corruption):
-    name, param, param_doc = "checksum_offset", "OFFSET", "added mod 256"
-    summary = "OFFSET is added to the checksum the sender computed"
+class ChecksumOffset(_E2ECorruption):
+    name, param, param_doc = "checksum_offset", "OFFSET", "added modulo the CRC's range"
+    summary = "OFFSET is added to the E2E CRC the sender computed"
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
-        e2e.set_checksum(data, e2e.checksum_of(data) + int(fault.param))
+        protection = self.protection(out)
+        protection.set_checksum(data, protection.checksum_of(data) + int(fault.param))
         return bytes(data)
 
 

@@ -208,7 +208,7 @@ class FaultPlan:
             if not kind.applies(fault, frame_id, codec):
                 continue
             if out is None:
-                out = Outgoing(frame_id, [data], self._rng)
+                out = Outgoing(frame_id, [data], self._rng, codec.protection)
             fault.hit()
             kind.act(fault, out)
             if out.dropped:

@@ -1,14 +1,12 @@
 """Receive side: every frame on the bus is checked against the DBC and the contract's E2E rules.
 
 One monitor per bus handle decodes every frame, keeps the latest valid values and, when asked,
-a time-stamped history per message; it checks length, checksum, counter sequence (the receiver's state
-machine, bench.e2e.Receiver, docs/spec/e2e.md), signal ranges and timeouts (3 x cycle time). Invalid
-frames are counted and logged, never applied.
+a time-stamped history per message; it checks length, the AUTOSAR E2E protection of protected messages (the
+profile's check and the E2E state machine, bench.e2e.Receiver, docs/spec/e2e.md), signal ranges and timeouts
+(3 x cycle time). Invalid frames are counted and logged, never applied.
 
-Two clocks per message (docs/spec/e2e.md "Timeout and resynchronisation"): the consumer's timeout runs
-from the last *valid* frame; the counter resynchronises only after a real reception gap, measured from
-the last frame of the message, valid or not, so that a stream of rejected frames can never time itself
-back into acceptance.
+The E2E receiver has no clock: it judges frames in order of arrival. The consumer's timeout runs from the last
+*valid* frame, so that a stream of rejected frames can never time itself back into acceptance.
 
 Two senders of one identifier (a second plant on the channel, a real ECU while its node is still simulated)
 are one finding per message (`Monitor.duplicates`, DuplicateSender) with its evidence, not only thousands of
@@ -39,6 +37,7 @@ INTERVALS_CAP = 5000     # frame intervals per message for cycle-time checks (50
                          # timing section keeps its own whole-run histogram, bench/timing.py)
 INVALID_CAP = 20000      # invalid-frame records
 # Two senders of one identifier (a finding of its own, not thousands of counter errors):
+SENDERS_GAP_CYCLES = 3   # a reception gap (no frame at all) longer than this many cycles ends the counter streams
 SENDERS_CALM = 32        # accepted frames in a row after which the counter streams are no longer followed
 OWN_ECHO_FRAMES = 16     # a received copy of one of the station's last 16 frames of an identifier (one counter
                          # cycle, as many as the kernel's broadcast manager holds) is its own echo, no second sender
@@ -56,7 +55,8 @@ class MessageState:
     latest: dict[str, float] | None = None
     last_valid: float | None = None          # bench time of the last valid frame
     last_seen: float | None = None           # bench time of the last frame, valid or not
-    rx: e2e.Receiver = field(default_factory=e2e.Receiver)   # the E2E receiver's state machine
+    rx: e2e.Receiver | None = field(init=False)   # the E2E receiver (check and state machine); None: unprotected
+    e2e_status: dict[str, int] = field(default_factory=dict)   # AUTOSAR check status -> frames
     last_invalid: bool = False
     frames: int = 0
     invalid: dict[str, int] = field(default_factory=dict)      # reason -> count
@@ -76,13 +76,15 @@ class MessageState:
     # The message's time limits, s, computed once (inf without a cycle time: never reached); the same sums
     # as written out, so a comparison with them decides as before.
     timeout_s: float = field(init=False)     # a consumer's timeout: TIMEOUT_CYCLES cycles after the last valid
-    resync_s: float = field(init=False)      # a reception gap that resynchronises the E2E receiver
+    gap_s: float = field(init=False)         # a reception gap that ends the counter streams (two senders)
     foreign_s: float = field(init=False)     # a received frame this soon after the station's own is another's
 
     def __post_init__(self) -> None:
         cycle = self.codec.cycle_time
         self.timeout_s = math.inf if cycle is None else TIMEOUT_CYCLES * cycle + TIME_EPS
-        self.resync_s = math.inf if cycle is None else e2e.RESYNC_GAP_CYCLES * cycle + TIME_EPS
+        self.gap_s = math.inf if cycle is None else SENDERS_GAP_CYCLES * cycle + TIME_EPS
+        p = self.codec.protection
+        self.rx = None if p is None else e2e.Receiver(p.counter_modulo, p.max_delta_counter, p.sm)
         self.foreign_s = (FOREIGN_CYCLES * cycle if cycle else FOREIGN_S) + TIME_EPS
 
 
@@ -148,9 +150,8 @@ class Monitor:
             self._time_out(state)   # the consumer went 3 cycles without a valid frame: record the timeout
         prev_seen = state.last_seen
         if prev_seen is not None:
-            if t - prev_seen > state.resync_s:
-                state.rx.resync()   # a real reception gap (no frame at all): the sender may have restarted
-                state.senders = None
+            if t - prev_seen > state.gap_s:
+                state.senders = None   # a real reception gap (no frame at all): the sender may have restarted
             if self.keep_intervals:
                 intervals = state.intervals
                 intervals.append(t - prev_seen)
@@ -168,13 +169,15 @@ class Monitor:
         kind = reason = ""
         values = None
         length_ok = len(data) == codec.length
-        if codec.e2e:
+        rx = state.rx
+        if rx is not None:
             found = codec.counter_if_intact(data) if length_ok else None
-            rx = state.rx
-            reference = rx.reference
-            check, accepted = rx.receive(found is not None, -1 if found is None else found)
+            expected = rx.expected()
+            status, accepted = rx.receive(found)
+            counts = state.e2e_status
+            counts[status.value] = counts.get(status.value, 0) + 1
             if not accepted:   # (a damaged frame's counter is not read: the receiver ignores it)
-                kind, reason = _e2e_rejection(rx, check, found, reference, length_ok)
+                kind, reason = _e2e_rejection(rx, status, found, expected, length_ok)
             if (kind or state.senders is not None) and length_ok and kind not in ("checksum", "length"):
                 self._follow_counters(state, t, arbitration_id, data, kind, prev_seen)
             state.last_data = data
@@ -217,8 +220,10 @@ class Monitor:
         tracker = state.senders
         if tracker is None:
             prev = state.last_data   # the previous frame of the message: its counter starts the first stream
-            previous = None if prev_seen is None or len(prev) != len(data) else (e2e.counter_of(prev), prev_seen)
-            tracker = state.senders = e2e.SenderTracker(state.codec.cycle_time, previous)
+            protection = state.codec.protection
+            assert protection is not None
+            previous = None if prev_seen is None or len(prev) != len(data) else (protection.counter_of(prev), prev_seen)
+            tracker = state.senders = e2e.SenderTracker(state.codec.cycle_time, protection.counter_modulo, previous)
             state.calm = 0
         if kind:
             state.calm = 0
@@ -230,7 +235,7 @@ class Monitor:
         cycle = state.codec.cycle_time
         if data == state.last_data and prev_seen is not None and cycle and t - prev_seen < cycle / 4:
             return     # the same frame again at once (a re-sent frame, the `duplicate` fault): one sender
-        streams = tracker.feed(e2e.counter_of(data), t)
+        streams = tracker.feed(state.codec.protection.counter_of(data), t)  # type: ignore[union-attr]
         if streams is not None:
             first, second = (",".join(str(c) for c in s) for s in streams)
             self._duplicate(state, t, frame_id, f"counters {first} and {second} interleaved")
@@ -320,20 +325,20 @@ class Monitor:
         return self.invalid_dropped + len(self.invalid_log)
 
 
-def _e2e_rejection(rx: e2e.Receiver, check: e2e.Check, found: int | None, reference: int | None,
+def _e2e_rejection(rx: e2e.Receiver, status: e2e.Status, found: int | None, expected: int,
                    length_ok: bool) -> tuple[str, str]:
-    """(kind, reason) of a frame the receiver's state machine did not accept (`reference`: its reference
-    counter before the frame)."""
-    counter = -1 if found is None else found
-    expected = None if reference is None else (reference + 1) % e2e.COUNTER_MODULO
-    if check is e2e.Check.ERROR:
-        return ("checksum", "checksum") if length_ok else ("length", "length")
-    if check is e2e.Check.REPEATED:
-        return "counter", f"counter {counter} repeated"
-    if check is e2e.Check.WRONG_SEQUENCE:
-        return "counter", f"counter {counter}, expected {expected}"
-    return "revalidating", (f"counter {counter} in sequence, {rx.good} of {e2e.REVALIDATION_FRAMES} "
-                            "consecutive frames after an E2E error")
+    """(kind, reason) of a frame the receiver did not let through: the AUTOSAR check status and the state
+    machine's state by their names (`expected`: the counter an in-sequence frame carried)."""
+    state = rx.state.value
+    if status is e2e.Status.ERROR:
+        if not length_ok:
+            return "length", "length"
+        return "checksum", f"E2E ERROR: CRC wrong, state {state}"
+    if status is e2e.Status.REPEATED:
+        return "counter", f"E2E REPEATED: counter {found} again, state {state}"
+    if status is e2e.Status.WRONGSEQUENCE:
+        return "counter", f"E2E WRONGSEQUENCE: counter {found}, expected {expected}, state {state}"
+    return "state", f"E2E {status.value}: counter {found} in sequence, state {state} (not VALID yet)"
 
 
 def _trim(items: list[Any], keep: int) -> int:

@@ -5,14 +5,14 @@ check in a test case); the kernel's BCM sends a cyclic frame on its own timer, h
 and costs the process nothing per frame. python-can exposes it as `bus.send_periodic(msgs, period)`; a
 sequence of frames becomes one BCM task that sends them in turn (`nframes`).
 
-How (docs/spec/e2e.md: the counter +1 per transmission, 15 -> 0; the checksum over it):
-- A message whose payload (every byte but the counter nibble and the checksum) is unchanged for
-  STABLE_CYCLES cycles is handed to the kernel as 16 frames carrying the counter c, c+1, ... c+15 (mod 16),
-  each with its checksum: one whole counter cycle, so the kernel's walk through the frames is the counter
+How (docs/spec/e2e.md: the counter +1 per transmission, through the profile's range; the CRC over it):
+- A message whose payload (every byte but the counter and the CRC) is unchanged for STABLE_CYCLES cycles is
+  handed to the kernel as one frame per counter value (15 for Profile 11), c, c+1, ... (modulo the counter's
+  range), each with its CRC: one whole counter cycle, so the kernel's walk through the frames is the counter
   sequence. c is the counter of the frame due now, which the kernel sends at once (STARTTIMER announces),
   then one frame per cycle time on its own timer.
 - PRECHECK_S before each of the kernel's frames the values are compared with the ones it holds; a change
-  rewrites the 16 frames in place (`task.modify_data`) and goes out with that frame, as the tick scheduler
+  rewrites the frames in place (`task.modify_data`) and goes out with that frame, as the tick scheduler
   would send it: the kernel keeps its position in the sequence and its timer, so counter and cycle run on.
 - A message that changes CHANGES_TO_STOP cycles in a row, whose sending is stopped (stop_sending) or while a
   fault plan acts on the station's frames goes back to the tick scheduler. The task is deleted between two of
@@ -25,8 +25,8 @@ How (docs/spec/e2e.md: the counter +1 per transmission, 15 -> 0; the checksum ov
   (inverted filters joined with CAN_RAW_JOIN_FILTERS, Linux >= 4.1). A foreign sender on an identifier the
   kernel sends is therefore not seen while the kernel sends it.
 
-Only messages of 8 bytes with a cycle time of at least MIN_CYCLE_S qualify (a message without E2E signals
-is handed over as one frame). The echo socket lives as long as the station (it closes with the process).
+Only messages of 8 bytes with a cycle time of at least MIN_CYCLE_S qualify (an unprotected message is handed
+over as one frame). The echo socket lives as long as the station (it closes with the process).
 Set BENCH_KERNEL_PERIODIC=0 in the environment to keep every message on the tick scheduler.
 """
 
@@ -42,7 +42,7 @@ from typing import Any
 
 import can
 
-from bench import e2e
+from bench.e2e import Protection
 from bench.restbus import Restbus
 from bench.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, SO_TIMESTAMPNS, FastReceiver, plain_socketcan
 
@@ -54,7 +54,7 @@ STOP_MARGIN_S = 0.0015   # a task is deleted only this far from its frames (none
 PRECHECK_S = 0.0015      # the values are compared this long before each of the kernel's frames
 ECHO_WAIT_S = 0.02       # longest wait, at a hand-over, for the echo of the kernel's last frame
 MIN_CYCLE_S = 4 * STOP_MARGIN_S
-FRAME_LENGTH = 8         # the contract's frames (E2E bytes 6 and 7)
+FRAME_LENGTH = 8         # classic CAN frames
 ENV_SWITCH = "BENCH_KERNEL_PERIODIC"
 ECHO_READ_LIMIT = 1 << 16   # frames one look at the echo socket takes at most (it is read every tick)
 
@@ -71,16 +71,19 @@ def _raw_socket() -> socket.socket:
     return socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
 
 
-_payload = e2e.payload   # the frame without its E2E bytes (counter nibble, checksum)
+def _payload(slot: Any, data: bytes) -> bytes:
+    """The frame without its E2E fields (counter and CRC cleared) for a protected message, else the frame."""
+    protection = slot.codec.protection
+    return bytes(data) if protection is None else protection.payload(data)
 
 
-def counter_cycle(frame_id: int, data: bytes, first_counter: int) -> list[can.Message]:
-    """16 frames of one payload with the counter first_counter, first_counter + 1, ... (mod 16) and their
-    checksums: what the BCM sends in turn."""
+def counter_cycle(protection: Protection, frame_id: int, data: bytes, first_counter: int) -> list[can.Message]:
+    """One frame of one payload per counter value, first_counter, first_counter + 1, ... (modulo the profile's
+    counter range), each with its CRC: what the BCM sends in turn."""
     frames = []
-    for k in range(e2e.COUNTER_MODULO):
+    for k in range(protection.counter_modulo):
         frame = bytearray(data)
-        e2e.protect(frame_id, frame, (first_counter + k) % e2e.COUNTER_MODULO)
+        protection.protect(frame, first_counter + k)
         frames.append(can.Message(arbitration_id=frame_id, data=frame, is_extended_id=False, is_fd=False))
     return frames
 
@@ -158,13 +161,13 @@ class KernelPeriodic:
         if task is not None:
             if faulty and not task.stopping:
                 task.stopping, task.next_check = True, _clock()
-            elif not task.stopping and _payload(data) != task.payload:
+            elif not task.stopping and _payload(task.slot, data) != task.payload:
                 self._changed(task, data)        # missed by check() (a late tick): on the kernel's next frame
             return True
         slot = self.slots.get(frame_id)
         if slot is None or faulty or not self.enabled:
             return False
-        payload = _payload(data) if slot.codec.e2e else data
+        payload = _payload(slot, data)
         if self._last.get(frame_id) == payload:
             stable = self._stable.get(frame_id, 0) + 1
         else:
@@ -212,7 +215,7 @@ class KernelPeriodic:
                 data = None
             slot.counter = counter
             stopping = False
-            if data is not None and (_payload(data) if slot.codec.e2e else data) != task.payload:
+            if data is not None and _payload(slot, data) != task.payload:
                 stopping = self._changed(task, data)
             else:
                 task.changes = 0
@@ -231,12 +234,13 @@ class KernelPeriodic:
         return task.stopping
 
     def _frames(self, slot: Any, frame_id: int, data: bytes, base: int) -> list[can.Message]:
-        if slot.codec.e2e:
-            return counter_cycle(frame_id, data, base)
+        if slot.codec.protection is not None:
+            return counter_cycle(slot.codec.protection, frame_id, data, base)
         return [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=False)]
 
     def _start(self, slot: Any, frame_id: int, data: bytes, payload: bytes) -> bool:
-        base = e2e.counter_of(data)
+        protection = slot.codec.protection
+        base = 0 if protection is None else protection.counter_of(data)
         frames = self._frames(slot, frame_id, data, base)
         self.tasks[frame_id] = placeholder = _Task(slot, frame_id, None, payload, base, _clock())
         try:
@@ -263,7 +267,7 @@ class KernelPeriodic:
             task.stopping, task.next_check = True, _clock()
             self._disable(f"modify_data of {slot.codec.name} failed: {exc}")
             return
-        task.payload = _payload(data) if slot.codec.e2e else bytes(data)
+        task.payload = _payload(slot, data)
         self.modified += 1
 
     def _stop(self, task: _Task) -> None:
@@ -279,9 +283,10 @@ class KernelPeriodic:
             self._set_filters()
         except OSError as exc:
             self._disable(f"setting the socket filters failed: {exc}")
-        if task.slot.codec.e2e:
+        protection = task.slot.codec.protection
+        if protection is not None:
             last = task.base - 1 if task.last_counter is None else task.last_counter
-            task.slot.counter = e2e.next_counter(last % e2e.COUNTER_MODULO)
+            task.slot.counter = protection.next_counter(last % protection.counter_modulo)
         self._stable[task.frame_id] = 0
         self.stopped += 1
 
@@ -291,10 +296,11 @@ class KernelPeriodic:
         counter again. The kernel started at t0 and sends one frame per period, so by now it can have
         sent frame `possible - 1` at most; wait (sleeping, which lets the kernel deliver) up to ECHO_WAIT_S for
         that frame's echo. When it does not come, the kernel did not send it (the stop came first)."""
-        if not task.slot.codec.e2e:
+        protection = task.slot.codec.protection
+        if protection is None:
             return
         possible = int((_clock() - task.t0) / task.period) + 1
-        expected = (task.base + possible - 1) % e2e.COUNTER_MODULO
+        expected = (task.base + possible - 1) % protection.counter_modulo
         deadline = time.monotonic() + ECHO_WAIT_S
         while task.last_counter != expected and time.monotonic() < deadline:
             time.sleep(0.0005)
@@ -334,6 +340,7 @@ class KernelPeriodic:
         for frame in self._echo_rx.frames(0.0, ECHO_READ_LIMIT):
             frame_id, data = frame.arbitration_id, frame.data
             task = tasks.get(frame_id)
-            if task is not None and len(data) == FRAME_LENGTH and task.slot.codec.e2e:
-                task.last_counter = e2e.counter_of(data)
+            protection = None if task is None else task.slot.codec.protection
+            if protection is not None and len(data) == FRAME_LENGTH:
+                task.last_counter = protection.counter_of(data)  # type: ignore[union-attr]
             yield frame_id, data, frame.timestamp

@@ -1,12 +1,12 @@
 """Restbus simulation: every message of the simulated nodes, sent at its DBC cycle time.
 
 Values start at the DBC start values; code (a test case or a node's behaviour) sets them by name.
-The E2E counter and checksum are filled here, per the contract, through `bench.e2e`.
+The E2E counter and CRC are filled here by each message's profile (`bench.e2e.Protection`, docs/spec/e2e.md).
 Values are checked when a frame is built (once per cycle), so a behaviour may set values every
 plant tick at no cost; a NaN or out-of-range value stops the sender with an error naming it.
 
 Most frames repeat their values (77 % of a PIVOT run's frames): a message whose values equal those of its last
-frame reuses that frame's checked and encoded payload, and a payload keeps its 16 protected frames (one per
+frame reuses that frame's checked and encoded payload, and a payload keeps its protected frames (one per
 counter value), so a repeat costs one dict comparison. Every new value is checked and encoded as before.
 """
 
@@ -15,7 +15,6 @@ from __future__ import annotations
 import heapq
 from collections.abc import Collection, Iterator, Mapping
 
-from bench import e2e
 from bench.codec import Codebook, MessageCodec
 from bench.errors import SignalError
 
@@ -24,7 +23,7 @@ TICKS_PER_MS = 1  # the restbus is scheduled on the plant's 1 ms tick
 
 class _Periodic:
     __slots__ = ("codec", "values", "period", "next_due", "counter", "enabled", "sent_values", "payload", "frames",
-                 "order")
+                 "order", "modulo")
 
     def __init__(self, codec: MessageCodec, period_ticks: int, phase: int, order: int) -> None:
         self.codec = codec
@@ -39,7 +38,8 @@ class _Periodic:
         # its payload without E2E bytes, and that payload's frames by counter.
         self.sent_values: dict[str, float | int | str] | None = None
         self.payload = b""
-        self.frames: list[bytes | None] = [None] * e2e.COUNTER_MODULO
+        self.modulo = codec.protection.counter_modulo if codec.protection is not None else 1
+        self.frames: list[bytes | None] = [None] * self.modulo
 
 
 def _order(slot: _Periodic) -> int:
@@ -140,24 +140,25 @@ class Restbus:
         if values != slot.sent_values:
             snapshot = dict(values)          # what is checked is what the cache remembers
             data = codec.encode(codec.checked(snapshot))
+            protection = codec.protection
             if not codec.fast:
-                if codec.e2e:
-                    e2e.protect(codec.frame_id, data, slot.counter)
-                    slot.counter = e2e.next_counter(slot.counter)
+                if protection is not None:
+                    protection.protect(data, slot.counter)
+                    slot.counter = protection.next_counter(slot.counter)
                 return bytes(data)
             payload = bytes(data)
             if payload != slot.payload:
                 slot.payload = payload
-                slot.frames = [None] * e2e.COUNTER_MODULO
+                slot.frames = [None] * slot.modulo
             slot.sent_values = snapshot
-        if not codec.e2e:
+        protection = codec.protection
+        if protection is None:
             return slot.payload
         counter = slot.counter
-        index = counter & 0x0F
-        frame = slot.frames[index]
+        frame = slot.frames[counter]
         if frame is None:
             data = bytearray(slot.payload)
-            e2e.protect(codec.frame_id, data, counter)
-            frame = slot.frames[index] = bytes(data)
-        slot.counter = (counter + 1) % e2e.COUNTER_MODULO   # e2e.next_counter, written out (every frame)
+            protection.protect(data, counter)
+            frame = slot.frames[counter] = bytes(data)
+        slot.counter = protection.next_counter(counter)
         return frame

@@ -38,7 +38,7 @@ REFRESH = 0.25          # s between screen updates
 DEFAULT_WINDOW = 2.0    # s of frames the rate and cycle columns are measured over
 RATE_WARN = 0.10        # a measured rate further than this fraction from the DBC's is highlighted
 OFFSET_BLOCK = 5.0      # s: the interface-to-host clock offset is re-estimated over blocks this long
-E2E_KINDS = ("checksum", "counter", "length", "range", "decode")   # the monitor's reasons (MessageState.invalid)
+E2E_KINDS = ("checksum", "counter", "state", "length", "range", "decode")   # the monitor's reasons (MessageState.invalid)
 
 
 class MonitorError(BenchError):
@@ -178,12 +178,17 @@ def values_text(codec: MessageCodec, values: dict[str, float] | None) -> str:
 
 
 def e2e_text(state: MessageState) -> Text:
-    if not state.invalid:
-        return Text("ok", style="green")
+    """The message's protection as AUTOSAR names it: its profile and the E2E state machine's state, then the
+    check statuses other than OK and the other reasons frames were rejected (unprotected messages say so)."""
+    protection = state.codec.protection
+    head = "unprotected" if state.rx is None or protection is None else f"{protection.profile} {state.rx.state.value}"
+    statuses = [f"{name} {count}" for name, count in state.e2e_status.items() if name != "OK" and count]
+    if not state.invalid and not statuses:
+        return Text(head, style="dim" if state.rx is None else "green")
     order = {kind: i for i, kind in enumerate(E2E_KINDS)}          # known kinds first, any other after them
     parts = [f"{kind} {count}" for kind, count in sorted(state.invalid.items(), key=lambda kv: order.get(kv[0], 99))
-             if count]
-    return Text(" ".join(parts), style="bold red")
+             if count and kind not in ("checksum", "counter", "state")]
+    return Text(" ".join([head, *statuses, *parts]), style="bold red" if state.invalid else "yellow")
 
 
 def timeout_text(state: MessageState, monitor: Monitor, now: float) -> Text:

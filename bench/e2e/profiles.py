@@ -1,0 +1,191 @@
+"""AUTOSAR E2E profiles on a frame: where each profile puts its CRC and counter, and the library calls.
+
+The CRC of every profile is computed by the `autosar-e2e` package (a C implementation of the AUTOSAR
+profiles), never here: the bench and an ECU configured with the same parameters compute the same bytes.
+This module only knows each profile's header layout (docs/spec/e2e.md "Profiles") so that the restbus can
+write a counter of its choice, the fault kinds can corrupt a field, and the receiver can read the counter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from e2e import p01, p02, p05, p11
+
+#: The profiles the bench speaks, by the name a database gives them (DBC attribute E2E_Profile, ARXML
+#: category, bench.toml [e2e]).
+PROFILES = ("P01", "P02", "P05", "P11")
+
+#: Data ID modes of the profiles that have them (P01: all four; P11: BOTH and NIBBLE).
+P01_MODES = {"BOTH": p01.E2E_P01_DATAID_BOTH, "ALT": p01.E2E_P01_DATAID_ALT,
+             "LOW": p01.E2E_P01_DATAID_LOW, "NIBBLE": p01.E2E_P01_DATAID_NIBBLE}
+P11_MODES = {"BOTH": p11.E2E_P11_DATAID_BOTH, "NIBBLE": p11.E2E_P11_DATAID_NIBBLE}
+
+
+@dataclass(frozen=True, slots=True)
+class Field:
+    """A field of the E2E header in the frame: first bit (Intel numbering, bit 0 = LSB of byte 0) and length."""
+
+    start: int
+    length: int
+
+    @property
+    def first_byte(self) -> int:
+        return self.start // 8
+
+    def read(self, data: bytes | bytearray) -> int:
+        return (int.from_bytes(data, "little") >> self.start) & ((1 << self.length) - 1)
+
+    def write(self, data: bytearray, value: int) -> None:
+        """Write `value` (cut to the field's width) into the field, leaving every other bit as it was."""
+        mask = (1 << self.length) - 1
+        byte, shift = divmod(self.start, 8)
+        span = (shift + self.length + 7) // 8
+        word = int.from_bytes(data[byte:byte + span], "little")
+        word = (word & ~(mask << shift)) | ((value & mask) << shift)
+        data[byte:byte + span] = word.to_bytes(span, "little")
+
+    def covers(self, start: int, length: int) -> bool:
+        """Whether an Intel signal at (start, length) overlaps this field."""
+        return start < self.start + self.length and self.start < start + length
+
+
+@dataclass(frozen=True, slots=True)
+class SMConfig:
+    """The E2E state machine's parameters (AUTOSAR E2E_SMConfigType, one window size)."""
+
+    window_size: int = 2
+    min_ok_init: int = 1
+    max_error_init: int = 0
+    min_ok_valid: int = 2
+    max_error_valid: int = 0
+    min_ok_invalid: int = 2
+    max_error_invalid: int = 0
+
+    def problems(self) -> list[str]:
+        """What AUTOSAR's constraints on these parameters say is wrong (empty: none)."""
+        found = []
+        if not 1 <= self.window_size <= 255:
+            found.append(f"WindowSize {self.window_size} is not 1-255")
+        for state in ("init", "valid", "invalid"):
+            ok, error = getattr(self, f"min_ok_{state}"), getattr(self, f"max_error_{state}")
+            if ok + error > self.window_size or ok < 0 or error < 0:
+                found.append(f"MinOkState{state.title()} {ok} + MaxErrorState{state.title()} {error} "
+                             f"exceed WindowSize {self.window_size}")
+        return found
+
+
+@dataclass(frozen=True, slots=True)
+class Protection:
+    """One message's E2E protection: its profile, parameters and header fields (docs/spec/e2e.md)."""
+
+    profile: str                      # "P01", "P02", "P05", "P11"
+    data_id: int = 0                  # P01, P05, P11: the 16-bit Data ID
+    data_id_list: bytes = b""         # P02: 16 Data IDs, one per counter value
+    data_id_mode: str = "BOTH"        # P01: BOTH, ALT, LOW, NIBBLE; P11: BOTH, NIBBLE
+    offset: int = 0                   # bit offset of the header (the CRC's first bit); P02: 0
+    length: int = 0                   # bytes covered by the CRC (0: the whole frame)
+    max_delta_counter: int = 1        # the largest counter step still accepted (OKSOMELOST above 1)
+    sm: SMConfig = field(default_factory=SMConfig)
+    source: str = ""                  # where the parameters came from (database attributes, ARXML, bench.toml)
+    crc: Field = field(init=False)
+    counter: Field = field(init=False)
+    counter_modulo: int = field(init=False)
+    _protect: Callable[[bytearray], None] = field(init=False, repr=False, compare=False)
+    _check: Callable[[bytes | bytearray], bool] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        byte = self.offset // 8
+        kw: dict[str, Any] = {"length": self.length}
+        module_protect: Callable[..., None]
+        module_check: Callable[..., bool]
+        set_ = object.__setattr__
+        if self.profile in ("P01", "P11"):
+            mode_table = P01_MODES if self.profile == "P01" else P11_MODES
+            module_protect = p01.e2e_p01_protect if self.profile == "P01" else p11.e2e_p11_protect
+            module_check = p01.e2e_p01_check if self.profile == "P01" else p11.e2e_p11_check
+            kw.update(offset=byte, data_id_mode=mode_table[self.data_id_mode])
+            set_(self, "crc", Field(8 * byte, 8))
+            set_(self, "counter", Field(8 * byte + 8, 4))
+            set_(self, "counter_modulo", 15)      # 0 ... 14; 15 is never sent, and refused by the check
+            data_id: Any = self.data_id
+        elif self.profile == "P02":
+            module_protect, module_check = p02.e2e_p02_protect, p02.e2e_p02_check
+            set_(self, "crc", Field(0, 8))
+            set_(self, "counter", Field(8, 4))
+            set_(self, "counter_modulo", 16)
+            data_id = bytes(self.data_id_list)
+        elif self.profile == "P05":
+            module_protect, module_check = p05.e2e_p05_protect, p05.e2e_p05_check
+            kw.update(offset=byte)
+            set_(self, "crc", Field(8 * byte, 16))
+            set_(self, "counter", Field(8 * byte + 16, 8))
+            set_(self, "counter_modulo", 256)
+            data_id = self.data_id
+        else:
+            raise ValueError(f"E2E profile {self.profile!r} is not one of {', '.join(PROFILES)}")
+        set_(self, "_protect", lambda data: module_protect(data, data_id, increment_counter=False, **kw))
+        # (the library's check wants a writable buffer: it is given a copy, the frame stays as received)
+        set_(self, "_check", lambda data: module_check(bytearray(data), data_id, **kw))
+
+    # -- sending ---------------------------------------------------------------------------------
+    def protect(self, data: bytearray, counter: int) -> None:
+        """Write `counter` (modulo the profile's range) and then the CRC into a payload, in place."""
+        self.counter.write(data, counter % self.counter_modulo)
+        self._protect(data)
+
+    def next_counter(self, counter: int) -> int:
+        return (counter + 1) % self.counter_modulo
+
+    # -- receiving -------------------------------------------------------------------------------
+    def intact(self, data: bytes | bytearray) -> bool:
+        """Whether the frame's CRC is right for this message's parameters (the library's check)."""
+        return self._check(data)
+
+    def counter_if_intact(self, data: bytes | bytearray) -> int | None:
+        """The counter of a frame whose CRC is right; None when it is wrong (a damaged counter is not read)."""
+        if not self._check(data):
+            return None
+        return self.counter.read(data)
+
+    def counter_of(self, data: bytes | bytearray) -> int:
+        """The counter a frame carries, right or wrong."""
+        return self.counter.read(data)
+
+    def checksum_of(self, data: bytes | bytearray) -> int:
+        """The CRC a frame carries, right or wrong."""
+        return self.crc.read(data)
+
+    def set_checksum(self, data: bytearray, value: int) -> None:
+        """Write a CRC value (cut to the field's width) into a payload, whatever it should be."""
+        self.crc.write(data, value)
+
+    def payload(self, data: bytes) -> bytes:
+        """The frame with its CRC and counter fields cleared: what stays the same from one frame of a message
+        to the next while its signals do."""
+        out = bytearray(data)
+        self.crc.write(out, 0)
+        self.counter.write(out, 0)
+        return bytes(out)
+
+    @property
+    def header_mask(self) -> int:
+        """The CRC and counter fields as a mask over the frame read as one little-endian integer."""
+        return ((1 << self.crc.length) - 1) << self.crc.start | ((1 << self.counter.length) - 1) << self.counter.start
+
+    def describe(self) -> str:
+        """One line: the profile and every parameter a receiver configures."""
+        if self.profile == "P02":
+            ident = "DataIDList " + " ".join(f"{b:02X}" for b in self.data_id_list)
+        elif self.profile == "P05":
+            ident = f"DataID 0x{self.data_id:04X}"
+        else:
+            ident = f"DataID 0x{self.data_id:04X} {self.data_id_mode}"
+        sm = self.sm
+        return (f"{self.profile} {ident}, CRC bits {self.crc.start}-{self.crc.start + self.crc.length - 1}, "
+                f"counter bits {self.counter.start}-{self.counter.start + self.counter.length - 1} "
+                f"(0-{self.counter_modulo - 1}), MaxDeltaCounter {self.max_delta_counter}, "
+                f"window {sm.window_size} (init {sm.min_ok_init}/{sm.max_error_init}, valid {sm.min_ok_valid}/"
+                f"{sm.max_error_valid}, invalid {sm.min_ok_invalid}/{sm.max_error_invalid})")

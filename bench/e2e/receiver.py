@@ -1,0 +1,121 @@
+"""The AUTOSAR E2E receiver of one message: the profile's check, the E2E state machine, the consumer's rule.
+
+Written from the AUTOSAR E2E specification (the check of Profiles 4 to 11 and E2E_SM with one window size);
+the transition table is docs/spec/e2e.md "State machine", which tests/bench/test_e2e_receiver.py checks row by
+row against a model of its own. The receiver runs once per received frame (NewDataAvailable is always true);
+that a message stopped arriving is the consumer's deadline monitoring (the timeout), not the receiver's.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+from bench.e2e.profiles import SMConfig
+
+
+class Status(Enum):
+    """The profile check's status of one frame (E2E_PXXCheckStatusType)."""
+
+    OK = "OK"                        # CRC right, counter = previous + 1
+    OKSOMELOST = "OKSOMELOST"        # CRC right, counter = previous + 2 ... previous + MaxDeltaCounter
+    REPEATED = "REPEATED"            # CRC right, counter = previous
+    WRONGSEQUENCE = "WRONGSEQUENCE"  # CRC right, any other counter (skipped too far, back, a second sender)
+    ERROR = "ERROR"                  # CRC wrong (or wrong length): the counter is not read
+
+
+class SMState(Enum):
+    """E2E_SMStateType."""
+
+    NODATA = "NODATA"
+    INIT = "INIT"
+    VALID = "VALID"
+    INVALID = "INVALID"
+
+
+#: Statuses the state machine's window counts as OK (E2E_P_OK) and as ERROR (E2E_P_ERROR); REPEATED and
+#: WRONGSEQUENCE take a place in the window and count as neither.
+_COUNTS_OK = (Status.OK, Status.OKSOMELOST)
+
+
+class StateMachine:
+    """E2E_SM of one message: the last `window_size` statuses decide the state (docs/spec/e2e.md)."""
+
+    __slots__ = ("config", "state", "window", "top")
+
+    def __init__(self, config: SMConfig) -> None:
+        self.config = config
+        self.state = SMState.NODATA
+        self.window: list[Status | None] = [None] * config.window_size
+        self.top = 0
+
+    def _clear(self) -> None:
+        self.window = [None] * self.config.window_size
+        self.top = 0
+
+    def _add(self, status: Status) -> tuple[int, int]:
+        window = self.window
+        window[self.top] = status
+        self.top = (self.top + 1) % len(window)
+        ok = sum(1 for s in window if s is Status.OK or s is Status.OKSOMELOST)
+        return ok, window.count(Status.ERROR)
+
+    def step(self, status: Status) -> SMState:
+        """E2E_SMCheck: one status in, the new state out."""
+        config = self.config
+        state = self.state
+        if state is SMState.NODATA:
+            if status is not Status.ERROR:
+                self._clear()
+                self.state = SMState.INIT
+            return self.state
+        ok, errors = self._add(status)
+        if state is SMState.INIT:
+            if errors <= config.max_error_init and ok >= config.min_ok_init:
+                self.state = SMState.VALID
+            elif errors > config.max_error_init:
+                self.state = SMState.INVALID
+        elif state is SMState.VALID:
+            if not (errors <= config.max_error_valid and ok >= config.min_ok_valid):
+                self.state = SMState.INVALID
+        elif errors <= config.max_error_invalid and ok >= config.min_ok_invalid:   # INVALID
+            self.state = SMState.VALID
+        return self.state
+
+
+class Receiver:
+    """The check and the state machine of one message, and the consumer's rule: a frame is applied when its
+    status is OK or OKSOMELOST and the state machine is VALID after it."""
+
+    __slots__ = ("modulo", "max_delta", "last", "sm")
+
+    def __init__(self, counter_modulo: int, max_delta_counter: int, sm: SMConfig) -> None:
+        self.modulo = counter_modulo
+        self.max_delta = max_delta_counter
+        self.last = counter_modulo - 1   # E2E_PXXCheckInit: a first counter 0 is in sequence
+        self.sm = StateMachine(sm)
+
+    @property
+    def state(self) -> SMState:
+        return self.sm.state
+
+    def check(self, counter: int | None) -> Status:
+        """The profile's check of one frame: `counter` is its counter when the CRC is right, None when not."""
+        if counter is None or counter >= self.modulo:
+            return Status.ERROR
+        delta = (counter - self.last) % self.modulo
+        self.last = counter
+        if delta == 1:
+            return Status.OK
+        if delta == 0:
+            return Status.REPEATED
+        return Status.OKSOMELOST if delta <= self.max_delta else Status.WRONGSEQUENCE
+
+    def receive(self, counter: int | None) -> tuple[Status, bool]:
+        """One frame: its status and whether the consumer may apply it (the signal checks still follow)."""
+        status = self.check(counter)
+        state = self.sm.step(status)
+        return status, state is SMState.VALID and (status is Status.OK or status is Status.OKSOMELOST)
+
+    def expected(self) -> int:
+        """The counter an in-sequence frame carries next."""
+        return (self.last + 1) % self.modulo
