@@ -231,7 +231,7 @@ class Case:
 
     def detections(self, message: str, since: float | None = None) -> list[tuple[float, str]]:
         """When the bench's monitor flagged a message since `since` (bench time, s; default: case start):
-        a list of (bench time s, reason) for every invalid frame (e.g. "counter 3 repeated", "checksum")
+        a list of (bench time s, reason) for every invalid frame (e.g. "E2E REPEATED: counter 3 again, state INVALID")
         and every timeout ("timeout"), in time order. `message` may also be "error frame" or an unknown
         identifier as "0x7FF". Records no step."""
         since = self.start if since is None else since

@@ -168,6 +168,7 @@ class Monitor:
             self._duplicate(state, t, arbitration_id, "frames received while this station sends it")
         kind = reason = ""
         values = None
+        starting = False
         length_ok = len(data) == codec.length
         rx = state.rx
         if rx is not None:
@@ -177,7 +178,10 @@ class Monitor:
             counts = state.e2e_status
             counts[status.value] = counts.get(status.value, 0) + 1
             if not accepted:   # (a damaged frame's counter is not read: the receiver ignores it)
-                kind, reason = _e2e_rejection(rx, status, found, expected, length_ok)
+                if rx.state is e2e.SMState.INIT and (status is e2e.Status.OK or status is e2e.Status.OKSOMELOST):
+                    starting = True   # intact and in sequence, the state machine not VALID yet: no fault of the
+                else:                 # sender's, so logged as valid; its values are not applied
+                    kind, reason = _e2e_rejection(rx, status, found, expected, length_ok)
             if (kind or state.senders is not None) and length_ok and kind not in ("checksum", "length"):
                 self._follow_counters(state, t, arbitration_id, data, kind, prev_seen)
             state.last_data = data
@@ -199,6 +203,10 @@ class Monitor:
                 sink(t, arbitration_id, data, direction, False, reason, codec, None)
             return False
         assert values is not None
+        if starting:
+            if sink:
+                sink(t, arbitration_id, data, direction, True, "", codec, values)
+            return False
         state.latest = values
         state.last_valid = t
         state.last_invalid = False

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from e2e import p01, p02, p05, p11
+from e2e.crc import calculate_crc8
 
 #: The profiles the bench speaks, by the name a database gives them (DBC attribute E2E_Profile, ARXML
 #: category, bench.toml [e2e]).
@@ -93,8 +94,9 @@ class Protection:
     crc: Field = field(init=False)
     counter: Field = field(init=False)
     counter_modulo: int = field(init=False)
-    _protect: Callable[[bytearray], None] = field(init=False, repr=False, compare=False)
+    _protect: Callable[[bytearray, int], None] = field(init=False, repr=False, compare=False)
     _check: Callable[[bytes | bytearray], bool] = field(init=False, repr=False, compare=False)
+    _intact: Callable[[bytes | bytearray], int | None] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         byte = self.offset // 8
@@ -126,15 +128,29 @@ class Protection:
             data_id = self.data_id
         else:
             raise ValueError(f"E2E profile {self.profile!r} is not one of {', '.join(PROFILES)}")
-        set_(self, "_protect", lambda data: module_protect(data, data_id, increment_counter=False, **kw))
-        # (the library's check wants a writable buffer: it is given a copy, the frame stays as received)
-        set_(self, "_check", lambda data: module_check(bytearray(data), data_id, **kw))
+        fast = _fast_crc(self.profile, self.data_id_mode, self.data_id, byte, self.length)
+        counter_field = self.counter
+        modulo = self.counter_modulo
+        if fast is None:
+            def protect_slow(data: bytearray, counter: int) -> None:
+                counter_field.write(data, counter % modulo)
+                module_protect(data, data_id, increment_counter=False, **kw)
+
+            set_(self, "_protect", protect_slow)
+            # (the library's check wants a writable buffer: it is given a copy, the frame stays as received)
+            check: Callable[[bytes | bytearray], bool] = lambda data: module_check(bytearray(data), data_id, **kw)
+            set_(self, "_check", check)
+            set_(self, "_intact", lambda data: counter_field.read(data) if check(data) else None)
+        else:
+            crc, intact, protect = fast
+            set_(self, "_protect", protect)
+            set_(self, "_check", lambda data: crc(data) == data[byte])
+            set_(self, "_intact", intact)
 
     # -- sending ---------------------------------------------------------------------------------
     def protect(self, data: bytearray, counter: int) -> None:
         """Write `counter` (modulo the profile's range) and then the CRC into a payload, in place."""
-        self.counter.write(data, counter % self.counter_modulo)
-        self._protect(data)
+        self._protect(data, counter)
 
     def next_counter(self, counter: int) -> int:
         return (counter + 1) % self.counter_modulo
@@ -146,9 +162,7 @@ class Protection:
 
     def counter_if_intact(self, data: bytes | bytearray) -> int | None:
         """The counter of a frame whose CRC is right; None when it is wrong (a damaged counter is not read)."""
-        if not self._check(data):
-            return None
-        return self.counter.read(data)
+        return self._intact(data)
 
     def counter_of(self, data: bytes | bytearray) -> int:
         """The counter a frame carries, right or wrong."""
@@ -189,3 +203,36 @@ class Protection:
                 f"(0-{self.counter_modulo - 1}), MaxDeltaCounter {self.max_delta_counter}, "
                 f"window {sm.window_size} (init {sm.min_ok_init}/{sm.max_error_init}, valid {sm.min_ok_valid}/"
                 f"{sm.max_error_valid}, invalid {sm.min_ok_invalid}/{sm.max_error_invalid})")
+
+
+def _fast_crc(profile: str, mode: str, data_id: int, crc_byte: int, length: int
+              ) -> tuple[Callable[[bytes | bytearray], int], Callable[[bytes | bytearray], int | None],
+                         Callable[[bytearray, int], None]] | None:
+    """Profiles 1 and 11 with DataIDMode BOTH (the contract's protection) through the library's CRC-8 alone:
+    AUTOSAR's chained Crc_CalculateCRC8 calls over the Data ID's low and high byte, then every byte but the CRC's,
+    in one library call per frame. The profile functions of `autosar-e2e` take keyword arguments, which that
+    library parses slowly (docs/performance.md "E2E"); tests/bench/test_e2e_profiles.py checks that these bytes
+    equal the profile functions' for every offset, length and counter. None: use the profile functions."""
+    if profile not in ("P01", "P11") or mode != "BOTH":
+        return None
+    # The library's CRC-8 starts at 0xFF and ends with XOR 0xFF; the profiles start at 0x00 and end without XOR.
+    # For an 8-bit CRC a start value is the same as XOR-ing it into the first byte, so the Data ID's low byte
+    # enters XOR 0xFF and the result is XOR-ed with 0xFF again: one call with the library's defaults.
+    prefix = bytes(((data_id & 0xFF) ^ 0xFF, (data_id >> 8) & 0xFF))
+    end = length or None
+    after = crc_byte + 1
+    counter_byte = after
+
+    def crc(data: bytes | bytearray) -> int:
+        return calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF
+
+    def intact(data: bytes | bytearray) -> int | None:
+        if calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF != data[crc_byte]:
+            return None
+        return data[counter_byte] & 0x0F
+
+    def protect(data: bytearray, counter: int) -> None:
+        data[counter_byte] = (data[counter_byte] & 0xF0) | (counter % 15)
+        data[crc_byte] = calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF
+
+    return crc, intact, protect

@@ -35,28 +35,34 @@ class SMState(Enum):
 #: Statuses the state machine's window counts as OK (E2E_P_OK) and as ERROR (E2E_P_ERROR); REPEATED and
 #: WRONGSEQUENCE take a place in the window and count as neither.
 _COUNTS_OK = (Status.OK, Status.OKSOMELOST)
+_OK = Status.OK
 
 
 class StateMachine:
     """E2E_SM of one message: the last `window_size` statuses decide the state (docs/spec/e2e.md)."""
 
-    __slots__ = ("config", "state", "window", "top")
+    __slots__ = ("config", "state", "window", "size", "top", "ok_run", "steady")
 
     def __init__(self, config: SMConfig) -> None:
         self.config = config
         self.state = SMState.NODATA
-        self.window: list[Status | None] = [None] * config.window_size
+        self.size = config.window_size
+        self.window: list[Status | None] = [None] * self.size
         self.top = 0
+        self.ok_run = 0       # statuses counted as OK added last in a row (up to the window's size)
+        self.steady = False   # VALID with a window of OK statuses only: an OK status keeps everything as it is
 
     def _clear(self) -> None:
-        self.window = [None] * self.config.window_size
+        self.window = [None] * self.size
         self.top = 0
+        self.ok_run = 0
 
     def _add(self, status: Status) -> tuple[int, int]:
         window = self.window
         window[self.top] = status
-        self.top = (self.top + 1) % len(window)
-        ok = sum(1 for s in window if s is Status.OK or s is Status.OKSOMELOST)
+        self.top = (self.top + 1) % self.size
+        self.ok_run = min(self.ok_run + 1, self.size) if status in _COUNTS_OK else 0
+        ok = sum(1 for s in window if s in _COUNTS_OK)
         return ok, window.count(Status.ERROR)
 
     def step(self, status: Status) -> SMState:
@@ -79,19 +85,24 @@ class StateMachine:
                 self.state = SMState.INVALID
         elif errors <= config.max_error_invalid and ok >= config.min_ok_invalid:   # INVALID
             self.state = SMState.VALID
+        self.steady = self.state is SMState.VALID and self.ok_run >= self.size
         return self.state
+
+
+_VALID = SMState.VALID
 
 
 class Receiver:
     """The check and the state machine of one message, and the consumer's rule: a frame is applied when its
     status is OK or OKSOMELOST and the state machine is VALID after it."""
 
-    __slots__ = ("modulo", "max_delta", "last", "sm")
+    __slots__ = ("modulo", "max_delta", "last", "next", "sm")
 
     def __init__(self, counter_modulo: int, max_delta_counter: int, sm: SMConfig) -> None:
         self.modulo = counter_modulo
         self.max_delta = max_delta_counter
         self.last = counter_modulo - 1   # E2E_PXXCheckInit: a first counter 0 is in sequence
+        self.next = 0                    # the counter an in-sequence frame carries next
         self.sm = StateMachine(sm)
 
     @property
@@ -104,6 +115,7 @@ class Receiver:
             return Status.ERROR
         delta = (counter - self.last) % self.modulo
         self.last = counter
+        self.next = (counter + 1) % self.modulo
         if delta == 1:
             return Status.OK
         if delta == 0:
@@ -112,10 +124,17 @@ class Receiver:
 
     def receive(self, counter: int | None) -> tuple[Status, bool]:
         """One frame: its status and whether the consumer may apply it (the signal checks still follow)."""
+        sm = self.sm
+        if counter == self.next and sm.steady:   # VALID with a window of OK statuses: one more OK keeps it so
+            self.last = counter
+            self.next = counter + 1 if counter + 1 < self.modulo else 0
+            sm.window[sm.top] = _OK
+            sm.top = sm.top + 1 if sm.top + 1 < sm.size else 0
+            return _OK, True
         status = self.check(counter)
         state = self.sm.step(status)
         return status, state is SMState.VALID and (status is Status.OK or status is Status.OKSOMELOST)
 
     def expected(self) -> int:
         """The counter an in-sequence frame carries next."""
-        return (self.last + 1) % self.modulo
+        return self.next
