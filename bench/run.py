@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import results_io
+from bench import e2e, results_io
 from bench.case import Case
 from bench.checks import LOG_ERROR, LOG_INFO, StepLog
 from bench.codec import Codebook, MessageCodec
@@ -156,6 +156,8 @@ class BenchRun:
             faults=session.faults.records() if session else [])
         if session is not None:   # the report's timing section (bench.timing); never raises
             run.tables.extend(self.timing.tables(session.codebook))
+            if session.runner is not None:
+                run.tables.append(e2e_table(session.runner.monitor))
             run.tables.append(database_table(session.codebook))
             found = duplicates_table([s.monitor for s in (session.runner, session.plant) if s is not None])
             if found is not None:   # a finding of its own, first among the tables
@@ -208,13 +210,36 @@ def duplicates_table(monitors: list[Monitor]) -> Table | None:
 
 
 def database_table(codebook: Codebook) -> Table:
-    """What the run was checked against: every message of the databases with its comment (DBC text:
-    the report escapes it like every other string)."""
+    """What the run was checked against: every message of the databases with its E2E protection and its comment
+    (DBC text: the report escapes it like every other string)."""
     rows = [[db_name, f"0x{m.frame_id:X}", m.name, ", ".join(m.senders),
-             f"{m.cycle_time * 1000:g}" if m.cycle_time else "–", m.message.comment or ""]
+             f"{m.cycle_time * 1000:g}" if m.cycle_time else "–",
+             m.protection.describe() if m.protection is not None else "unprotected", m.message.comment or ""]
             for db_name, m in sorted(((c.database, c) for c in codebook.by_id.values()), key=lambda x: x[1].frame_id)]
     return Table("Databases: the messages this run checked", ["database", "id", "message", "sender", "cycle [ms]",
-                                                                "comment"], rows)
+                                                                "E2E protection", "comment"], rows)
+
+
+#: The AUTOSAR check statuses, in the order the E2E table shows them.
+E2E_STATUSES = [status.value for status in e2e.Status]
+
+
+def e2e_table(monitor: Monitor) -> Table:
+    """AUTOSAR E2E per message over the whole run, as the test runner's receiver judged it: frames per check
+    status and the E2E state machine's state at the end (unprotected messages say so)."""
+    rows = []
+    for state in sorted(monitor.states.values(), key=lambda s: s.codec.frame_id):
+        if not state.frames:
+            continue
+        protection = state.codec.protection
+        if state.rx is None or protection is None:
+            rows.append([state.codec.name, "unprotected", *["–"] * len(E2E_STATUSES), "–"])
+            continue
+        rows.append([state.codec.name, protection.profile,
+                     *[str(state.e2e_status.get(name, 0)) for name in E2E_STATUSES], state.rx.state.value])
+    return Table("E2E: AUTOSAR check status per message over the whole run (frames the test runner received; a frame "
+                 "is applied when its status is OK or OKSOMELOST and the state machine is VALID, docs/spec/e2e.md)",
+                 ["Message", "Profile", *E2E_STATUSES, "state at the end"], rows)
 
 
 def _longrepr(report: pytest.TestReport) -> str:
