@@ -419,7 +419,7 @@ class Codebook:
             if name not in names:
                 raise DatabaseError(f"bench.toml: [e2e] {name}: no such message{did_you_mean(name, names)}")
         for db_name, db in self.databases:
-            definitions = getattr(db.dbc, "attribute_definitions", None) or {} if db.dbc is not None else {}
+            definitions: Mapping[str, Any] = (db.dbc.attribute_definitions if db.dbc is not None else None) or {}
             for message in db.messages:
                 try:
                     protection = e2e.protection(message, definitions, overrides.get(message.name))
@@ -467,5 +467,6 @@ def load_dbc(path: Path | str) -> Database:
         raise DatabaseError(f"{path}: {exc}") from None
 
 
-def load_codebook(paths: Iterable[Path | str], e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> Codebook:
+def load_codebook(paths: Iterable[Path | str],
+                  e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> Codebook:
     return Codebook(((Path(p).name, load_dbc(p)) for p in paths), e2e_overrides)

@@ -1,13 +1,13 @@
-"""E2E protect and check cost per frame: the AUTOSAR Profile 11 path (autosar-e2e, bench.e2e) against the bench's
-former protection (CRC-8 in Python, its own receiver), loaded from the git history in the same run.
+"""E2E protect and check cost per frame: the AUTOSAR Profile 11 path (autosar-e2e, bench.e2e) against the
+bench's former protection (CRC-8 in Python, its own receiver), loaded from the git history in the same run.
 
     python benchmarks/bench_e2e.py [--frames N] [--repeat R] [--before REV]
 
-Each figure is the median CPU time (the thread's) of R passes over N frames of distinct payloads (no cache helps either side):
-`protect` writes counter and CRC into a payload; `check` reads a received frame's counter if its CRC is right
-and runs the receiver (check status and state machine). The before side is the module bench/e2e.py as it was
-at REV (default 90a7bbc, the last tree with it), executed from `git show`; without git the before figures are
-left out.
+Each figure is the median CPU time (the thread's) of R passes over N frames of distinct payloads (no cache
+helps either side): `protect` writes counter and CRC into a payload; `check` reads a received frame's counter
+if its CRC is right and runs the receiver (check status and state machine). The before side is the module
+bench/e2e.py as it was at REV (default 90a7bbc, the last tree with it), executed from `git show`; without git
+the before figures are left out.
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ REFRESH = 0.25          # s between screen updates
 DEFAULT_WINDOW = 2.0    # s of frames the rate and cycle columns are measured over
 RATE_WARN = 0.10        # a measured rate further than this fraction from the DBC's is highlighted
 OFFSET_BLOCK = 5.0      # s: the interface-to-host clock offset is re-estimated over blocks this long
-E2E_KINDS = ("checksum", "counter", "state", "length", "range", "decode")   # the monitor's reasons (MessageState.invalid)
+E2E_KINDS = ("checksum", "counter", "state", "length", "range", "decode")   # the monitor's reasons (.invalid)
 
 
 class MonitorError(BenchError):

@@ -138,7 +138,9 @@ class Protection:
 
             set_(self, "_protect", protect_slow)
             # (the library's check wants a writable buffer: it is given a copy, the frame stays as received)
-            check: Callable[[bytes | bytearray], bool] = lambda data: module_check(bytearray(data), data_id, **kw)
+            def check(data: bytes | bytearray) -> bool:
+                return module_check(bytearray(data), data_id, **kw)
+
             set_(self, "_check", check)
             set_(self, "_intact", lambda data: counter_field.read(data) if check(data) else None)
         else:
