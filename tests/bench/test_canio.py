@@ -146,12 +146,14 @@ def test_writer_with_a_dbc_checks_and_decodes_like_a_run(tmp_path: Path) -> None
             writer(can.Message(timestamp=10.0 + i * 0.01, arbitration_id=frame_id, data=restbus.build(slot),
                                is_extended_id=False))
         bad = bytearray(restbus.build(slot))
-        bad[7] ^= 0xFF                                         # wrong checksum
+        protection = codebook["WHL_Status_FL"].protection
+        assert protection is not None
+        bad[protection.crc.first_byte] ^= 0xFF                 # wrong CRC
         writer(can.Message(timestamp=10.05, arbitration_id=frame_id, data=bad, is_extended_id=False))
         writer(can.Message(timestamp=10.06, arbitration_id=0x7FF, data=b"\x01", is_extended_id=False))
     frames = list(read_frames(log))
     assert [f.valid for f in frames] == [True] * 5 + [False, False]
-    assert frames[5].error == "checksum" and frames[6].error == "unknown identifier"
+    assert frames[5].error.startswith("E2E ERROR") and frames[6].error == "unknown identifier"
     decoded = list(read_decoded(log, "WHL_Status_FL"))
     assert len(decoded) == 5 and all(values["SteerAngle"] == 12.5 for _, _, values in decoded)
 
