@@ -177,6 +177,37 @@ def test_an_override_changes_what_is_sent_and_checked() -> None:
     assert plain["Plain_Status"].protection is not None                 # protection given by bench.toml alone
 
 
+def test_the_log_process_and_the_mcap_writer_load_with_the_override(tmp_path: Path) -> None:
+    """The run's log child and python-can's MCAP writer load the databases as the run does: an override that no
+    profile can use stops them with its reason, a good one is what their monitor checks."""
+    from bench.canio import MCAPWriter
+    from bench.errors import BenchError
+    from bench.logproc import LogProcess
+
+    bad = {"P11_Status": {"Offset": 44}}
+    with pytest.raises(BenchError, match="Offset 44 is not a multiple of 8"):
+        LogProcess(tmp_path / "run.mcap", [FIXTURE], "test", bad)
+    log = LogProcess(tmp_path / "good.mcap", [FIXTURE], "test", {"P11_Status": {"DataID": 0x0222}})
+    log.close()
+    writer = MCAPWriter(tmp_path / "w.mcap", dbc=str(FIXTURE), e2e={"P11_Status": {"MaxDeltaCounter": 4}})
+    try:
+        assert writer.monitor is not None
+        protection = writer.monitor.codebook["P11_Status"].protection
+        assert protection is not None and protection.max_delta_counter == 4
+    finally:
+        writer.stop()
+    config = tmp_path / "bench.toml"
+    config.write_text(f'[bench]\ndatabases = ["{FIXTURE}"]\nstimulus = ["TESTER"]\nplant = "p"\ntestcases = "t"\n'
+                      'reports = "r"\n\n[e2e.P11_Status]\nMaxDeltaCounter = 5\n', encoding="utf-8")
+    writer = MCAPWriter(tmp_path / "c.mcap", dbc=str(FIXTURE), config=str(config))   # --config=bench.toml
+    try:
+        assert writer.monitor is not None
+        protection = writer.monitor.codebook["P11_Status"].protection
+        assert protection is not None and protection.max_delta_counter == 5
+    finally:
+        writer.stop()
+
+
 def test_dbc_check_applies_the_override(tmp_path: Path) -> None:
     result = check_file(FIXTURE, e2e_overrides={"P11_Status": {"Offset": 40}})
     # the CRC moves to bits 40-47 and the counter to 48-51: the Crc signal at 48 now sits on the counter
