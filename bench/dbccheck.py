@@ -615,9 +615,9 @@ def _check_e2e_definitions(definitions: Mapping[str, Any], lines: _Lines, findin
     """The E2E attribute definitions themselves: a name the bench does not know (a typo: its values would be
     ignored), an ENUM choice no profile has, a definition or a value on signals (the bench reads messages')."""
     for name, definition in definitions.items():
-        line, kind = lines.definition.get(name, (None, ""))
         if not name.upper().startswith("E2E"):
             continue
+        line, kind = lines.definition.get(name, (None, ""))
         if name not in E2E_ATTRIBUTES:
             findings.append(Finding(WARNING, "e2e-attribute", f"attribute {name} is not an E2E parameter the bench "
                                     f"knows{did_you_mean(name, E2E_ATTRIBUTES)}: its values are ignored (known: "

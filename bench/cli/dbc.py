@@ -28,7 +28,7 @@ from bench import dbccheck
 from bench.codec import load_dbc
 from bench.config import load_config
 from bench.e2e import config as e2e_config
-from bench.errors import ConfigError, DatabaseError
+from bench.errors import ConfigError, DatabaseError, did_you_mean
 
 CHECK = "check"
 #: Where `Protection.describe()` is broken into lines in the table: before each group of parameters.
@@ -170,7 +170,8 @@ def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[
     out = Console(soft_wrap=True, highlight=False)
     err = Console(stderr=True, soft_wrap=True, highlight=False)
     unreadable = rejected = 0
-    for outcome in dbccheck.check_files(files, e2e_mode, e2e_overrides):
+    outcomes = dbccheck.check_files(files, e2e_mode, e2e_overrides)
+    for outcome in outcomes:
         if isinstance(outcome, DatabaseError):
             unreadable += 1
             err.print(Text.assemble(("bench dbc check: error: ", "bold red"), str(outcome)))
@@ -185,4 +186,9 @@ def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[
     if len(files) > 1:
         out.print(Text(f"{len(files)} files: {len(files) - rejected - unreadable} accepted, {rejected} rejected, "
                        f"{unreadable} unreadable"))
-    return 2 if unreadable else (1 if rejected else 0)
+    names = [p.name for outcome in outcomes if isinstance(outcome, dbccheck.CheckResult) for p in outcome.protections]
+    stray = [name for name in (e2e_overrides or {}) if name not in names]
+    for name in stray:   # what `bench run` refuses too (bench.codec.Codebook)
+        out.print(Text(f"bench.toml: error [e2e] {name}: no such message in the databases{did_you_mean(name, names)}",
+                       style="red"))
+    return 2 if unreadable else (1 if rejected or stray else 0)

@@ -123,6 +123,11 @@ def test_the_project_e2e_table_applies(tmp_path: Path, capsys: pytest.CaptureFix
     out = capsys.readouterr().out
     assert "DRV_Steering 0x100: P11 DataID 0x0100 BOTH" in out and "MaxDeltaCounter 5" in out
     assert "[DBC attributes, bench.toml [e2e]]" in out
+    config.write_text(config.read_text(encoding="utf-8").replace("[e2e.DRV_Steering]", "[e2e.DRV_Steerin]"),
+                      encoding="utf-8")
+    assert main(["dbc", "check", "--config", str(config)]) == 1
+    assert ("bench.toml: error [e2e] DRV_Steerin: no such message in the databases (did you mean DRV_Steering?)"
+            in capsys.readouterr().out)
 
 
 def test_no_project_is_a_one_line_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

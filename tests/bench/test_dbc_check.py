@@ -487,9 +487,10 @@ def test_cli_unreadable_file(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 
 
 def test_cli_default_checks_our_databases(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["dbc", "check"]) == 0
+    assert main(["dbc", "check", "--e2e", "required"]) == 0     # the contract protects every message
     out = capsys.readouterr().out
     assert f"{CHASSIS_DBC}: accepted" in out and f"{BENCH_DBC}: accepted" in out
+    assert "0 unprotected; " in out and "unprotected\n" not in out
 
 
 def test_cli_e2e_option(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
