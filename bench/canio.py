@@ -14,8 +14,9 @@ number or a name). docs/python-can-conformance.md lists what python-can's own te
 
 Without a DBC the log has the raw-frame channel only. With `dbc` (a path, several separated by commas;
 on the logger's command line `--dbc=FILE.dbc`) every frame also goes through the bench's monitor:
-it is checked (length, the contract's E2E checksum and counter, ranges) and its decoded signals are
-written to the decoded channels, as in a bench run.
+it is checked (length, the E2E protection each message declares, ranges) and its decoded signals are
+written to the decoded channels, as in a bench run. `config` (`--config=bench.toml`) applies that project's
+[e2e] table over the databases' own protection, as `bench run` does; `e2e` gives such a table directly.
 """
 
 from __future__ import annotations
@@ -87,11 +88,18 @@ class MCAPWriter(BinaryIOMessageWriter):
     `file` is a path or a binary file object (which stop() closes, as python-can's writers do)."""
 
     def __init__(self, file: str | os.PathLike[str] | BinaryIO | BufferedIOBase, *, dbc: Any = None,
-                 channel: Any = None, append: bool = False, flush_interval: float = 0.5, **kwargs: Any) -> None:
+                 channel: Any = None, append: bool = False, flush_interval: float = 0.5,
+                 config: str | os.PathLike[str] | None = None, e2e: Mapping[str, Mapping[str, Any]] | None = None,
+                 **kwargs: Any) -> None:
         if append:
             raise ValueError(f"{file}: an MCAP log cannot be appended to; write a new file")
         dbc_paths = _paths(dbc)
-        codebook = load_codebook(dbc_paths) if dbc_paths else None   # DatabaseError names a bad file
+        overrides = dict(e2e or {})
+        if config:
+            from bench.config import load_config
+
+            overrides = {**load_config(Path(config)).e2e, **overrides}
+        codebook = load_codebook(dbc_paths, overrides) if dbc_paths else None   # DatabaseError names a bad file
         databases = [db for _, db in codebook.databases] if codebook else []
         super().__init__(file, mode="wb")
         try:

@@ -424,7 +424,8 @@ class Codebook:
                 try:
                     protection = e2e.protection(message, definitions, overrides.get(message.name))
                 except e2e.ProtectionError as exc:
-                    raise DatabaseError(f"{db_name}: {exc}") from None
+                    over = f" (with bench.toml [e2e.{message.name}])" if message.name in overrides else ""
+                    raise DatabaseError(f"{db_name}{over}: {exc}") from None
                 codec = MessageCodec(message, db_name, protection)
                 other = self.by_id.get(codec.frame_id) or self.by_name.get(codec.name)
                 if other is not None:
@@ -469,4 +470,6 @@ def load_dbc(path: Path | str) -> Database:
 
 def load_codebook(paths: Iterable[Path | str],
                   e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> Codebook:
+    """The databases' messages; `e2e_overrides` is bench.toml's [e2e] table (message -> AUTOSAR parameters), given
+    by every caller that loads a project's databases so that each process applies the same protection."""
     return Codebook(((Path(p).name, load_dbc(p)) for p in paths), e2e_overrides)

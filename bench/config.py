@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 from bench.bus import VIRTUAL, is_virtual
 from bench.busopts import BusOptions, positive_int
 from bench.contract import Requirement, load_requirements
+from bench.e2e.config import PARAMETERS as E2E_PARAMETERS
 from bench.errors import ConfigError, SignalError, did_you_mean
 
 if TYPE_CHECKING:
@@ -87,6 +88,8 @@ class ProjectConfig:
     requirements: tuple[Requirement, ...] = ()   # every requirement of those documents, in document order
     bus: BusOptions = BusOptions()               # [bus]: python-can arguments (bitrate, fd, data_bitrate, ...)
     scenario: ScenarioProtocol | None = None     # [scenario]; None: the project's plant takes no scenarios
+    #: [e2e.MESSAGE]: AUTOSAR E2E parameters by name (no `E2E_` prefix) over the databases' own, per message
+    e2e: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @cached_property
     def requirement_ids(self) -> frozenset[str]:
@@ -168,6 +171,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         latency=_latency_pairs(path, data.get("timing", {})),
         bus=_bus_table(path, data.get("bus", {})),
         scenario=_scenario(path, data.get("scenario")),
+        e2e=_e2e_table(path, data.get("e2e", {})),
         **_contract(path, text, data.get("contract", {})),
     )
 
@@ -202,7 +206,45 @@ def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
 _BUS_CLI_ONLY = ("interface", "channel")
 
 
-TABLES = ("bench", "scenario", "contract", "timing", "bus")   # bench.toml's tables; any other is a typo
+TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e")   # bench.toml's tables; any other is a typo
+
+
+#: [e2e.MESSAGE] keys whose value is a name; DataIDList is hex text or a list of bytes; every other key a number.
+_E2E_NAMES = ("Profile", "DataIDMode")
+
+
+def _e2e_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
+    """[e2e.MESSAGE] Profile = "P11", DataID = 0x100, MaxDeltaCounter = 2, ...: a message's end-to-end protection
+    over what its database declares (docs/spec/e2e.md "Parameters"; keys are AUTOSAR's names, the DBC attributes'
+    without `E2E_`). Only the form is checked here; the values are checked with the databases (`bench.e2e.config`),
+    and a message name that no database has is refused there, with the name meant."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [e2e] must be a table of [e2e.MESSAGE] tables")
+    known = tuple(E2E_PARAMETERS)
+    out: dict[str, dict[str, Any]] = {}
+    for message, values in table.items():
+        where = f"{path}: [e2e.{message}]"
+        if not isinstance(values, dict):
+            raise ConfigError(f"{path}: [e2e] {message} = {values!r}: give a message's parameters as a table "
+                              f"[e2e.{message}] (keys: {', '.join(known)})")
+        _known_keys(where, values, known)
+        parameters: dict[str, Any] = {}
+        for key, value in values.items():
+            if key in _E2E_NAMES:
+                if not isinstance(value, str) or not value:
+                    raise ConfigError(f"{where} {key} must be a name (a string), got {value!r}")
+            elif key == "DataIDList":
+                if isinstance(value, list) and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255
+                                                   for v in value):
+                    value = " ".join(f"{v:02X}" for v in value)
+                elif not isinstance(value, str):
+                    raise ConfigError(f"{where} DataIDList must be 16 bytes, as hex text \"0A 0B ...\" or a list "
+                                      f"of numbers 0-255, got {value!r}")
+            elif isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"{where} {key} must be a whole number, got {value!r}")
+            parameters[key] = value
+        out[message] = parameters
+    return out
 
 
 def _bus_table(path: Path, table: Any) -> BusOptions:

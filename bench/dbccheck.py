@@ -1,25 +1,36 @@
-"""`bench dbc check`: does a DBC meet the bench's needs? Every finding names its line in the file.
+"""`bench dbc check`: does a database (DBC or ARXML) meet the bench's needs? Every finding names its line in a
+DBC file; an ARXML file has no line numbers, so its findings name the message (and the signal).
 
 Why a checker of its own rather than cantools' strict load: strict loading stops at the first problem
 and knows nothing of what the bench relies on — the restbus sends only messages with a cycle time,
 encodes with a mask (a range wider than the raw field wraps silently), starts every signal at its
-`GenSigStartValue` (a start value outside the range stops the run at the first send), writes the
-end-to-end bytes 6-7 of every message and its monitor checks them (docs/spec/e2e.md).
+`GenSigStartValue` (a start value outside the range stops the run at the first send), and protects and checks
+every message that declares an AUTOSAR E2E profile (docs/spec/e2e.md).
 
 cantools gives no line numbers for parsed objects, so the text is scanned for `BO_ <id> <name>`,
-the ` SG_ <name> ` lines of that message's block, and the `BA_`/`VAL_` lines naming them.
+the ` SG_ <name> ` lines of that message's block, and the `BA_DEF_`/`BA_`/`VAL_` lines naming them.
 
 Severities: an *error* is something the bench would get wrong or refuse (a database with errors is
 rejected); a *warning* is something the contract asks for (docs/spec/k-matrix.md: cycle time, send type, unit,
 range, start value and comment on everything; value tables for enumerations) whose absence the bench
 survives.
 
-End-to-end layout (`--e2e`): the profile is positional (docs/spec/e2e.md), a counter of 4 unsigned Intel
-bits at bit 48 and a checksum of 8 at bit 56, whatever the database calls them. `required` makes a missing
-or misplaced counter or checksum an error in every message, `optional` a warning in the messages that mean to
-carry the profile (an 8-byte frame with a 4-bit signal over bits 48-51, or with an 8-bit one over byte 7 beside a
-4-bit one in byte 6); `auto` (the default) is `required` when some message of the file means to (it follows the
-profile) and `optional` otherwise (a foreign database, e.g. a customer's k-matrix).
+End-to-end protection is declared per message (`bench.e2e.config`): DBC attributes `E2E_Profile`, `E2E_DataID`,
+... (AUTOSAR's parameter names with the prefix `E2E_`), ARXML E2E properties (cantools' `Message.autosar.e2e`),
+and, for the databases of a project, bench.toml's `[e2e.MESSAGE]` tables over both. A message that declares a
+profile is checked as the bench will load it: a declaration no profile can use (an unsupported profile, a
+DataIDList that is not 16 bytes, a header outside the frame, state machine parameters against AUTOSAR's
+MinOk + MaxError <= WindowSize, ...) is an error on the message; a signal that overlaps the profile's CRC or
+counter field without being exactly that field (the field's bits, Intel, unsigned, scale 1, offset 0) is a
+warning naming the signal and the field (the bench writes the field over it). The check also reads the
+attribute definitions: an `E2E_` attribute the bench does not know is a warning with the name it most likely
+meant (its values would be ignored), as is a profile or DataIDMode choice no profile has; an attribute set but
+never defined is cantools' load error, reported on the `BA_` line that sets it.
+
+`--e2e` says whether a message may go without protection: `optional` (the default) — an unprotected message is
+fine (the bench judges it on length, timing and ranges; the summary counts protected and unprotected messages);
+`required` — every message must declare a profile, an unprotected one is an error (the contract's own
+databases are checked that way in CI and in the tests).
 """
 
 from __future__ import annotations
@@ -29,20 +40,26 @@ import re
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cantools
 from cantools.database.can import Database, Message, Signal
 
-from bench import e2e
 from bench.codec import RANGE_SLACK
-from bench.errors import DatabaseError
+from bench.e2e import config as e2e_config
+from bench.e2e.profiles import P01_MODES, PROFILES, Field, Protection
+from bench.errors import DatabaseError, did_you_mean
 
 ERROR, WARNING = "error", "warning"
-E2E_MODES = ("auto", "required", "optional")
+OPTIONAL, REQUIRED = "optional", "required"
+E2E_MODES = (OPTIONAL, REQUIRED)     # --e2e: may a message go without a declared profile?
 FRAME_LENGTH = 8                     # docs/spec/k-matrix.md: classical CAN, 8-byte frames
-#: The profile's two places (docs/spec/e2e.md): what a finding calls each, its first bit and its length.
-E2E_PLACES = (("counter", e2e.COUNTER_START, e2e.COUNTER_LENGTH),
-              ("checksum", e2e.CHECKSUM_START, e2e.CHECKSUM_LENGTH))
+ARXML_SUFFIX = ".arxml"
+#: The E2E attribute names the bench reads (`E2E_` + AUTOSAR's parameter name).
+E2E_ATTRIBUTES = tuple(e2e_config.PREFIX + name for name in e2e_config.PARAMETERS)
+#: The choices an ENUM definition of these attributes may offer.
+E2E_CHOICES = {e2e_config.PREFIX + "Profile": (e2e_config.NONE, *PROFILES),
+               e2e_config.PREFIX + "DataIDMode": tuple(P01_MODES)}
 MAX_QUOTE = 160                      # characters of a parser message kept in a finding
 MAX_SIGNAL_BITS = 64                 # the longest integer or float signal a CAN database can mean
 MAX_FRAME_BYTES = 64                 # CAN FD; cantools' loader is slow in larger numbers (quadratic in the start bit)
@@ -65,6 +82,24 @@ class Finding:
         return self.message or ""
 
 
+@dataclass(frozen=True)
+class MessageProtection:
+    """The protection the bench will apply to one message: a Protection, None (unprotected), or `refused` (its
+    declaration is an error finding)."""
+
+    name: str
+    frame_id: int
+    protection: Protection | None
+    refused: bool = False
+
+    def describe(self) -> str:
+        if self.refused:
+            return "declared protection refused (see the error)"
+        if self.protection is None:
+            return "unprotected"
+        return f"{self.protection.describe()} [{self.protection.source}]"
+
+
 @dataclass
 class CheckResult:
     """The findings of one file, sorted by line; `accepted` when none is an error."""
@@ -74,7 +109,16 @@ class CheckResult:
     messages: int = 0
     signals: int = 0
     encoding: str = "utf-8"
-    e2e: str = "optional"
+    e2e: str = OPTIONAL
+    protections: list[MessageProtection] = field(default_factory=list)   # in the database's order
+
+    @property
+    def protected(self) -> int:
+        return sum(p.protection is not None for p in self.protections)
+
+    @property
+    def unprotected(self) -> int:
+        return sum(p.protection is None and not p.refused for p in self.protections)
 
     @property
     def errors(self) -> list[Finding]:
@@ -114,6 +158,9 @@ _SG = re.compile(r"^\s*SG_\s+([A-Za-z0-9_]+)(?:[^:]*:\s*(\d+)\s*\|\s*(\d+))?")
 _KEYWORD = re.compile(r"^\s*([A-Z][A-Z0-9_]*)")
 _BA_MSG = re.compile(r'^\s*BA_\s+"([A-Za-z0-9_]+)"\s+BO_\s+(\d+)\s')
 _BA_SIG = re.compile(r'^\s*BA_\s+"([A-Za-z0-9_]+)"\s+SG_\s+(\d+)\s+([A-Za-z0-9_]+)')
+_BA_ANY = re.compile(r'^\s*BA_\s+"([A-Za-z0-9_]+)"')
+_BA_DEF = re.compile(r'^\s*BA_DEF_\s+(?:(BU_|BO_|SG_|EV_)\s+)?"([A-Za-z0-9_]+)"')
+_QUOTED_NAME = re.compile(r"^'([A-Za-z0-9_]+)'$")
 _VAL = re.compile(r"^\s*VAL_\s+(\d+)\s+([A-Za-z0-9_]+)(.*)$")
 _PAIR = re.compile(r'(-?\d+)\s+"((?:[^"\\]|\\.)*)"')
 _SYNTAX_LINE = re.compile(r"\bline (\d+)")
@@ -138,6 +185,8 @@ class _Lines:
         self.message_attr: dict[tuple[int, str], int] = {}
         self.signal_attr: dict[tuple[int, str, str], int] = {}
         self.value_tables: dict[tuple[int, str], _ValueTableText] = {}
+        self.definition: dict[str, tuple[int, str]] = {}   # attribute name -> (line of its BA_DEF_, object kind)
+        self.attribute_set: dict[str, int] = {}            # attribute name -> line of its first BA_
         self.absurd: list[Finding] = []   # numbers no CAN frame can have (cantools would take minutes on them)
         current: str | None = None
         for number, line in enumerate(text.split("\n"), start=1):
@@ -159,6 +208,10 @@ class _Lines:
                                                m.group(1)))
             elif (m := _KEYWORD.match(line)) is not None:
                 current = None   # any other statement ends the message block
+                if (d := _BA_DEF.match(line)) is not None:
+                    self.definition.setdefault(d.group(2), (number, d.group(1) or ""))
+                elif (b := _BA_ANY.match(line)) is not None:
+                    self.attribute_set.setdefault(b.group(1), number)
                 if (a := _BA_MSG.match(line)) is not None:
                     self.message_attr.setdefault((int(a.group(2)), a.group(1)), number)
                 elif (a := _BA_SIG.match(line)) is not None:
@@ -192,45 +245,50 @@ def _dbc_id(message: Message) -> int:
 
 
 # -- the check ---------------------------------------------------------------------------------------
-def check_file(path: Path | str, e2e_mode: str = "auto") -> CheckResult:
-    """Check one DBC file; DatabaseError only when the file cannot be read at all."""
+Overrides = Mapping[str, Mapping[str, Any]]
+
+
+def check_file(path: Path | str, e2e_mode: str = OPTIONAL, e2e_overrides: Overrides | None = None) -> CheckResult:
+    """Check one DBC or ARXML file (by its suffix); DatabaseError only when the file cannot be read at all.
+    `e2e_overrides`: a project's bench.toml [e2e] table (message name -> parameters), applied to this file's
+    messages of those names."""
     path = Path(path)
     text, encoding = read_text(path)
-    result = check_text(text, path, e2e_mode)
+    kind = "arxml" if path.suffix.lower() == ARXML_SUFFIX else "dbc"
+    result = check_text(text, path, e2e_mode, e2e_overrides, database_format=kind)
     result.encoding = encoding
     return result
 
 
-def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = "auto") -> CheckResult:
-    """Check DBC text; never raises on any text (every problem is a finding)."""
+def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = OPTIONAL,
+               e2e_overrides: Overrides | None = None, database_format: str = "dbc") -> CheckResult:
+    """Check DBC (or ARXML) text; never raises on any text (every problem is a finding)."""
     if e2e_mode not in E2E_MODES:
         raise ValueError(f"e2e mode must be one of {', '.join(E2E_MODES)}, got {e2e_mode!r}")
-    result = CheckResult(path=Path(path))
-    lines = _Lines(text)
+    result = CheckResult(path=Path(path), e2e=e2e_mode)
+    lines = _Lines(text if database_format == "dbc" else "")   # ARXML: no line numbers
     findings = result.findings
     if lines.absurd:   # reported alone: loading such a file can take cantools minutes
         findings.extend(lines.absurd)
         return _sorted(result)
-    database, strict_error = _load(text, findings)
+    database, strict_error = _load(text, findings, database_format)
     if database is None:
         return _sorted(result)
     messages = list(database.messages)
     result.messages = len(messages)
     result.signals = sum(len(m.signals) for m in messages)
-    declares_e2e = any(_means_e2e(m) for m in messages)
-    required = e2e_mode == "required" or (e2e_mode == "auto" and declares_e2e)
-    result.e2e = "required" if required else "optional"
     if not messages:
-        findings.append(Finding(WARNING, "empty", "no messages: nothing for the bench to send or check", 1))
+        findings.append(Finding(WARNING, "empty", "no messages: nothing for the bench to send or check",
+                                1 if database_format == "dbc" else None))
     _check_duplicates(messages, lines, findings)
-    attribute_defaults = _attribute_defaults(database)
+    definitions = _attribute_definitions(database)
+    _check_e2e_definitions(definitions, lines, findings)
+    attribute_defaults = {name: d.default_value for name, d in definitions.items()}
+    overrides = e2e_overrides or {}
     for message in messages:
-        _check_message(message, lines, attribute_defaults, required, findings)
-    if messages and not required and not declares_e2e:
-        findings.append(Finding(
-            WARNING, "e2e", "no message carries the end-to-end layout (a 4-bit counter at bit 48, an 8-bit "
-            "checksum at bit 56, docs/spec/e2e.md): the bench sends and judges every message without end-to-end "
-            "protection", 1))
+        _check_message(message, lines, attribute_defaults, findings)
+        result.protections.append(_check_e2e(message, definitions, overrides.get(message.name), lines,
+                                             e2e_mode == REQUIRED, findings))
     if strict_error is not None:
         _add_strict_error(strict_error, lines, findings)
     return _sorted(result)
@@ -241,19 +299,20 @@ def _sorted(result: CheckResult) -> CheckResult:
     return result
 
 
-def _load(text: str, findings: list[Finding]) -> tuple[Database | None, Exception | None]:
+def _load(text: str, findings: list[Finding], database_format: str = "dbc") -> tuple[Database | None,
+                                                                                 Exception | None]:
     """Strict first (what the bench does); when that fails, non-strict to check the rest."""
     strict_error: Exception | None = None
     try:
-        database = cantools.database.load_string(text, database_format="dbc", strict=True)
+        database = cantools.database.load_string(text, database_format=database_format, strict=True)
         if isinstance(database, Database):
             return database, None
     except Exception as exc:  # noqa: BLE001 - cantools raises many types; each is a finding
         strict_error = exc
     try:
-        database = cantools.database.load_string(text, database_format="dbc", strict=False)
+        database = cantools.database.load_string(text, database_format=database_format, strict=False)
     except Exception as exc:  # noqa: BLE001
-        findings.append(_parse_finding(exc, text))
+        findings.append(_parse_finding(exc, text if database_format == "dbc" else ""))
         return None, None
     if not isinstance(database, Database):
         findings.append(Finding(ERROR, "load", "not a CAN database", 1))
@@ -272,6 +331,12 @@ def _clean(exc: BaseException) -> str:
 
 def _parse_finding(exc: BaseException, text: str) -> Finding:
     message = _clean(exc)
+    undefined = _QUOTED_NAME.match(message)
+    if undefined is not None and undefined.group(1) in (lines := _Lines(text)).attribute_set:
+        # cantools' KeyError for an attribute set by a BA_ line that no BA_DEF_ defines
+        name = undefined.group(1)
+        return Finding(ERROR, "attribute", f"attribute {name} is set but never defined (no BA_DEF_ \"{name}\"): "
+                       "cantools cannot load the file", lines.attribute_set[name])
     match = _SYNTAX_LINE.search(message)
     line = int(match.group(1)) if match else None
     if line is None:
@@ -294,10 +359,10 @@ def _add_strict_error(exc: Exception, lines: _Lines, findings: list[Finding]) ->
                             lines.message.get(name) if name else None, name))
 
 
-def _attribute_defaults(database: Database) -> dict[str, object]:
+def _attribute_definitions(database: Database) -> dict[str, Any]:
+    """The database's attribute definitions by name (none for ARXML)."""
     specifics = getattr(database, "dbc", None)
-    definitions = getattr(specifics, "attribute_definitions", None) or {}
-    return {name: d.default_value for name, d in definitions.items()}
+    return dict(getattr(specifics, "attribute_definitions", None) or {})
 
 
 def _check_duplicates(messages: list[Message], lines: _Lines, findings: list[Finding]) -> None:
@@ -316,8 +381,7 @@ def _check_duplicates(messages: list[Message], lines: _Lines, findings: list[Fin
 
 
 # -- one message -------------------------------------------------------------------------------------
-def _check_message(message: Message, lines: _Lines, defaults: dict[str, object], e2e_required: bool,
-                   findings: list[Finding]) -> None:
+def _check_message(message: Message, lines: _Lines, defaults: dict[str, object], findings: list[Finding]) -> None:
     line = lines.of_message(message)
     name = message.name
 
@@ -327,9 +391,12 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
     if message.is_extended_frame:
         add(ERROR, "frame-id", f"extended (29-bit) identifier 0x{message.frame_id:X}: the bench sends and "
             "monitors 11-bit identifiers only")
-    if message.length != FRAME_LENGTH:
-        add(ERROR, "frame-length", f"length {message.length} byte{'s' * (message.length != 1)}: the bench sends "
-            "classical 8-byte frames and writes the end-to-end counter and checksum into bytes 6 and 7")
+    if message.length > FRAME_LENGTH:
+        add(ERROR, "frame-length", f"length {message.length} bytes: the bench sends classical CAN frames of at "
+            f"most {FRAME_LENGTH} bytes")
+    elif message.length != FRAME_LENGTH:
+        add(WARNING, "frame-length", f"length {message.length} byte{'s' * (message.length != 1)}: the contract's "
+            f"frames are {FRAME_LENGTH} bytes (docs/spec/k-matrix.md); the bench sends and judges it at its length")
     if message.is_multiplexed():
         add(ERROR, "multiplex", "multiplexed message: the bench's codec and monitor need every signal in "
             "every frame")
@@ -341,7 +408,6 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
     _check_layout(message, lines, findings)
     for signal in message.signals:
         _check_signal(message, signal, lines, findings)
-    _check_e2e(message, lines, e2e_required, findings)
 
 
 def _attribute(message: Message, name: str, defaults: dict[str, object]) -> tuple[object, bool]:
@@ -353,6 +419,10 @@ def _attribute(message: Message, name: str, defaults: dict[str, object]) -> tupl
 
 
 def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], add: _Add) -> None:
+    if message.dbc is None:   # ARXML: the cycle time of the frame's timing, no send type attribute
+        if message.cycle_time is None or message.cycle_time <= 0:
+            add(ERROR, "cycle-time", "no cyclic timing: the restbus cannot send it periodically")
+        return
     dbc_id = _dbc_id(message)
     cycle, explicit = _attribute(message, "GenMsgCycleTime", defaults)
     at = lines.message_attr.get((dbc_id, "GenMsgCycleTime"))
@@ -540,76 +610,94 @@ def _check_value_table(message: Message, signal: Signal, lines: _Lines, add: _Ad
             f"{_g(float(signal.offset))}): the bench sets a name's number as the physical value", at)
 
 
-# -- end-to-end layout -------------------------------------------------------------------------------
-def _at_place(signal: Signal, start: int, length: int) -> bool:
-    """A signal of a place's size over exactly its bits, in either byte order: what a database that means the
-    profile declares there, rightly or not."""
-    return signal.length == length and sorted(_bits(signal)) == list(range(start, start + length))
-
-
-def _means_e2e(message: Message) -> bool:
-    """Whether an 8-byte message means to carry the profile: a 4-bit signal over bits 48-51, or an 8-bit one over
-    byte 7 beside a 4-bit one in byte 6. An 8-bit signal in byte 7 alone is common in foreign databases (the
-    corpus has five) and says nothing; a 4-bit signal at bit 48 of an 8-byte frame is the counter's mark."""
-    if message.length != FRAME_LENGTH:
-        return False
-    (_, counter_start, counter_length), (_, checksum_start, checksum_length) = E2E_PLACES
-    if any(_at_place(s, counter_start, counter_length) for s in message.signals):
-        return True
-    counter_byte = range(counter_start - counter_start % 8, counter_start - counter_start % 8 + 8)
-    return (any(_at_place(s, checksum_start, checksum_length) for s in message.signals)
-            and any(s.length == counter_length and all(b in counter_byte for b in _bits(s)) for s in message.signals))
-
-
-def _holder(message: Message, start: int, length: int) -> Signal | None:
-    """The signal that holds a place, or is meant to: one over exactly its bits, else one over its first bit,
-    else one of its size inside its byte (a counter moved within byte 6); None when nothing is there."""
-    first_byte = start - start % 8
-    tests: tuple[Callable[[Signal], bool], ...] = (
-        lambda s: _at_place(s, start, length),
-        lambda s: start in _bits(s),
-        lambda s: s.length == length and all(first_byte <= b < first_byte + 8 for b in _bits(s)),
-    )
-    for test in tests:
-        found = next((s for s in message.signals if test(s)), None)
-        if found is not None:
-            return found
-    return None
-
-
-def _check_e2e(message: Message, lines: _Lines, required: bool, findings: list[Finding]) -> None:
-    """The counter and the checksum of one message, found by their places (docs/spec/e2e.md); checked in every
-    message when the profile is required, else only in messages that mean to carry it."""
-    if not required and not _means_e2e(message):
-        return
-    severity = ERROR if required else WARNING
-    for what, start, length in E2E_PLACES:
-        signal = _holder(message, start, length)
-        if signal is None:
-            findings.append(Finding(severity, "e2e", f"no {length}-bit {what} at bit {start} (docs/spec/e2e.md)",
-                                    lines.of_message(message), message.name))
+# -- end-to-end protection ---------------------------------------------------------------------------
+def _check_e2e_definitions(definitions: Mapping[str, Any], lines: _Lines, findings: list[Finding]) -> None:
+    """The E2E attribute definitions themselves: a name the bench does not know (a typo: its values would be
+    ignored), an ENUM choice no profile has, a definition or a value on signals (the bench reads messages')."""
+    for name, definition in definitions.items():
+        if not name.upper().startswith("E2E"):
             continue
-        wrong = []
-        if signal.start != start or signal.length != length:
-            wrong.append(f"is {signal.length} bits at bit {signal.start}")
-        if signal.byte_order != "little_endian":
-            wrong.append("is big-endian")
-        if signal.is_signed or signal.is_float:
-            wrong.append("is signed" if signal.is_signed else "is a float")
-        if float(signal.scale) != 1 or float(signal.offset) != 0:
-            wrong.append(f"has scale {_g(float(signal.scale))}, offset {_g(float(signal.offset))}")
-        if wrong:
-            findings.append(Finding(severity, "e2e", f"{'; '.join(wrong)}: the end-to-end {what} is {length} "
-                                    f"unsigned Intel bits at bit {start}, scale 1 (docs/spec/e2e.md)",
-                                    lines.of_signal(message, signal), message.name, signal.name))
+        line, kind = lines.definition.get(name, (None, ""))
+        if name not in E2E_ATTRIBUTES:
+            findings.append(Finding(WARNING, "e2e-attribute", f"attribute {name} is not an E2E parameter the bench "
+                                    f"knows{did_you_mean(name, E2E_ATTRIBUTES)}: its values are ignored (known: "
+                                    f"{', '.join(E2E_ATTRIBUTES)})", line))
+            continue
+        if kind and kind != "BO_":
+            findings.append(Finding(WARNING, "e2e-attribute", f"attribute {name} is defined for {kind} objects: "
+                                    "the bench reads E2E parameters of messages (BA_DEF_ BO_)", line))
+        allowed = E2E_CHOICES.get(name)
+        choices = [str(c) for c in (getattr(definition, "choices", None) or ())]
+        strange = [c for c in choices if allowed is not None and c not in allowed]
+        if strange:
+            findings.append(Finding(WARNING, "e2e-attribute", f"attribute {name}: choice(s) "
+                                    f"{', '.join(repr(c) for c in strange)} mean nothing to the bench (it knows "
+                                    f"{', '.join(allowed or ())}): a message set to one is refused", line))
+    for (_, signal, name), line in sorted(lines.signal_attr.items(), key=lambda item: item[1]):
+        if name in E2E_ATTRIBUTES:
+            findings.append(Finding(WARNING, "e2e-attribute", f"{name} set on signal {signal}: the bench reads "
+                                    "E2E parameters of messages only, so this value is ignored", line))
+
+
+def _check_e2e(message: Message, definitions: Mapping[str, Any], override: Mapping[str, Any] | None,
+               lines: _Lines, required: bool, findings: list[Finding]) -> MessageProtection:
+    """The protection a message declares, checked as the bench loads it (`bench.e2e.config.protection`), and the
+    signals on its CRC and counter fields."""
+    line = lines.of_message(message)
+    name = message.name
+    try:
+        protection = e2e_config.protection(message, definitions, override)
+    except e2e_config.ProtectionError as exc:
+        text = str(exc)
+        text = text[len(name) + 2:] if text.startswith(f"{name}: ") else text
+        findings.append(Finding(ERROR, "e2e", f"{text}{' (bench.toml [e2e] applied)' if override else ''}",
+                                line, name))
+        return MessageProtection(name, message.frame_id, None, refused=True)
+    if protection is None:
+        if required:
+            findings.append(Finding(ERROR, "e2e", "no E2E protection declared (E2E_Profile, ARXML E2E properties "
+                                    "or bench.toml [e2e]): --e2e required wants a profile on every message",
+                                    line, name))
+        return MessageProtection(name, message.frame_id, None)
+    for what, place in (("CRC", protection.crc), ("counter", protection.counter)):
+        span = set(range(place.start, place.start + place.length))
+        for signal in message.signals:
+            if not span & set(_bits(signal)):
+                continue
+            wrong = _not_exactly(signal, place)
+            if wrong:
+                findings.append(Finding(
+                    WARNING, "e2e", f"overlaps the {protection.profile} {what} field (bits {place.start}-"
+                    f"{place.start + place.length - 1}) but {'; '.join(wrong)}: the bench writes the field over it "
+                    f"(the {what} is {place.length} unsigned Intel bits at bit {place.start}, scale 1, offset 0)",
+                    lines.of_signal(message, signal), name, signal.name))
+    return MessageProtection(name, message.frame_id, protection)
+
+
+def _not_exactly(signal: Signal, place: Field) -> list[str]:
+    """How a signal over an E2E field differs from that field (empty: it is exactly the field)."""
+    wrong = []
+    if signal.start != place.start or signal.length != place.length or signal.byte_order != "little_endian":
+        order = "" if signal.byte_order == "little_endian" else " big-endian"
+        wrong.append(f"is {signal.length}{order} bits at bit {signal.start}")
+    if signal.is_signed or signal.is_float:
+        wrong.append("is signed" if signal.is_signed else "is a float")
+    if float(signal.scale) != 1 or float(signal.offset) != 0:
+        wrong.append(f"has scale {_g(float(signal.scale))}, offset {_g(float(signal.offset))}")
+    return wrong
+
+
+def protection_line(result: CheckResult, entry: MessageProtection) -> str:
+    """What the bench will apply to one message, e.g. `x.dbc: DRV_Steering 0x100: P11 DataID 0x0100 BOTH, ...`."""
+    return f"{result.path}: {entry.name} 0x{entry.frame_id:03X}: {entry.describe()}"
 
 
 def summary_line(result: CheckResult) -> str:
     errors, warnings = len(result.errors), len(result.warnings)
     verdict = "accepted" if result.accepted else "rejected"
     return (f"{result.path}: {verdict}: {errors} error{'s' * (errors != 1)}, {warnings} "
-            f"warning{'s' * (warnings != 1)} ({result.messages} messages, {result.signals} signals, "
-            f"end-to-end {result.e2e})")
+            f"warning{'s' * (warnings != 1)} ({result.messages} messages: {result.protected} protected, "
+            f"{result.unprotected} unprotected; {result.signals} signals; end-to-end {result.e2e})")
 
 
 def format_finding(result: CheckResult, finding: Finding) -> str:
@@ -618,12 +706,13 @@ def format_finding(result: CheckResult, finding: Finding) -> str:
     return f"{where}: {finding.severity} [{finding.kind}]{subject} {finding.text}"
 
 
-def check_files(paths: Iterable[Path | str], e2e_mode: str = "auto") -> list[CheckResult | DatabaseError]:
+def check_files(paths: Iterable[Path | str], e2e_mode: str = OPTIONAL,
+                e2e_overrides: Overrides | None = None) -> list[CheckResult | DatabaseError]:
     """Each file's result, or the DatabaseError of a file that cannot be read."""
     out: list[CheckResult | DatabaseError] = []
     for path in paths:
         try:
-            out.append(check_file(path, e2e_mode))
+            out.append(check_file(path, e2e_mode, e2e_overrides))
         except DatabaseError as exc:
             out.append(exc)
     return out

@@ -19,6 +19,7 @@ interval would, and it runs at a lower priority (LOG_NICE): it has no deadline, 
 from __future__ import annotations
 
 import gc
+import json
 import logging
 import math
 import os
@@ -49,11 +50,14 @@ _ORIGIN = "origin"
 class LogProcess:
     """Same calls as the recorder's frame/step/close, served by a child process."""
 
-    def __init__(self, path: Path, databases: Sequence[Path], channel: str) -> None:
+    def __init__(self, path: Path, databases: Sequence[Path], channel: str,
+                 e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+        """`e2e_overrides`: bench.toml's [e2e] table, so that the child loads the databases as the run does."""
         # A program of its own (not multiprocessing, which would re-import the caller's main module), in a
         # session of its own so that a signal to the run's process group does not cut the log short.
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "bench.logproc", str(path), channel, *map(str, databases)],
+            [sys.executable, "-m", "bench.logproc", str(path), channel, json.dumps(dict(e2e_overrides or {})),
+             *map(str, databases)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True)
         assert self._process.stdin is not None and self._process.stdout is not None
         self._to_child = Connection(os.dup(self._process.stdin.fileno()), readable=False)
@@ -122,7 +126,8 @@ class LogProcess:
             return "the log process ended unexpectedly"
 
 
-def _serve(conn: Connection, reply: Connection, path: str, databases: list[str], channel: str) -> None:
+def _serve(conn: Connection, reply: Connection, path: str, databases: list[str], channel: str,
+           e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> None:
     """The child: one Recorder, fed batch by batch until the pipe says stop or closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C and SIGTERM are for the run; it closes us
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -134,7 +139,7 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
     from bench.recorder import Recorder
 
     try:
-        codebook = load_codebook(databases)
+        codebook = load_codebook(databases, e2e_overrides)
         # flush_interval inf: the Recorder reads no clock per record; the chunks are finalised below, per batch
         recorder = Recorder(Path(path), [db for _, db in codebook.databases], attachments=[Path(p) for p in databases],
                             flush_interval=math.inf)
@@ -216,4 +221,4 @@ def _report_first(path: str, count: int, problem: str) -> None:
 
 if __name__ == "__main__":
     _serve(Connection(os.dup(0), writable=False), Connection(os.dup(1), readable=False), sys.argv[1],
-           sys.argv[3:], sys.argv[2])
+           sys.argv[4:], sys.argv[2], json.loads(sys.argv[3]))

@@ -116,7 +116,7 @@ def _facts(config: pytest.Config) -> tuple[ProjectConfig, list[str]]:
     if facts is None:
         try:
             project = load_config(_config_path(config))
-            nodes = load_codebook(project.databases).nodes
+            nodes = load_codebook(project.databases, project.e2e).nodes
         except BenchError as exc:
             raise pytest.UsageError(str(exc)) from None
         facts = config.stash[_FACTS_KEY] = (project, nodes)
@@ -181,7 +181,7 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
 
 def _external(config: pytest.Config, project: ProjectConfig) -> set[str]:
     try:
-        return resolve_external(load_codebook(project.databases), project.stimulus,
+        return resolve_external(load_codebook(project.databases, project.e2e), project.stimulus,
                                 config.getoption("--bench-external"))
     except BenchError as exc:
         raise pytest.UsageError(str(exc)) from None

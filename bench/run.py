@@ -60,7 +60,7 @@ class BenchRun:
         self.findings = FindingCollector(lambda: self.session.now() if self.session is not None else None)
         self.findings.attach()
         label = f"{settings.interface}:{settings.channel or 'default'}"
-        self.recorder = log = LogProcess(self.mcap_path, project.databases, label)
+        self.recorder = log = LogProcess(self.mcap_path, project.databases, label, project.e2e)
         self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
 
         def sink(t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,

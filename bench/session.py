@@ -56,7 +56,7 @@ class BenchSession:
                  sink: FrameSink | None = None, keep_history: bool = True) -> None:
         self.project = project
         self.settings = settings
-        self.codebook = load_codebook(project.databases)
+        self.codebook = load_codebook(project.databases, project.e2e)
         problems = project.problems(self.codebook)
         if problems:
             raise InputProblems(problems)

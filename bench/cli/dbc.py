@@ -1,16 +1,21 @@
-"""`bench dbc [FILE ...]`: list what a DBC carries (ids, senders, cycle times, signals with units),
-so an engineer can check a database against the project's communication matrix at a glance without opening
-an editor. Without FILE: the databases of the project's bench.toml ([bench] databases).
+"""`bench dbc [FILE ...]`: list what a database (DBC or ARXML) carries (ids, senders, cycle times, the E2E
+protection the bench applies, signals with units), so an engineer can check it against the project's
+communication matrix at a glance without opening an editor. Without FILE: the databases of the project's
+bench.toml ([bench] databases), with its [e2e] table applied.
 
-`bench dbc check [FILE ...]`: check databases against the bench's needs (`bench.dbccheck`) and print
-every finding with its file and line. Exit 0 when no file has an error (warnings allowed), 1 when one
-has, 2 when a file cannot be read. `check` is recognised as the first word, so a file named "check"
-is listed with `bench dbc ./check`.
+`bench dbc check [--e2e optional|required] [FILE ...]`: check databases against the bench's needs
+(`bench.dbccheck`), print per message the protection the bench will apply (profile, DataID, offsets, window) or
+"unprotected", then every finding with its file and line. `--e2e optional` (the default): a message may go
+without protection; `--e2e required`: every message must declare a profile (the contract's databases). Exit 0
+when no file has an error (warnings allowed), 1 when one has, 2 when a file cannot be read. `check` is
+recognised as the first word, so a file named "check" is listed with `bench dbc ./check`.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -22,11 +27,27 @@ from rich.text import Text
 from bench import dbccheck
 from bench.codec import load_dbc
 from bench.config import load_config
-from bench.errors import ConfigError, DatabaseError
+from bench.e2e import config as e2e_config
+from bench.errors import ConfigError, DatabaseError, did_you_mean
 
 CHECK = "check"
-E2E_HELP = ("check only: the end-to-end layout (the bench's counter and checksum signals) is an error (required), "
-            "a warning (optional), or required when the file declares either signal (auto, the default)")
+#: Where `Protection.describe()` is broken into lines in the table: before each group of parameters.
+_PARTS = re.compile(r", (?=CRC bits|counter bits|MaxDeltaCounter|window)")
+E2E_HELP = ("check only: may a message go without E2E protection? optional (the default): yes, it is listed as "
+            "unprotected; required: every message must declare a profile (E2E_Profile P01/P02/P05/P11 and the "
+            "other E2E_* attributes, ARXML E2E properties, or bench.toml [e2e]), an unprotected one is an error "
+            "(how the contract's own databases are checked). A declared protection is checked either way.")
+CHECK_DESCRIPTION = (
+    "Check DBC or ARXML files against the bench's needs (cycle and send types, layout, ranges, start values, value "
+    "tables, E2E protection); print per message the protection the bench will apply (profile, DataID or "
+    "DataIDList, CRC and counter bits, MaxDeltaCounter, the state machine's window) or 'unprotected', then every "
+    "finding with its file and line (ARXML: with its message). A message is protected when it declares an AUTOSAR "
+    "E2E profile: DBC attributes E2E_Profile (None, P01, P02, P05, P11), E2E_DataID, E2E_DataIDMode, "
+    "E2E_DataIDList, E2E_Offset, E2E_DataLength, E2E_MaxDeltaCounter, E2E_WindowSize, E2E_MinOkState*/"
+    "E2E_MaxErrorState* (Init, Valid, Invalid); ARXML E2E properties; bench.toml [e2e.MESSAGE] over both when the "
+    "files are the project's. A declaration no profile can use is an error; a signal over the CRC or counter "
+    "field that is not exactly that field is a warning. Exit 0: no errors; 1: a file has errors; 2: a file "
+    "cannot be read.")
 CONFIG_HELP = "the project's bench.toml, whose [bench] databases are the default FILEs (default: found from here up)"
 
 
@@ -35,15 +56,17 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "dbc",
         help="list the messages and signals of DBC files, or check them (bench dbc check FILE...)",
-        usage="bench dbc [FILE ...]\n       bench dbc check [--e2e {auto,required,optional}] [FILE ...]",
-        description="List id, name, senders, cycle time and signals of every message; "
-        "'bench dbc check FILE...' checks them against the bench's needs instead (cycle and send types, "
-        "layout, ranges, start values, end-to-end layout, value tables) and prints every finding with its line. "
-        "Without FILE: the databases of the project's bench.toml ([bench] databases).",
+        usage="bench dbc [FILE ...]\n       bench dbc check [--e2e {optional,required}] [FILE ...]",
+        description="List id, name, senders, cycle time, E2E protection and signals of every message of DBC or "
+        "ARXML files; 'bench dbc check FILE...' checks them against the bench's needs instead (cycle and send "
+        "types, layout, ranges, start values, value tables, the E2E protection each message declares), prints "
+        "per message the protection the bench will apply (profile, DataID, offsets, window) or 'unprotected', and "
+        "every finding with its line. Without FILE: the databases of the project's bench.toml ([bench] databases), "
+        "with its [e2e] table applied.",
     )
     # REMAINDER, parsed again in `run`: so that options may follow the words (`check --e2e required FILE`)
     parser.add_argument("files", nargs=argparse.REMAINDER, metavar="[check] FILE",
-                        help="DBC file(s); a first word 'check' checks them instead of listing them")
+                        help="DBC or ARXML file(s); a first word 'check' checks them instead of listing them")
     parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
     parser.add_argument("--config", default=None, help=CONFIG_HELP)
     parser.set_defaults(handler=run)
@@ -57,7 +80,8 @@ class _WordsParser(argparse.ArgumentParser):
 
 
 def _words(prog: str, words: list[str], with_e2e: bool) -> argparse.Namespace:
-    parser = _WordsParser(prog=prog, add_help=prog.endswith("check"))
+    checking = prog.endswith("check")
+    parser = _WordsParser(prog=prog, add_help=checking, description=CHECK_DESCRIPTION if checking else None)
     parser.add_argument("files", nargs="*", metavar="FILE")
     parser.add_argument("--config", default=None, help=CONFIG_HELP)
     if with_e2e:
@@ -70,41 +94,61 @@ def run(args: argparse.Namespace) -> int:
     words: list[str] = list(args.files)
     if words and words[0] == CHECK:
         checked = _words("bench dbc check", words[1:], with_e2e=True)
-        files = [Path(f) for f in checked.files] or configured(checked.config or args.config)
-        return check(files, checked.e2e or args.e2e or "auto")
+        files, overrides = _files(checked.files, checked.config or args.config)
+        return check(files, checked.e2e or args.e2e or dbccheck.OPTIONAL, overrides)
     if args.e2e is not None:
         raise ConfigError("--e2e: only for 'bench dbc check FILE...'")
     listed = _words("bench dbc", words, with_e2e=False)
-    files = [Path(f) for f in listed.files] or configured(listed.config or args.config)
+    files, overrides = _files(listed.files, listed.config or args.config)
     databases = [(path, load_dbc(path)) for path in files]  # raises DatabaseError naming the file
     console = Console()
     for path, database in databases:
-        console.print(message_table(path, database))
+        console.print(message_table(path, database, overrides))
     return 0
 
 
-def configured(config: str | None) -> list[Path]:
-    """The project's databases: what `bench run` would load (ConfigError without a bench.toml)."""
-    return list(load_config(Path(config) if config else None).databases)
+def _files(given: list[str], config: str | None) -> tuple[list[Path], dict[str, dict[str, Any]]]:
+    """The files named, or the project's databases with its [e2e] table: what `bench run` would load (ConfigError
+    without a bench.toml)."""
+    if given:
+        return [Path(f) for f in given], {}
+    project = load_config(Path(config) if config else None)
+    return list(project.databases), project.e2e
 
 
-def message_table(path: Path, database: Database) -> Table:
+def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None
+                  ) -> Table:
     """One row per message, sorted by id (= bus priority)."""
     table = Table(title=_title(path, database), title_justify="left", show_lines=True)
     table.add_column("id", no_wrap=True, justify="right")
     table.add_column("message", no_wrap=True)
     table.add_column("sender", no_wrap=True)
     table.add_column("cycle ms", justify="right", no_wrap=True)
+    table.add_column("E2E", no_wrap=True)
     table.add_column(Text("signals [unit]"))
+    definitions = dict(getattr(database.dbc, "attribute_definitions", None) or {}) if database.dbc else {}
+    overrides = e2e_overrides or {}
     for message in sorted(database.messages, key=lambda m: m.frame_id):
         table.add_row(
             Text(f"0x{message.frame_id:03X}"),
             Text(message.name),
             Text(", ".join(message.senders) or "-"),
             Text("-" if message.cycle_time is None else str(message.cycle_time)),
+            _protection(message, definitions, overrides.get(message.name)),
             _signals(message),
         )
     return table
+
+
+def _protection(message: Message, definitions: Mapping[str, Any], override: Mapping[str, Any] | None) -> Text:
+    """The protection the bench applies, one parameter group a line; 'unprotected', or why it is refused."""
+    try:
+        protection = e2e_config.protection(message, definitions, override)
+    except e2e_config.ProtectionError as exc:
+        return Text(f"refused: {exc}", style="red")
+    if protection is None:
+        return Text("unprotected")
+    return Text("\n".join(_PARTS.split(protection.describe())))
 
 
 def _title(path: Path, database: Database) -> Text:
@@ -120,16 +164,20 @@ def _signals(message: Message) -> Text:
     return Text("\n".join(lines))
 
 
-def check(files: list[Path], e2e_mode: str) -> int:
-    """Print every finding as FILE:LINE, then one summary line per file (compiler style, so editors jump to it)."""
+def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> int:
+    """Print per message the protection the bench applies, every finding as FILE:LINE, then one summary line per
+    file (compiler style, so editors jump to it)."""
     out = Console(soft_wrap=True, highlight=False)
     err = Console(stderr=True, soft_wrap=True, highlight=False)
     unreadable = rejected = 0
-    for outcome in dbccheck.check_files(files, e2e_mode):
+    outcomes = dbccheck.check_files(files, e2e_mode, e2e_overrides)
+    for outcome in outcomes:
         if isinstance(outcome, DatabaseError):
             unreadable += 1
             err.print(Text.assemble(("bench dbc check: error: ", "bold red"), str(outcome)))
             continue
+        for entry in outcome.protections:
+            out.print(Text(dbccheck.protection_line(outcome, entry)))
         for finding in outcome.findings:
             style = "red" if finding.severity == dbccheck.ERROR else "yellow"
             out.print(Text(dbccheck.format_finding(outcome, finding), style=style))
@@ -138,4 +186,9 @@ def check(files: list[Path], e2e_mode: str) -> int:
     if len(files) > 1:
         out.print(Text(f"{len(files)} files: {len(files) - rejected - unreadable} accepted, {rejected} rejected, "
                        f"{unreadable} unreadable"))
-    return 2 if unreadable else (1 if rejected else 0)
+    names = [p.name for outcome in outcomes if isinstance(outcome, dbccheck.CheckResult) for p in outcome.protections]
+    stray = [name for name in (e2e_overrides or {}) if name not in names]
+    for name in stray:   # what `bench run` refuses too (bench.codec.Codebook)
+        out.print(Text(f"bench.toml: error [e2e] {name}: no such message in the databases{did_you_mean(name, names)}",
+                       style="red"))
+    return 2 if unreadable else (1 if rejected or stray else 0)

@@ -147,7 +147,8 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
             problems.extend(getattr(exc, "problems", None) or [str(exc)])
             return None
 
-    codebook = load_codebook(project.databases)   # a database that does not load makes every other check moot
+    # a database that does not load makes every other check moot
+    codebook = load_codebook(project.databases, project.e2e)
     problems.extend(project.problems(codebook))
     for path in args.paths:
         if not Path(path.partition("::")[0]).exists():

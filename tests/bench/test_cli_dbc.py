@@ -1,4 +1,5 @@
-"""`bench dbc`: lists both databases, and a bad file is a one-line error (exit 2), never a traceback."""
+"""`bench dbc`: lists both databases with the protection of each message, and a bad file is a one-line error
+(exit 2), never a traceback."""
 
 from __future__ import annotations
 
@@ -21,6 +22,29 @@ def test_lists_both_databases(capsys: pytest.CaptureFixture[str]) -> None:
     for text in ("chassis.dbc", "bench.dbc", "0x100", "DRV_Steering", "HandWheelAngle [deg]",
                  "0x161", "ABS_SteerState", "0x680", "BENCH_Control", "PLANT_Dynamics", "TESTER"):
         assert text in out, text
+
+
+def test_the_table_shows_each_message_protection(capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.repo import ROOT
+
+    assert main(["dbc", str(ROOT / "tests" / "fixtures" / "e2e_profiles.dbc")]) == 0
+    out = capsys.readouterr().out
+    assert "E2E" in out
+    for text in ("P01 DataID 0x1234 ALT", "P02 DataIDList 10 11 12", "P05 DataID 0x1235", "P11 DataID 0x0111 NIBBLE",
+                 "CRC bits 48-55", "counter bits 56-59 (0-14)", "window 2 (init 1/0, valid 2/0, invalid 2/0)",
+                 "unprotected"):
+        assert text in out, text
+
+
+def test_arxml_file_is_listed_with_its_profiles(capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.repo import ROOT
+
+    arxml = ROOT.parent / "shared" / "corpus" / "arxml" / "system-4.2.arxml"   # the CI's shared/ beside the clone
+    if not arxml.is_file():
+        pytest.skip(f"no shared corpus beside the repository ({arxml})")
+    assert main(["dbc", str(arxml)]) == 0
+    out = capsys.readouterr().out
+    assert "Message1" in out and "P02 DataIDList 7B 7C" in out and "P05 DataID 0x0141" in out
 
 
 def test_one_file(capsys: pytest.CaptureFixture[str]) -> None:
@@ -86,6 +110,24 @@ def test_check_takes_config_after_the_word(tmp_path: Path, capsys: pytest.Captur
     assert main(["dbc", "check", "--config", str(config)]) == 0
     out = capsys.readouterr().out
     assert "bench.dbc" in out and "chassis.dbc" not in out
+
+
+def test_the_project_e2e_table_applies(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Without FILE the databases are the project's, with its bench.toml [e2e] over them, for listing and check."""
+    config = _project(tmp_path / "p", ["chassis.dbc"])
+    config.write_text(config.read_text(encoding="utf-8") + "\n[e2e.DRV_Steering]\nMaxDeltaCounter = 5\n",
+                      encoding="utf-8")
+    assert main(["dbc", "--config", str(config)]) == 0
+    assert "MaxDeltaCounter 5" in capsys.readouterr().out
+    assert main(["dbc", "check", "--config", str(config)]) == 0
+    out = capsys.readouterr().out
+    assert "DRV_Steering 0x100: P11 DataID 0x0100 BOTH" in out and "MaxDeltaCounter 5" in out
+    assert "[DBC attributes, bench.toml [e2e]]" in out
+    config.write_text(config.read_text(encoding="utf-8").replace("[e2e.DRV_Steering]", "[e2e.DRV_Steerin]"),
+                      encoding="utf-8")
+    assert main(["dbc", "check", "--config", str(config)]) == 1
+    assert ("bench.toml: error [e2e] DRV_Steerin: no such message in the databases (did you mean DRV_Steering?)"
+            in capsys.readouterr().out)
 
 
 def test_no_project_is_a_one_line_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

@@ -207,6 +207,58 @@ def test_scenario_names_are_checked_against_the_databases(tmp_path: Path, scenar
     assert str(path) in str(error.value) and words in str(error.value)
 
 
+# -- [e2e]: a message's AUTOSAR E2E parameters over its database's own ------------------------------------------
+def test_e2e_table_is_read_by_autosar_names(tmp_path: Path) -> None:
+    project = load_config(write(tmp_path, toml({"bench": GOOD}) + "[e2e.DRV_Steering]\nMaxDeltaCounter = 3\n"
+                                '[e2e.DRV_Pedals]\nProfile = "P02"\nDataIDList = [' + ", ".join(map(str, range(16)))
+                                + "]\n"))
+    assert project.e2e == {"DRV_Steering": {"MaxDeltaCounter": 3},
+                           "DRV_Pedals": {"Profile": "P02", "DataIDList": " ".join(f"{i:02X}" for i in range(16))}}
+    assert load_config(write(tmp_path, toml({"bench": GOOD}))).e2e == {}
+
+
+@pytest.mark.parametrize("body, words", [
+    ("[e2e.DRV_Steering]\nMaxDeltaCountr = 3\n",
+     "[e2e.DRV_Steering] unknown key(s) MaxDeltaCountr (did you mean MaxDeltaCounter?)"),
+    ("[e2e.DRV_Steering]\nE2E_DataID = 3\n", "[e2e.DRV_Steering] unknown key(s) E2E_DataID (did you mean DataID?)"),
+    ("[e2e]\nDRV_Steering = 3\n", "give a message's parameters as a table [e2e.DRV_Steering]"),
+    ("[e2e.DRV_Steering]\nProfile = 11\n", "[e2e.DRV_Steering] Profile must be a name"),
+    ('[e2e.DRV_Steering]\nDataID = "0x100"\n', "[e2e.DRV_Steering] DataID must be a whole number"),
+    ("[e2e.DRV_Steering]\nDataIDList = [1, 256]\n", "[e2e.DRV_Steering] DataIDList must be 16 bytes"),
+    ("[e2e.DRV_Steering]\nWindowSize = true\n", "[e2e.DRV_Steering] WindowSize must be a whole number"),
+], ids=["typo", "prefix", "not-a-table", "profile-number", "id-text", "list-byte", "bool"])
+def test_e2e_table_errors_are_one_line(tmp_path: Path, body: str, words: str) -> None:
+    path = write(tmp_path, toml({"bench": GOOD}) + body)
+    with pytest.raises(ConfigError) as error:
+        load_config(path)
+    text = str(error.value)
+    assert text.startswith(f"{path}: ") and words in text and "\n" not in text, text
+
+
+def test_e2e_table_reaches_the_session_and_bench_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The override is what the run loads (bench.session, bench run's checks before any case)."""
+    from bench.config import RunSettings
+    from bench.session import BenchSession
+
+    path = write(tmp_path, toml({"bench": GOOD}) + "[e2e.DRV_Steering]\nMaxDeltaCounter = 3\nWindowSize = 4\n")
+    session = BenchSession(load_config(path), RunSettings())
+    try:
+        protection = session.codebook["DRV_Steering"].protection
+        assert protection is not None and protection.max_delta_counter == 3 and protection.sm.window_size == 4
+        assert "bench.toml [e2e]" in protection.source
+        other = session.codebook["DRV_Pedals"].protection
+        assert other is not None and other.max_delta_counter == 2 and other.source == "DBC attributes"
+    finally:
+        session.close()
+    bad = write(tmp_path, toml({"bench": GOOD}) + "[e2e.DRV_Steering]\nOffset = 44\n", "bad.toml")
+    assert main(["run", str(MINI_CASES), "--config", str(bad), "--out", str(tmp_path / "out")]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "bench.toml [e2e.DRV_Steering]" in err and "Offset 44 is not a multiple of 8" in err, err
+    unknown = write(tmp_path, toml({"bench": GOOD}) + "[e2e.DRV_Steerin]\nMaxDeltaCounter = 3\n", "unknown.toml")
+    assert main(["run", str(MINI_CASES), "--config", str(unknown), "--out", str(tmp_path / "out")]) == 2
+    assert "[e2e] DRV_Steerin: no such message (did you mean DRV_Steering?)" in capsys.readouterr().err
+
+
 def test_config_is_a_folder_or_missing(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="cannot read"):
         load_config(tmp_path)

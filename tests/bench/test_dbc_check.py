@@ -1,5 +1,6 @@
 """`bench dbc check`: each check fails on a database made to break it, with the line of the culprit;
-our own databases pass; every file of the cantools corpus is accepted or rejected without a traceback.
+our own databases pass (every message protected); every file of the cantools corpus, DBC and ARXML, is accepted
+or rejected without a traceback.
 
 The small databases below are written by hand; expected lines are found by searching the test's own
 text for the statement that is wrong (never read back from the checker).
@@ -15,14 +16,34 @@ from bench.cli import main
 from bench.dbccheck import ERROR, CheckResult, Finding, check_file, check_text
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
-CORPUS = ROOT.parent / "shared" / "corpus" / "dbc"
+CORPUS = ROOT.parent / "shared" / "corpus" / "dbc"        # the CI keeps shared/ beside the repository's clone
+ARXML_CORPUS = ROOT.parent / "shared" / "corpus" / "arxml"
 
 HEADER = 'VERSION ""\n\nNS_ :\n\nBS_:\n\nBU_: ECU TESTER\n\n'
 SIGNALS = (
     ' SG_ Speed : 0|16@1- (0.01,0) [-300|300] "m/s" TESTER\n'
     ' SG_ Mode : 16|4@1+ (1,0) [0|3] "-" TESTER\n'
-    ' SG_ AliveCounter : 48|4@1+ (1,0) [0|15] "-" TESTER\n'
-    ' SG_ Checksum : 56|8@1+ (1,0) [0|255] "-" TESTER\n'
+    ' SG_ AliveCounter : 56|4@1+ (1,0) [0|14] "-" TESTER\n'
+    ' SG_ Checksum : 48|8@1+ (1,0) [0|255] "-" TESTER\n'
+)
+#: Profile 11 as the contract declares it: the CRC in byte 6, the counter in the low nibble of byte 7.
+E2E_DEFINITIONS = (
+    'BA_DEF_ BO_  "E2E_Profile" ENUM  "None","P01","P02","P05","P11";\n'
+    'BA_DEF_ BO_  "E2E_DataID" INT 0 65535;\n'
+    'BA_DEF_ BO_  "E2E_DataIDList" STRING ;\n'
+    'BA_DEF_ BO_  "E2E_Offset" INT 0 504;\n'
+    'BA_DEF_ BO_  "E2E_WindowSize" INT 1 255;\n'
+    'BA_DEF_ BO_  "E2E_MaxErrorStateValid" INT 0 255;\n'
+    'BA_DEF_DEF_  "E2E_Profile" "None";\n'
+    'BA_DEF_DEF_  "E2E_DataID" 0;\n'
+    'BA_DEF_DEF_  "E2E_DataIDList" "";\n'
+    'BA_DEF_DEF_  "E2E_Offset" 48;\n'
+    'BA_DEF_DEF_  "E2E_WindowSize" 2;\n'
+    'BA_DEF_DEF_  "E2E_MaxErrorStateValid" 0;\n'
+)
+E2E_VALUES = (
+    'BA_ "E2E_Profile" BO_ 256 4;\n'
+    'BA_ "E2E_DataID" BO_ 256 256;\n'
 )
 FOOTER = (
     'CM_ BO_ 256 "Status of the ECU.";\n'
@@ -36,8 +57,10 @@ FOOTER = (
     'BA_DEF_DEF_  "GenMsgCycleTime" 0;\n'
     'BA_DEF_DEF_  "GenMsgSendType" "NoMsgSendType";\n'
     'BA_DEF_DEF_  "GenSigStartValue" 0;\n'
+    + E2E_DEFINITIONS +
     'BA_ "GenMsgCycleTime" BO_ 256 10;\n'
     'BA_ "GenMsgSendType" BO_ 256 0;\n'
+    + E2E_VALUES +
     'BA_ "GenSigStartValue" SG_ 256 Speed 0;\n'
     'BA_ "GenSigStartValue" SG_ 256 Mode 0;\n'
     'BA_ "GenSigStartValue" SG_ 256 AliveCounter 0;\n'
@@ -71,14 +94,19 @@ def only(findings: list[Finding]) -> Finding:
 def test_good_database_has_no_finding() -> None:
     result = check_text(GOOD)
     assert result.findings == []
-    assert result.accepted and result.messages == 1 and result.signals == 4 and result.e2e == "required"
+    assert result.accepted and result.messages == 1 and result.signals == 4 and result.e2e == "optional"
+    assert (result.protected, result.unprotected) == (1, 0)
+    protection = result.protections[0].protection
+    assert protection is not None and (protection.profile, protection.data_id, protection.offset) == ("P11", 256, 48)
 
 
 @pytest.mark.parametrize("path", [CHASSIS_DBC, BENCH_DBC], ids=lambda p: p.name)
 def test_our_databases_pass(path: Path) -> None:
-    result = check_file(path)
+    """The contract protects every message: checked as CI checks it, with --e2e required."""
+    result = check_file(path, e2e_mode="required")
     assert result.errors == [], result.errors
-    assert result.e2e == "required"
+    assert result.e2e == "required" and result.unprotected == 0 and result.protected == result.messages
+    assert {p.protection.profile for p in result.protections if p.protection} == {"P11"}
 
 
 # -- layout --------------------------------------------------------------------------------------------------
@@ -109,8 +137,8 @@ def test_big_endian_without_overlap_is_accepted() -> None:
 
 def test_signal_does_not_fit_the_frame() -> None:
     # without the E2E signals (bytes 6-7 free): Intel 60|8 runs to bit 67, Motorola 63|16 on into byte 8
-    plain = GOOD.replace(' SG_ AliveCounter : 48|4@1+ (1,0) [0|15] "-" TESTER\n', "").replace(
-        ' SG_ Checksum : 56|8@1+ (1,0) [0|255] "-" TESTER\n', "")
+    plain = GOOD.replace(' SG_ AliveCounter : 56|4@1+ (1,0) [0|14] "-" TESTER\n', "").replace(
+        ' SG_ Checksum : 48|8@1+ (1,0) [0|255] "-" TESTER\n', "")
     for layout in ("60|8@1+", "63|16@0+"):
         text = plain.replace(' SG_ Mode : 16|4@1+', f' SG_ Mode : {layout}')
         result = check_text(text)
@@ -124,9 +152,12 @@ def test_frame_length_and_extended_id() -> None:
     text = text.replace(" 256 ", " 2147483904 ")
     result = check_text(text)
     line = line_of(text, "BO_ 2147483904 ECU_Status")
-    assert only(errors(result, "frame-length")).line == line
+    assert only(warnings(result, "frame-length")).line == line   # the contract's 8 bytes; the bench copes
     assert only(errors(result, "frame-id")).line == line
     assert errors(result, "fit")  # the E2E signals no longer fit in 6 bytes
+    assert "does not fit" in only(errors(result, "e2e")).text    # nor does the declared P11 header
+    longer = check_text(GOOD.replace("BO_ 256 ECU_Status: 8 ECU", "BO_ 256 ECU_Status: 12 ECU"))
+    assert "classical CAN" in only(errors(longer, "frame-length")).text
 
 
 def test_multiplexed_message_is_rejected() -> None:
@@ -235,35 +266,102 @@ def test_missing_start_value_uses_raw_zero() -> None:
     assert "raw 0" in finding.text and "-40" in finding.text
 
 
-# -- end-to-end layout ---------------------------------------------------------------------------------------
-def test_e2e_counter_misplaced() -> None:
-    text = GOOD.replace(" SG_ AliveCounter : 48|4@1+", " SG_ AliveCounter : 52|4@1+")
-    finding = only(errors(check_text(text), "e2e"))
-    assert (finding.signal, finding.line) == ("AliveCounter", line_of(text, " SG_ AliveCounter "))
-    optional = check_text(text, e2e_mode="optional")
-    assert not errors(optional, "e2e") and only(warnings(optional, "e2e")).signal == "AliveCounter"
+# -- end-to-end protection, as declared -----------------------------------------------------------------------
+def plain(text: str = GOOD) -> str:
+    """The database without its E2E values (the definitions stay): every message unprotected."""
+    return text.replace(E2E_VALUES, "")
 
 
-def test_e2e_checksum_signed_big_endian() -> None:
-    text = GOOD.replace(" SG_ Checksum : 56|8@1+", " SG_ Checksum : 63|8@0-")
-    finding = only(errors(check_text(text), "e2e"))
-    assert "big-endian" in finding.text and "signed" in finding.text
+def test_e2e_unprotected_is_fine_unless_required() -> None:
+    result = check_text(plain())
+    assert result.findings == [] and (result.protected, result.unprotected) == (0, 1)
+    assert result.protections[0].describe() == "unprotected"
+    required = check_text(plain(), e2e_mode="required")
+    finding = only(errors(required, "e2e"))
+    assert finding.line == line_of(GOOD, "BO_ 256 ECU_Status") and "--e2e required" in finding.text
+    assert check_text(plain(GOOD.replace(E2E_DEFINITIONS, ""))).findings == []   # no E2E attributes at all
 
 
-def test_e2e_missing_checksum() -> None:
-    text = GOOD.replace(' SG_ Checksum : 56|8@1+ (1,0) [0|255] "-" TESTER\n', "")
-    finding = only(errors(check_text(text), "e2e"))
-    assert "no 8-bit checksum at bit 56" in finding.text and finding.line == line_of(text, "BO_ 256 ECU_Status")
-
-
-def test_e2e_auto_is_optional_for_a_foreign_database() -> None:
-    text = GOOD.replace(' SG_ AliveCounter : 48|4@1+ (1,0) [0|15] "-" TESTER\n', "").replace(
-        ' SG_ Checksum : 56|8@1+ (1,0) [0|255] "-" TESTER\n', "")
+def test_e2e_signal_beside_its_field_is_a_warning() -> None:
+    text = GOOD.replace(" SG_ AliveCounter : 56|4@1+", " SG_ AliveCounter : 57|4@1+")
     result = check_text(text)
-    assert result.e2e == "optional" and result.accepted
-    assert only(warnings(result, "e2e")).line == 1
-    required = check_text(text, e2e_mode="required")
-    assert len(errors(required, "e2e")) == 2 and not required.accepted
+    finding = only(warnings(result, "e2e"))
+    assert (finding.signal, finding.line) == ("AliveCounter", line_of(text, " SG_ AliveCounter "))
+    assert "overlaps the P11 counter field (bits 56-59)" in finding.text and "is 4 bits at bit 57" in finding.text
+    assert result.accepted
+
+
+def test_e2e_signal_on_its_field_but_signed_big_endian_scaled() -> None:
+    # Motorola 55|8: bits 55..48, exactly the CRC's bits, but not the CRC as the profile writes it
+    text = GOOD.replace(" SG_ Checksum : 48|8@1+ (1,0)", " SG_ Checksum : 55|8@0- (2,0)")
+    finding = only(warnings(check_text(text), "e2e"))
+    assert finding.signal == "Checksum"
+    assert all(words in finding.text for words in ("big-endian", "signed", "scale 2", "CRC field"))
+
+
+def test_e2e_field_over_another_signal() -> None:
+    text = GOOD.replace(' SG_ Mode : 16|4@1+', ' SG_ Mode : 58|4@1+')   # bits 58-61: half on the counter
+    finding = only(warnings(check_text(text), "e2e"))
+    assert finding.signal == "Mode" and "counter field (bits 56-59)" in finding.text
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ('"None","P01","P02","P05","P11";', '"None","P01","P02","P05","P11","P22";', "'P22' is not supported"),
+    ('BA_ "E2E_Profile" BO_ 256 4;', 'BA_ "E2E_Profile" BO_ 256 2;\nBA_ "E2E_DataIDList" BO_ 256 "01 02";',
+     "DataIDList has 2 Data IDs, P02 needs 16"),
+    ('BA_ "E2E_DataID" BO_ 256 256;', 'BA_ "E2E_DataID" BO_ 256 256;\nBA_ "E2E_Offset" BO_ 256 56;',
+     "does not fit"),
+    ('BA_ "E2E_DataID" BO_ 256 256;', 'BA_ "E2E_DataID" BO_ 256 256;\nBA_ "E2E_MaxErrorStateValid" BO_ 256 1;',
+     "MinOkStateValid 2 + MaxErrorStateValid 1 exceed WindowSize 2"),
+], ids=["profile", "data-id-list", "header-outside", "sm-window"])
+def test_e2e_declaration_no_profile_can_use(old: str, new: str, words: str) -> None:
+    text = GOOD.replace(old, new)
+    if "P22" in new:
+        text = text.replace('BA_ "E2E_Profile" BO_ 256 4;', 'BA_ "E2E_Profile" BO_ 256 5;')
+    result = check_text(text)
+    finding = only(errors(result, "e2e"))
+    assert (finding.message, finding.line) == ("ECU_Status", line_of(text, "BO_ 256 ECU_Status"))
+    assert words in finding.text and not finding.text.startswith("ECU_Status"), finding.text
+    assert result.protections[0].refused and (result.protected, result.unprotected) == (0, 0)
+
+
+def test_e2e_choice_the_bench_does_not_know_is_a_warning_on_its_definition() -> None:
+    text = GOOD.replace('"None","P01","P02","P05","P11";', '"None","P01","P02","P05","P11","P22";')
+    finding = only(warnings(check_text(text), "e2e-attribute"))
+    assert finding.line == line_of(text, 'BA_DEF_ BO_  "E2E_Profile"') and "'P22'" in finding.text
+
+
+def test_e2e_attribute_set_but_not_defined() -> None:
+    """cantools refuses the file (a bare KeyError); the finding says which attribute and where it is set."""
+    text = GOOD.replace('BA_DEF_ BO_  "E2E_Profile" ENUM  "None","P01","P02","P05","P11";\n', "").replace(
+        'BA_DEF_DEF_  "E2E_Profile" "None";\n', "")
+    finding = only(check_text(text).findings)
+    assert (finding.severity, finding.kind) == (ERROR, "attribute")
+    assert finding.line == line_of(text, 'BA_ "E2E_Profile"') and "E2E_Profile is set but never defined" in finding.text
+
+
+def test_e2e_attribute_the_bench_does_not_know() -> None:
+    text = GOOD.replace('BA_DEF_ BO_  "E2E_DataID" INT 0 65535;\n',
+                        'BA_DEF_ BO_  "E2E_DataID" INT 0 65535;\nBA_DEF_ BO_  "E2E_MaxDeltaCountr" INT 0 255;\n')
+    finding = only(warnings(check_text(text), "e2e-attribute"))
+    assert finding.line == line_of(text, '"E2E_MaxDeltaCountr"')
+    assert "did you mean E2E_MaxDeltaCounter?" in finding.text and "ignored" in finding.text
+
+
+def test_e2e_attribute_on_a_signal_is_a_warning() -> None:
+    text = GOOD.replace('BA_DEF_ BO_  "E2E_WindowSize" INT 1 255;', 'BA_DEF_ SG_  "E2E_WindowSize" INT 1 255;')
+    text = text.replace('BA_ "GenSigStartValue" SG_ 256 Mode 0;\n',
+                        'BA_ "GenSigStartValue" SG_ 256 Mode 0;\nBA_ "E2E_WindowSize" SG_ 256 Mode 3;\n')
+    found = warnings(check_text(text), "e2e-attribute")
+    assert [f.line for f in found] == [line_of(text, '"E2E_WindowSize" INT'), line_of(text, '"E2E_WindowSize" SG_ 256')]
+
+
+def test_e2e_override_over_the_database() -> None:
+    result = check_text(plain(), e2e_overrides={"ECU_Status": {"Profile": "P11", "DataID": 0x100, "Offset": 48}})
+    protection = result.protections[0].protection
+    assert result.findings == [] and protection is not None and protection.source == "bench.toml [e2e]"
+    refused = only(errors(check_text(GOOD, e2e_overrides={"ECU_Status": {"WindowSize": 1}}), "e2e"))
+    assert "exceed WindowSize 1" in refused.text and "(bench.toml [e2e] applied)" in refused.text
 
 
 # -- value tables, units, comments ---------------------------------------------------------------------------
@@ -322,13 +420,13 @@ def test_odd_whitespace_and_cp1252(tmp_path: Path, eol: str) -> None:
     text = GOOD.replace("BO_ 256 ECU_Status:", "BO_\t256   ECU_Status :").replace(
         " SG_ Mode : 16|4@1+ (1,0) [0|3] \"-\"", "\t SG_   Mode\t: 16|4@1+ (1,0) [0|3] \"°C\"")
     text = text.replace(' SG_ Speed : 0|16@1- (0.01,0) [-300|300]', ' SG_ Speed : 0|16@1- (0.01,0) [-300|301]')
-    text = text.replace(" SG_ AliveCounter : 48|4@1+", " SG_ AliveCounter : 52|4@1+")
+    text = text.replace(" SG_ AliveCounter : 56|4@1+", " SG_ AliveCounter : 57|4@1+")
     path = tmp_path / "odd.dbc"
     path.write_bytes(text.replace("\n", eol).encode("cp1252"))
     result = check_file(path)
     assert result.encoding == "cp1252"
-    assert only(errors(result, "e2e")).line == line_of(text, "SG_ AliveCounter")
-    assert result.warnings == [] and {f.kind for f in result.errors} == {"e2e"}
+    assert only(warnings(result, "e2e")).line == line_of(text, "SG_ AliveCounter")
+    assert result.errors == [] and {f.kind for f in result.warnings} == {"e2e"}
     assert result.messages == 1 and result.signals == 4
 
 
@@ -345,7 +443,9 @@ def test_cli_good_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     path.write_text(GOOD)
     assert main(["dbc", "check", str(path)]) == 0
     out = capsys.readouterr().out
-    assert f"{path}: accepted: 0 errors, 0 warnings" in out
+    assert f"{path}: accepted: 0 errors, 0 warnings (1 messages: 1 protected, 0 unprotected;" in out
+    assert (f"{path}: ECU_Status 0x100: P11 DataID 0x0100 BOTH, CRC bits 48-55, counter bits 56-59 (0-14), "
+            "MaxDeltaCounter 2, window 2 (init 1/0, valid 2/0, invalid 2/0) [DBC attributes]") in out
 
 
 def test_cli_warnings_only_pass(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -387,19 +487,30 @@ def test_cli_unreadable_file(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 
 
 def test_cli_default_checks_our_databases(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["dbc", "check"]) == 0
+    assert main(["dbc", "check", "--e2e", "required"]) == 0     # the contract protects every message
     out = capsys.readouterr().out
     assert f"{CHASSIS_DBC}: accepted" in out and f"{BENCH_DBC}: accepted" in out
+    assert "0 unprotected; " in out and "unprotected\n" not in out
 
 
 def test_cli_e2e_option(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "plain.dbc"
-    path.write_text(GOOD.replace(' SG_ AliveCounter : 48|4@1+ (1,0) [0|15] "-" TESTER\n', "").replace(
-        ' SG_ Checksum : 56|8@1+ (1,0) [0|255] "-" TESTER\n', ""))
+    path.write_text(plain())
     assert main(["dbc", "check", str(path)]) == 0
+    assert f"{path}: ECU_Status 0x100: unprotected" in capsys.readouterr().out
     assert main(["dbc", "check", "--e2e", "required", str(path)]) == 1
+    assert "error [e2e] ECU_Status: no E2E protection declared" in capsys.readouterr().out
     assert main(["dbc", "--e2e", "required"]) == 2      # the option belongs to check
     assert "only for 'bench dbc check" in capsys.readouterr().err.replace("\n", "")
+    assert main(["dbc", "check", "--e2e", "auto", str(path)]) == 2   # the old mode is gone, said in one line
+    assert "invalid choice: 'auto'" in capsys.readouterr().err
+
+
+def test_cli_help_says_what_e2e_means(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["dbc", "check", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "optional (the default)" in text and "required: every message must declare a profile" in text
 
 
 def test_listing_a_file_named_check(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -451,3 +562,31 @@ def test_corpus_accepts_only_files_without_messages() -> None:
     accepted = {r.path.name for r in results if r.accepted}
     assert accepted and all(r.messages == 0 for r in results if r.accepted)
     assert all(r.findings for r in results)
+
+
+# -- the ARXML corpus: no line numbers, findings name the message --------------------------------------------
+ARXML_FILES = sorted(ARXML_CORPUS.glob("*.arxml")) if ARXML_CORPUS.is_dir() else []
+
+
+@pytest.mark.skipif(not ARXML_FILES, reason=f"no ARXML corpus at {ARXML_CORPUS}")
+@pytest.mark.parametrize("path", ARXML_FILES, ids=lambda p: p.name)
+def test_arxml_file_is_accepted_or_rejected_cleanly(path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["dbc", "check", str(path)])
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.out + captured.err
+    assert code in (0, 1) and f"{path}: {'accepted' if code == 0 else 'rejected'}:" in captured.out
+    assert not any(line.startswith(f"{path}:") and line[len(str(path)) + 1:][:1].isdigit()
+                   for line in captured.out.splitlines())    # no line numbers in ARXML
+
+
+@pytest.mark.skipif(not (ARXML_CORPUS / "system-4.2.arxml").is_file(), reason=f"no ARXML corpus at {ARXML_CORPUS}")
+def test_arxml_findings_name_the_message() -> None:
+    result = check_file(ARXML_CORPUS / "system-4.2.arxml")
+    by_name = {p.name: p.protection for p in result.protections}
+    assert by_name["Message1"] is not None and by_name["Message1"].profile == "P02"
+    assert by_name["Message3"] is not None and by_name["Message3"].profile == "P05"
+    assert (result.protected, result.unprotected) == (2, 6)
+    assert all(f.line is None and f.message for f in result.findings)
+    assert not errors(result, "e2e")
+    overlap = [f for f in warnings(result, "e2e") if f.message == "Message1"]
+    assert overlap and all(f.signal == "message1_SeqCounter" for f in overlap)
