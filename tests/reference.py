@@ -41,3 +41,13 @@ def protected(data_id: int, payload: bytes, counter: int) -> bytes:
     data[COUNTER_BYTE] = (data[COUNTER_BYTE] & 0xF0) | (counter & 0x0F)
     data[CRC_BYTE] = contract_checksum(data_id, bytes(data))
     return bytes(data)
+
+
+def counter_of(data: bytes) -> int:
+    """The contract's AliveCounter of a frame (the low nibble of byte 7)."""
+    return data[COUNTER_BYTE] & 0x0F
+
+
+def intact(data_id: int, data: bytes) -> bool:
+    """Whether a frame carries the contract's CRC in byte 6 and a counter Profile 11 can send (0 ... 14)."""
+    return len(data) == 8 and data[CRC_BYTE] == contract_checksum(data_id, data) and counter_of(data) < COUNTER_VALUES
