@@ -102,3 +102,38 @@ def test_only_the_e2e_package_calls_the_profiles() -> None:
              for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
              if library.search(line) or own_crc.search(line)]
     assert found == []
+
+
+def _attribute_table() -> dict[str, list[str]]:
+    """docs/spec/e2e.md's table of DBC attributes: name -> (type, meaning, contract)."""
+    lines = (repo.ROOT / "docs" / "spec" / "e2e.md").read_text(encoding="utf-8").splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("| DBC attribute |")) + 2
+    rows = {}
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip()[1:-1].split("|")]
+        rows[cells[0].strip("`")] = cells[1:]
+    return rows
+
+
+def test_the_documents_attributes_are_the_databases() -> None:
+    """Every E2E_* attribute both databases define is in the document's table, with its ENUM values, and the
+    contract's numbers are the databases' defaults; and the table names every parameter the bench reads."""
+    import cantools
+
+    table = _attribute_table()
+    assert set(table) == {"E2E_" + name for name in e2e.PARAMETERS}
+    for path in (repo.CHASSIS_DBC, repo.BENCH_DBC):
+        definitions = {k: v for k, v in cantools.database.load_file(str(path)).dbc.attribute_definitions.items()
+                       if k.startswith("E2E_")}
+        assert set(definitions) == set(table), path.name
+        for name, definition in definitions.items():
+            kind, _, contract = table[name]
+            assert kind.startswith(definition.type_name), name
+            for choice in definition.choices or ():
+                assert f"`{choice}`" in kind, (name, choice)
+            if contract.isdigit():
+                assert int(definition.default_value) == int(contract), (path.name, name)
+            elif name == "E2E_DataIDMode":
+                assert definition.default_value == contract, (path.name, name)
