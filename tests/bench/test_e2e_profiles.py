@@ -320,3 +320,46 @@ def test_protect_writes_the_reference_crc(frame_id: int, payload: bytes, counter
     p.protect(data, counter)
     assert data[7] & 0x0F == counter and data[7] & 0xF0 == payload[7] & 0xF0 and data[:6] == payload[:6]
     assert data[6] == crc8_j1850_p11(bytes([frame_id & 0xFF, frame_id >> 8]) + bytes(data[:6]) + bytes(data[7:]))
+
+
+# -- the document's "Profiles" table, independently -----------------------------------------------------------
+def _crc(data: bytes, poly: int, width: int, start: int, final_xor: int) -> int:
+    """A CRC without reflection, bit by bit (docs/spec/e2e.md "Profiles")."""
+    top, mask, crc_ = 1 << (width - 1), (1 << width) - 1, start
+    for byte in data:
+        crc_ ^= byte << (width - 8)
+        for _ in range(8):
+            crc_ = ((crc_ << 1) ^ poly) & mask if crc_ & top else (crc_ << 1) & mask
+    return crc_ ^ final_xor
+
+
+def test_the_documents_check_values() -> None:
+    check = b"123456789"
+    assert _crc(check, 0x1D, 8, 0x00, 0x00) == 0x37          # P01, P11
+    assert _crc(check, 0x2F, 8, 0xFF, 0xFF) == 0xDF == crc.calculate_crc8_h2f(check)   # P02
+    assert _crc(check, 0x1021, 16, 0xFFFF, 0) == 0x29B1 == crc.calculate_crc16(check)  # P05
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_the_documents_layouts(own_codebook: Codebook, codebook: Codebook, case: str) -> None:
+    """The bytes each CRC runs over, in the document's order, give the CRC Protection.protect writes."""
+    p = _protection(case, own_codebook, codebook)
+    rng = random.Random(11)
+    o = p.offset // 8
+    for i in range(200):
+        data = bytearray(rng.randbytes(8))
+        p.protect(data, i)
+        if p.profile == "P02":
+            expected = _crc(bytes(data[1:]) + bytes([p.data_id_list[data[1] & 0x0F]]), 0x2F, 8, 0xFF, 0xFF)
+            assert data[0] == expected
+        elif p.profile == "P05":
+            body = bytes(data[:o]) + bytes(data[o + 2:])
+            assert int.from_bytes(data[o:o + 2], "little") == _crc(body + p.data_id.to_bytes(2, "little"),
+                                                                   0x1021, 16, 0xFFFF, 0)
+        else:
+            ident = {"BOTH": bytes([p.data_id & 0xFF, p.data_id >> 8]), "LOW": bytes([p.data_id & 0xFF]),
+                     "ALT": bytes([p.data_id >> 8 if data[o + 1] & 1 else p.data_id & 0xFF]),
+                     "NIBBLE": bytes([p.data_id & 0xFF, 0])}[p.data_id_mode]
+            assert data[o] == crc8_j1850_p11(ident + bytes(data[:o]) + bytes(data[o + 1:]))
+            if p.data_id_mode == "NIBBLE":
+                assert data[o + 1] >> 4 == (p.data_id >> 8) & 0x0F
