@@ -1,4 +1,4 @@
-"""The codec's decode cache (one entry per message, keyed by the payload without AliveCounter and Checksum) gives
+"""The codec's decode cache (one entry per message, keyed by the payload without its E2E counter and CRC) gives
 what cantools decodes for any sequence of frames, and `decode_checked` names exactly the signals outside the DBC
 range (with its half-step slack), whichever frame of a payload came first."""
 
@@ -13,13 +13,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.codec import RANGE_SLACK, DecodeError, MessageCodec, load_codebook
-from bench.e2e import crc8_sae_j1850
+from tests.reference import COUNTER_VALUES, contract_checksum
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 CODEBOOK = load_codebook([CHASSIS_DBC, BENCH_DBC])
 
-# The contract's E2E layout, but a Checksum whose DBC range leaves out part of its field, and a signal whose
-# range leaves out raw values: the cache must not skip the range check of either.
+# A message without E2E protection (no E2E attributes) with signals named AliveCounter and Checksum: ordinary
+# signals then, and a Checksum whose DBC range leaves out part of its field, and a signal whose range leaves out
+# raw values: the cache must not skip the range check of either.
 NARROW_DBC = """VERSION ""
 BU_: A B
 BO_ 291 Narrow: 8 A
@@ -56,9 +57,9 @@ def _frames(draw: st.DrawFn) -> tuple[str, list[bytes | bytearray]]:
     frames: list[bytes | bytearray] = []
     for _ in range(draw(st.integers(1, 30))):
         frame = bytearray(draw(st.sampled_from(bodies)))
-        if length == 8:
-            frame[6] = (frame[6] & 0xF0) | draw(st.integers(0, 15))
-            frame[7] = draw(st.integers(0, 255))
+        if length == 8:     # the contract's header: the CRC in byte 6, the counter in the low nibble of byte 7
+            frame[7] = (frame[7] & 0xF0) | draw(st.integers(0, COUNTER_VALUES - 1))
+            frame[6] = draw(st.integers(0, 255))
         form = draw(st.sampled_from(["bytes", "bytearray", "longer"]))
         frames.append(bytes(frame) if form == "bytes" else frame if form == "bytearray" else bytes(frame) + b"\x55")
     return name, frames
@@ -81,8 +82,9 @@ def test_decode_and_range_equal_cantools_for_any_frame_sequence(case: tuple[str,
 
 
 def test_the_narrow_checksum_is_checked_on_every_frame() -> None:
-    """A Checksum whose range leaves out part of its field takes the uncached path: the same body with an
-    out-of-range Checksum after an in-range one is still refused."""
+    """A Checksum whose range leaves out part of its field (of an unprotected message: an ordinary signal) is
+    judged on every frame: the same body with an out-of-range Checksum after an in-range one is still refused."""
+    assert NARROW.protection is None
     good = bytes([40, 1, 0, 0, 0, 0, 3, 100])
     bad = bytes([40, 1, 0, 0, 0, 0, 4, 250])
     assert NARROW.decode_checked(good)[1] == ()
@@ -105,13 +107,14 @@ def test_a_short_frame_is_refused_after_a_cached_one() -> None:
        st.lists(st.tuples(st.integers(0, 7), st.booleans()), min_size=1, max_size=200))
 def test_the_e2e_check_is_remembered_per_frame_only(name: str, pool: list[bytes],
                                                     picks: list[tuple[int, bool]]) -> None:
-    """The codec's memo of the E2E check (frames repeat: both monitors, and 16 frames per unchanged payload)
-    gives the CRC's answer for every frame, right checksums and wrong, bytes and bytearray."""
+    """The codec's memo of the E2E check (frames repeat: both monitors, and one frame per counter value of an
+    unchanged payload) gives the Profile 11 check's answer for every frame, right CRCs and wrong, bytes and
+    bytearray."""
     codec = CODEBOOK[name]
-    frames = [bytes(f[:7]) + bytes((crc8_sae_j1850(bytes((codec.frame_id & 0xFF, codec.frame_id >> 8)) + f[:7]),))
-              if i % 2 else f for i, f in enumerate(pool)]
+    frames = [f[:6] + bytes((contract_checksum(codec.frame_id, f),)) + f[7:] if i % 2 else f
+              for i, f in enumerate(pool)]
     for index, as_bytearray in picks:
         data = frames[index % len(frames)]
-        right = data[7] == crc8_sae_j1850(bytes((codec.frame_id & 0xFF, codec.frame_id >> 8)) + data[:7])
-        expected = data[6] & 0x0F if right else None
+        right = data[6] == contract_checksum(codec.frame_id, data) and data[7] & 0x0F < COUNTER_VALUES
+        expected = data[7] & 0x0F if right else None
         assert codec.counter_if_intact(bytearray(data) if as_bytearray else data) == expected

@@ -206,7 +206,11 @@ def test_invalid_frames_are_explained(recorded: Recorded) -> None:
     a, b = recorded.run.cases
     rows = {(m, r): int(n) for m, r, n in a.invalid}
     corrupted = {k: n for k, n in rows.items() if k[0] == CORRUPTED}
-    assert corrupted and abs(sum(corrupted.values()) - 0.2 / CYCLE) <= 1
+    errors = sum(n for (_, reason), n in corrupted.items() if reason.startswith("E2E ERROR"))
+    assert abs(errors - 0.2 / CYCLE) <= 1
+    # after a burst of bad CRCs the receiver needs two frames in sequence (docs/spec/e2e.md "CRC burst"), and the
+    # message's first frame of the run is never applied
+    assert sum(corrupted.values()) - errors <= 3, corrupted
     assert a.invalid_frames >= sum(rows.values()) and b.invalid_frames == 0
     html = (recorded.out / "report.html").read_text(encoding="utf-8")
     section = html[html.index('<section id="invalid">'):]

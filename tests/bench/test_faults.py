@@ -7,13 +7,14 @@ import math
 
 import pytest
 
-from bench import e2e, fault_kinds
-from bench.codec import Codebook
+from bench import fault_kinds
+from bench.codec import Codebook, load_codebook
 from bench.errors import ConfigError
 from bench.fault_kinds import FaultKind, Outgoing
 from bench.faults import KINDS, Fault, FaultPlan, parse_fault, validate
 from bench.restbus import Restbus
 from tests import repo
+from tests.reference import COUNTER_VALUES, contract_checksum
 
 MSG = "VCU_WheelCmd_FL"
 ROOT = repo.ROOT
@@ -60,12 +61,16 @@ def test_each_frame_fault(codebook: Codebook) -> None:
     assert _apply(codebook, Fault("duplicate", MSG, 0, 9)) == [(0.0, data), (0.0, data)]
     (_, flipped), = _apply(codebook, Fault("bitflip", MSG, 0, 9, 3))
     assert flipped[0] == data[0] ^ 0x08 and flipped[1:] == data[1:]
+    # the E2E kinds act on the message's Profile 11 fields: the counter in bits 56-59, the CRC in byte 6
     (_, jumped), = _apply(codebook, Fault("counter_jump", MSG, 0, 9, 3))
-    assert e2e.counter_of(jumped) == 8 and jumped[7] == e2e.checksum(frame_id, jumped)
+    assert jumped[7] & 0x0F == 8 and jumped[6] == contract_checksum(frame_id, jumped)
+    assert jumped[:6] == data[:6] and jumped[7] & 0xF0 == data[7] & 0xF0
+    (_, wrapped), = _apply(codebook, Fault("counter_jump", MSG, 0, 9, 12))
+    assert wrapped[7] & 0x0F == (5 + 12) % COUNTER_VALUES and wrapped[6] == contract_checksum(frame_id, wrapped)
     (_, value), = _apply(codebook, Fault("checksum_value", MSG, 0, 9, 0xAB))
-    assert value[7] == 0xAB and value[:7] == data[:7]
+    assert value[6] == 0xAB and value[:6] == data[:6] and value[7] == data[7]
     (_, offset), = _apply(codebook, Fault("checksum_offset", MSG, 0, 9, 1))
-    assert offset[7] == (data[7] + 1) & 0xFF
+    assert offset[6] == (data[6] + 1) & 0xFF and offset[7] == data[7]
 
 
 def test_freezes_hold_the_value_at_the_fault_start(codebook: Codebook) -> None:
@@ -77,9 +82,21 @@ def test_freezes_hold_the_value_at_the_fault_start(codebook: Codebook) -> None:
     counters = []
     for _ in range(3):
         (_, frame), = plan.apply(1.0, frame_id, restbus.build(slot))
-        counters.append(e2e.counter_of(frame))
-        assert frame[7] == e2e.checksum(frame_id, frame)
+        counters.append(frame[7] & 0x0F)
+        assert frame[6] == contract_checksum(frame_id, frame)
     assert counters == [0, 0, 0] and counter_fault.frozen == 0
+
+
+def test_e2e_kinds_refuse_an_unprotected_message() -> None:
+    """Counter and CRC faults act on a message's profile fields: an unprotected message (here VCU_WheelCmd_FL with
+    bench.toml's [e2e] Profile = "None") has none, and the fault is refused at the door, naming why."""
+    unprotected = load_codebook([repo.CHASSIS_DBC, repo.BENCH_DBC], {MSG: {"Profile": "None"}})
+    assert unprotected[MSG].protection is None
+    for kind in ("counter_freeze", "counter_jump", "checksum_value", "checksum_freeze", "checksum_random",
+                 "checksum_offset"):
+        with pytest.raises(ConfigError, match=f"{MSG} is not E2E-protected: {kind} acts on"):
+            FaultPlan(unprotected).add(Fault(kind, MSG, 0, 9, 1))
+    FaultPlan(unprotected).add(Fault("bitflip", MSG, 0, 9, 3))   # a frame fault of any message still applies
 
 
 def test_node_and_bus_faults(codebook: Codebook) -> None:

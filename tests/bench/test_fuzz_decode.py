@@ -28,7 +28,7 @@ from bench.errors import BenchError
 from bench.logread import MAGIC, read_decoded, read_frames, read_steps, summarise
 from bench.monitor import Monitor
 from bench.recorder import Recorder
-from tests.reference import protected
+from tests.reference import COUNTER_VALUES, protected
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 _CODEBOOK = load_codebook([CHASSIS_DBC, BENCH_DBC])
@@ -116,12 +116,15 @@ def test_monitor_decodes_only_frames_of_the_right_length(spied: tuple[Codebook, 
 
 
 @settings(max_examples=400, deadline=None)
-@given(st.sampled_from(CODECS), st.binary(min_size=8, max_size=8), st.integers(0, 15))
+@given(st.sampled_from(CODECS), st.binary(min_size=8, max_size=8), st.integers(0, COUNTER_VALUES - 1))
 def test_monitor_verdict_on_protected_random_payloads(codec: Any, payload: bytes, counter: int) -> None:
-    """With a correct checksum, a frame is valid exactly when every signal cantools decodes lies in its DBC
-    range (half a step of slack), and then its values are the ones applied."""
+    """With a correct CRC, in sequence after a first frame (which is never applied, docs/spec/e2e.md), a frame
+    is valid exactly when every signal cantools decodes lies in its DBC range (half a step of slack), and then
+    its values are the ones applied."""
     data = protected(codec.frame_id, payload, counter)
     monitor = Monitor(_CODEBOOK)
+    first = protected(codec.frame_id, payload, (counter - 1) % COUNTER_VALUES)
+    assert not monitor.on_frame(0.99, codec.frame_id, first, "rx")
     valid = monitor.on_frame(1.0, codec.frame_id, data, "rx")
     decoded = codec.message.decode(data, decode_choices=False, scaling=True)
     in_range = all(
@@ -137,16 +140,20 @@ def test_monitor_verdict_on_protected_random_payloads(codec: Any, payload: bytes
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.sampled_from(CODECS), st.lists(st.tuples(st.binary(min_size=8, max_size=8), st.integers(0, 15)),
-                                         min_size=2, max_size=20))
+@given(st.sampled_from(CODECS),
+       st.lists(st.tuples(st.binary(min_size=8, max_size=8), st.integers(0, COUNTER_VALUES - 1)),
+                min_size=2, max_size=20))
 def test_monitor_counter_check(codec: Any, frames: list[tuple[bytes, int]]) -> None:
-    """Checksums right, counters random: a frame after a frame with counter c is judged on c + 1 (mod 16)."""
+    """CRCs right, counters random: a frame after a frame with counter c is rejected, by its AUTOSAR status,
+    unless its counter is c + 1 or c + 2 (mod 15: OK or OKSOMELOST with MaxDeltaCounter 2)."""
     monitor = Monitor(_CODEBOOK)
     previous = None
     for i, (payload, counter) in enumerate(frames):
         valid = monitor.on_frame(i * 0.001, codec.frame_id, protected(codec.frame_id, payload, counter), "rx")
-        if previous is not None and counter != (previous + 1) % 16:
-            assert not valid and monitor.invalid_log[-1].reason.startswith("counter")
+        if previous is not None and (counter - previous) % COUNTER_VALUES not in (1, 2):
+            assert not valid
+            status = "E2E REPEATED" if counter == previous else "E2E WRONGSEQUENCE"
+            assert monitor.invalid_log[-1].reason.startswith(status)
         previous = counter
 
 

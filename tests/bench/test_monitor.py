@@ -20,44 +20,60 @@ def _frames(codebook: Codebook, message: str, count: int, **values: float) -> li
 
 
 def test_valid_sequence_is_applied(codebook: Codebook) -> None:
+    """A sender in sequence from power-up: every frame but the first is applied (the first only moves the E2E
+    state machine from NODATA to INIT, docs/spec/e2e.md), and that is the only frame not applied."""
     monitor = Monitor(codebook, keep_history=True)
     frame_id = codebook["VCU_WheelCmd_FL"].frame_id
-    for i, data in enumerate(_frames(codebook, "VCU_WheelCmd_FL", 20, SteerAngleCmd=12.34)):
-        assert monitor.on_frame(i * 0.01, frame_id, data, "rx")
+    verdicts = [monitor.on_frame(i * 0.01, frame_id, data, "rx")
+                for i, data in enumerate(_frames(codebook, "VCU_WheelCmd_FL", 20, SteerAngleCmd=12.34))]
+    assert verdicts == [False] + [True] * 19
     assert monitor.latest("VCU_WheelCmd_FL", 0.19)["SteerAngleCmd"] == 12.34
     t, v = monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd")
-    assert len(t) == 20 and v[-1] == 12.34
-    assert monitor.invalid_frames == 0
+    assert len(t) == 19 and v[-1] == 12.34
+    assert monitor.invalid_frames == 1
+    assert monitor.invalid_log[0].reason == "E2E OK: counter 0 in sequence, state INIT (not VALID yet)"
+    state = monitor.state("VCU_WheelCmd_FL")
+    assert state.e2e_status == {"OK": 20} and state.rx is not None and state.rx.state is e2e.SMState.VALID
 
 
 def test_each_fault_is_detected_and_not_applied(codebook: Codebook) -> None:
     monitor = Monitor(codebook)
     frame_id = codebook["VCU_WheelCmd_FL"].frame_id
-    good = _frames(codebook, "VCU_WheelCmd_FL", 6, SteerAngleCmd=5.0)
-    assert monitor.on_frame(0.00, frame_id, good[0], "rx")
-    bad_crc = bytearray(good[1])
-    bad_crc[7] ^= 0x01
-    assert not monitor.on_frame(0.01, frame_id, bytes(bad_crc), "rx")
-    assert not monitor.on_frame(0.02, frame_id, good[3], "rx")        # counter 3 where 2 was due (the frame
-                                                                      # with the bad checksum took the slot of 1)
-    assert not monitor.on_frame(0.03, frame_id, good[4][:7], "rx")    # short frame
+    good = _frames(codebook, "VCU_WheelCmd_FL", 6, SteerAngleCmd=5.0)        # counters 0 ... 5
+    assert not monitor.on_frame(0.00, frame_id, good[0], "rx")       # NODATA -> INIT
+    assert monitor.on_frame(0.01, frame_id, good[1], "rx")           # INIT -> VALID
+    bad_crc = bytearray(good[2])
+    bad_crc[6] ^= 0x01                                                # the CRC (byte 6)
+    assert not monitor.on_frame(0.02, frame_id, bytes(bad_crc), "rx")    # ERROR
+    assert not monitor.on_frame(0.03, frame_id, good[5], "rx")       # counter 5 after 1 (the bad frame's
+                                                                      # counter is not read): WRONGSEQUENCE
+    assert not monitor.on_frame(0.04, frame_id, good[4][:7], "rx")   # short frame: ERROR, reason length
     state = monitor.state("VCU_WheelCmd_FL")
-    assert state.invalid == {"checksum": 1, "counter": 1, "length": 1}
-    # out of range: a raw angle of +200 deg (the DBC range is +-90) with a valid counter and checksum
+    assert state.invalid == {"state": 1, "checksum": 1, "counter": 1, "length": 1}
+    assert state.e2e_status == {"OK": 2, "ERROR": 2, "WRONGSEQUENCE": 1}
+    assert [r.reason for r in monitor.invalid_log[1:]] == [
+        "E2E ERROR: CRC wrong, state INVALID", "E2E WRONGSEQUENCE: counter 5, expected 2, state INVALID",
+        "length 7, DBC says 8"]
+    # out of range: a raw angle of +200 deg (the DBC range is +-90) with a right counter and CRC, in VALID
     codec = codebook["VCU_WheelCmd_FL"]
-    values = dict(codec.start_values(), SteerAngleCmd=200.0)
-    data = codec.encode(values)
-    e2e.protect(frame_id, data, 0)
+    assert codec.protection is not None
     monitor2 = Monitor(codebook)
-    assert not monitor2.on_frame(0.0, frame_id, bytes(data), "rx")
-    assert monitor2.state("VCU_WheelCmd_FL").invalid == {"range": 1}
-    assert monitor2.latest("VCU_WheelCmd_FL", 0.0) is None
+    assert not monitor2.on_frame(0.0, frame_id, good[0], "rx")
+    data = codec.encode(dict(codec.start_values(), SteerAngleCmd=200.0))
+    codec.protection.protect(data, 1)
+    assert not monitor2.on_frame(0.01, frame_id, bytes(data), "rx")
+    assert monitor2.state("VCU_WheelCmd_FL").invalid == {"state": 1, "range": 1}
+    assert monitor2.state("VCU_WheelCmd_FL").rx.state is e2e.SMState.VALID   # a range error is no E2E status
+    assert monitor2.latest("VCU_WheelCmd_FL", 0.01) is None
 
 
 def test_timeout_after_three_cycles(codebook: Codebook) -> None:
     monitor = Monitor(codebook)
     frame_id = codebook["VCU_WheelCmd_FL"].frame_id
-    monitor.on_frame(1.0, frame_id, _frames(codebook, "VCU_WheelCmd_FL", 1)[0], "rx")
+    first, second = _frames(codebook, "VCU_WheelCmd_FL", 2)
+    monitor.on_frame(0.99, frame_id, first, "rx")
+    assert monitor.timed_out("VCU_WheelCmd_FL", 0.99), "nothing applied yet"
+    assert monitor.on_frame(1.0, frame_id, second, "rx")
     assert not monitor.timed_out("VCU_WheelCmd_FL", 1.0 + 0.030)
     assert monitor.timed_out("VCU_WheelCmd_FL", 1.0 + 0.0301)
     monitor.check_timeouts(1.031)
@@ -92,7 +108,7 @@ def test_long_runs_keep_memory_bounded_and_say_so(codebook: Codebook, monkeypatc
         monitor.on_frame(i * 0.01, frame_id, data, "rx")
     state = monitor.state("VCU_WheelCmd_FL")
     assert len(state.history_t) <= 100 and len(state.intervals) <= 100
-    assert state.history_dropped + len(state.history_t) == 500
+    assert state.history_dropped + len(state.history_t) == 499      # every frame but the first is applied
     assert state.intervals_dropped + len(state.intervals) == 499
     t, _ = monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd", since=4.5)
     assert t[0] == 4.5

@@ -1,6 +1,7 @@
 """The restbus' cache of unchanged values (bench/restbus.py) sends exactly the frames a fresh check and encoding
 would: for any sequence of values set, reset and sent, every frame equals cantools' encoding of the values with
-the contract's AliveCounter and Checksum, and every bad value is refused at every send, named with its value."""
+the contract's AliveCounter and Profile 11 CRC (tests/reference.py), and every bad value is refused at every send,
+named with its value."""
 
 from __future__ import annotations
 
@@ -13,9 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.codec import Codebook, MessageCodec, load_codebook
-from bench.e2e import crc8_sae_j1850
 from bench.errors import SignalError
 from bench.restbus import Restbus
+from tests.reference import COUNTER_VALUES, protected
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 CODEBOOK = load_codebook([CHASSIS_DBC, BENCH_DBC])
@@ -57,12 +58,11 @@ def _number(codec: MessageCodec, name: str, value: object) -> float:
 
 
 def _expected(codec: MessageCodec, values: dict[str, object], counter: int) -> bytes:
-    """cantools' encoding, then AliveCounter and the CRC over id low, id high and bytes 0-6 (docs/spec/e2e.md)."""
+    """cantools' encoding, then the AliveCounter (bits 56-59) and the Profile 11 CRC in byte 6 over DataID (the
+    identifier) low, high, bytes 0-5 and byte 7 (docs/spec/e2e.md)."""
     physical = {n: _number(codec, n, v) for n, v in values.items()}
-    data = bytearray(codec.message.encode(physical, scaling=True, strict=False, padding=False))
-    data[6] = (data[6] & 0xF0) | counter
-    data[7] = crc8_sae_j1850(bytes((codec.frame_id & 0xFF, codec.frame_id >> 8)) + bytes(data[:7]))
-    return bytes(data)
+    return protected(codec.frame_id, codec.message.encode(physical, scaling=True, strict=False, padding=False),
+                     counter)
 
 
 def _is_bad(codec: MessageCodec, name: str, value: object) -> bool:
@@ -118,7 +118,7 @@ def test_cached_frames_equal_a_fresh_encoding(scenario: tuple[str, list[tuple[st
                            or f"{name}.{n}: {_number_or(model[n])}" in str(caught.value) for n in bad), caught.value
                 continue
             assert restbus.build(slot) == _expected(codec, model, counter)
-            counter = (counter + 1) % 16
+            counter = (counter + 1) % COUNTER_VALUES
 
 
 def _number_or(value: object) -> str:

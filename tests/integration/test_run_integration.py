@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from tests.child import Child
-from tests.reference import crc8_j1850
+from tests.reference import COUNTER_VALUES, counter_of, crc8_j1850_p11, intact
 from tests.repo import ROOT
 
 CASES = ROOT / "tests" / "fixtures" / "cases"
@@ -57,16 +57,16 @@ def test_run_writes_the_report_folder(first_run: Path) -> None:
 
 
 def test_every_logged_frame_has_a_valid_checksum_and_counter(first_run: Path) -> None:
-    assert crc8_j1850(b"123456789") == 0x4B
+    assert crc8_j1850_p11(b"123456789") == 0x37
     frames = frames_of(first_run / "run.mcap")
     assert len(frames) > 1000
     last_counter: dict[int, int] = {}
     for _, frame_id, data, _ in frames:
         assert len(data) == 8
-        assert data[7] == crc8_j1850(bytes([frame_id & 0xFF, frame_id >> 8]) + data[:7]), hex(frame_id)
-        counter = data[6] & 0x0F
+        assert intact(frame_id, data), hex(frame_id)     # the Profile 11 CRC in byte 6 (DataID = identifier)
+        counter = counter_of(data)
         if frame_id in last_counter:
-            assert counter == (last_counter[frame_id] + 1) % 16, hex(frame_id)
+            assert counter == (last_counter[frame_id] + 1) % COUNTER_VALUES, hex(frame_id)
         last_counter[frame_id] = counter
     assert {0x100, 0x102, 0x110, 0x120, 0x130, 0x680, 0x690} <= set(last_counter)
 

@@ -5,7 +5,7 @@ in a User-mode Linux guest on machines without SocketCAN) and on any Linux host 
 skips, except inside the lane (VCAN_CHANNEL set), where a missing vcan0 is a failure: the lane must never pass
 by skipping. What it checks, from the kernel's receive timestamps of a receiver that only collects (and judges
 after): every frame of the plant keeps the contract (docs/spec/k-matrix.md: AliveCounter +1 per frame,
-CRC-8/SAE-J1850 over identifier and data, tests/reference.py), every message of the vehicle's network is there
+the Profile 11 CRC over DataID and data, tests/reference.py), every message of the vehicle's network is there
 at its DBC cycle time (p50 within 5 %, as Case.check_cycle_times), no frame of another vehicle's network is on
 the bus, and the plant's own status line reports no invalid frame.
 
@@ -28,7 +28,7 @@ from bench.codec import load_codebook
 from bench.config import load_config
 from plant.factory import messages_of, vehicles
 from tests.integration.vcan import CHANNEL, IN_LANE, has_vcan, load_lane_script
-from tests.reference import contract_checksum
+from tests.reference import COUNTER_VALUES, counter_of, intact
 from tests.repo import ROOT
 
 WARM_UP_S = 2.0     # s after the plant's first frame before judging (its BCM tasks start after 3 cycles)
@@ -81,8 +81,8 @@ def test_plant_process_keeps_the_contract_on_vcan() -> None:
         codec = codebook.by_id[frame_id]
         if codec.e2e:
             for a, b in zip(msgs, msgs[1:]):
-                assert b.data[6] & 0x0F == ((a.data[6] & 0x0F) + 1) % 16, f"{codec.name}: counter"
-            bad = [m for m in msgs if m.data[7] != contract_checksum(frame_id, bytes(m.data))]
+                assert counter_of(b.data) == (counter_of(a.data) + 1) % COUNTER_VALUES, f"{codec.name}: counter"
+            bad = [m for m in msgs if not intact(frame_id, bytes(m.data))]
             assert not bad, f"{codec.name}: {len(bad)} frames with a wrong checksum"
         if codec.cycle_time:
             intervals = [b.timestamp - a.timestamp for a, b in zip(msgs, msgs[1:])]
