@@ -217,9 +217,13 @@ class MessageCodec:
         """A checked physical value: value-table names resolved, NaN and out-of-range refused."""
         sig = self.signal(signal)
         if isinstance(value, str):
+            if not sig.choices:   # a text for a signal that has no names: a number typed with its unit, say
+                unit = f" in {sig.unit}" if sig.unit else ""
+                raise SignalError(f"{self.name}.{signal}: {value!r} is not a number (give a number{unit}; "
+                                  "the signal has no value table)")
             if value not in sig.choices:
-                raise SignalError(f"{self.name}.{signal}: {value!r} is not in its value table "
-                                  f"({', '.join(sig.choices) or 'none'})")
+                raise SignalError(f"{self.name}.{signal}: {value!r}{did_you_mean(value, sig.choices)} is not in its "
+                                  f"value table ({', '.join(sig.choices)})")
             return float(sig.choices[value])
         try:
             number = float(value)

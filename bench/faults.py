@@ -85,15 +85,29 @@ def parse_fault(spec: str) -> Fault:
     if kind not in KINDS:
         raise ConfigError(f"--fault {spec!r}: unknown kind {kind!r} (kinds: {', '.join(KINDS)})")
     start_text, _, end_text = window.partition("-")
-    try:
-        param = float(parts[2]) if len(parts) == 3 else 0.0
-        start = float(start_text)
-        end = float(end_text) if end_text else math.inf
-    except ValueError:
-        raise ConfigError(f"--fault {spec!r}: PARAM, START and END must be numbers") from None
+    param = _number(spec, "PARAM", parts[2]) if len(parts) == 3 else 0.0
+    start = _number(spec, "START", start_text)
+    end = _number(spec, "END", end_text) if end_text else math.inf
     if not (math.isfinite(param) and math.isfinite(start) and start >= 0 and end > start):
         raise ConfigError(f"--fault {spec!r}: need 0 <= START < END and a finite PARAM")
     return Fault(kind, target, start, end, param, relative=relative)
+
+
+def _number(spec: str, name: str, text: str) -> float:
+    """A number of the spec (PARAM, START or END); ConfigError naming which one is not, and where `case+` goes when
+    it was written inside the window rather than once at its front."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    if CASE_PREFIX in text:
+        head, _, window = spec.partition("@")
+        fixed = f"{head}@{CASE_PREFIX}{window.replace(CASE_PREFIX, '')}"
+        raise ConfigError(f"--fault {spec!r}: {name} {text!r} is not a number: case+ goes once, at the front of "
+                          f"the window, and makes both times count from each case's start (e.g. {fixed})")
+    if not text:
+        raise ConfigError(f"--fault {spec!r}: {name} is missing (the window is START-END in s, START >= 0)")
+    raise ConfigError(f"--fault {spec!r}: {name} {text!r} is not a number" + (" (s)" if name != "PARAM" else ""))
 
 
 def check_fault(fault: Fault, codebook: Codebook) -> None:

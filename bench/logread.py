@@ -241,6 +241,18 @@ def summarise(path: str | Path) -> LogSummary:
     return summary
 
 
+def run_start(path: str | Path) -> float | None:
+    """Epoch s of the run's bench time 0: the clock metadata a bench run writes before its first frame (read up to
+    that frame, not the whole log); None when the log has none before it (not a bench run's log)."""
+    scan = _Scan(path)
+    for record in scan:
+        if scan.origin_ns:
+            return scan.origin_ns / 1e9
+        if isinstance(record, Message):
+            return None
+    return None
+
+
 def _valid(data: bytes) -> bool:
     """A frame's `valid` flag, without parsing the JSON the recorder writes compactly."""
     if b'"valid":true' in data:

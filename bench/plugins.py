@@ -11,7 +11,7 @@ from collections.abc import Callable, Collection
 from importlib.metadata import entry_points
 from types import ModuleType
 
-from bench.errors import ConfigError
+from bench.errors import ConfigError, did_you_mean
 from bench.node import Behaviour
 
 PLANT_GROUP = "bench.plants"
@@ -30,9 +30,13 @@ def load_plant(name: str) -> PlantFactory:
             raise ConfigError(f"plant {name!r}: cannot load: {exc}") from None
     found = {ep.name: ep for ep in entry_points(group=PLANT_GROUP)}
     if name not in found:
-        raise ConfigError(f"no plant {name!r} is registered in the entry-point group {PLANT_GROUP!r} "
-                          f"(registered: {', '.join(sorted(found)) or 'none'}; is the project installed?)")
-    loaded: PlantFactory = found[name].load()
+        raise ConfigError(f"no plant {name!r}{did_you_mean(name, found)} is registered in the entry-point group "
+                          f"{PLANT_GROUP!r} (registered: {', '.join(sorted(found)) or 'none'}; is the project "
+                          "installed?)")
+    try:
+        loaded: PlantFactory = found[name].load()
+    except (ImportError, AttributeError) as exc:   # registered, but its package is broken or gone
+        raise ConfigError(f"plant {name!r}: cannot load {found[name].value}: {exc}") from None
     return loaded
 
 

@@ -282,6 +282,9 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
     report: pytest.TestReport = outcome.get_result()
     if call.excinfo is not None and call.excinfo.errisinstance(FailedSteps):
         report.longrepr = str(call.excinfo.value)   # the steps say it all: no traceback through pytest's hooks
+    elif call.excinfo is not None and call.excinfo.errisinstance(BenchError) and getattr(
+            item.config.option, "tbstyle", "auto") in ("auto", "short", "line"):   # --tb=long shows it all
+        report.longrepr = call_site_error(call.excinfo)
     if "bench" not in getattr(item, "fixturenames", ()):
         return
     run = item.config.stash.get(_RUN_KEY, None)
@@ -289,6 +292,22 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
         item.config.stash[_PENDING_KEY].append((item, report, call))
         return
     _record(run, item, report, call)
+
+
+def call_site_error(excinfo: pytest.ExceptionInfo[BaseException]) -> str:
+    """A BenchError a case's call raised (a value outside the DBC range, an unknown signal, a bad scenario) as one
+    line at the case's own call: `test_x.py:12: SignalError: DRV_MotionRequest.TargetSpeed: 100 m/s is outside
+    ...`. The error names the input and what is wrong; the bench's frames below the call add nothing for the
+    case's author."""
+    entries = [e for e in excinfo.traceback if not Path(str(e.path)).is_relative_to(_PACKAGE)]
+    where = ""
+    if entries:
+        path, here = Path(str(entries[-1].path)), Path.cwd()
+        where = f"{path.relative_to(here) if path.is_relative_to(here) else path}:{entries[-1].lineno + 1}: "
+    return f"{where}{excinfo.typename}: {excinfo.value}"
+
+
+_PACKAGE = Path(__file__).resolve().parent
 
 
 def _record(run: BenchRun, item: pytest.Item, report: pytest.TestReport, call: pytest.CallInfo[None]) -> None:
@@ -342,7 +361,7 @@ def _empty_shard(config: pytest.Config, out_dir: Path | None, aborted: bool,
     (a pytest-xdist worker: its part of it), so that `bench report merge` gets all N and the campaign they
     deselected; no bus is opened. None when this run is no shard."""
     which = shards.current(config)
-    if which is None or aborted:
+    if which is None or aborted or config.option.collectonly:   # --collect-only lists the shard's cases, no more
         return None
     project, _ = _facts(config)
     folder = out_dir or default_out_dir(project.reports)

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NoReturn
 
-from cantools.database.can import Database, Message
+from cantools.database.can import Database, Message, Signal
 from rich.console import Console
 from rich.table import Table
 from rich.text import Text
@@ -49,6 +49,8 @@ CHECK_DESCRIPTION = (
     "field that is not exactly that field is a warning. Exit 0: no errors; 1: a file has errors; 2: a file "
     "cannot be read.")
 CONFIG_HELP = "the project's bench.toml, whose [bench] databases are the default FILEs (default: found from here up)"
+VALUES_HELP = ("list only: each signal with its DBC range and its value table (the names a case may give, e.g. "
+               "bench.set(..., DriveMode=\"PIVOT\"))")
 
 
 def register(subparsers: Any) -> None:
@@ -69,6 +71,7 @@ def register(subparsers: Any) -> None:
                         help="DBC or ARXML file(s); a first word 'check' checks them instead of listing them")
     parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
     parser.add_argument("--config", default=None, help=CONFIG_HELP)
+    parser.add_argument("--values", action="store_true", help=VALUES_HELP)
     parser.set_defaults(handler=run)
 
 
@@ -86,6 +89,8 @@ def _words(prog: str, words: list[str], with_e2e: bool) -> argparse.Namespace:
     parser.add_argument("--config", default=None, help=CONFIG_HELP)
     if with_e2e:
         parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
+    else:
+        parser.add_argument("--values", action="store_true", help=VALUES_HELP)
     return parser.parse_intermixed_args(words)
 
 
@@ -93,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
     """Load every file first (strict), so a bad file fails before anything is printed."""
     words: list[str] = list(args.files)
     if words and words[0] == CHECK:
+        if args.values or "--values" in words:
+            raise ConfigError("--values: only for the listing, 'bench dbc [FILE ...] --values'")
         checked = _words("bench dbc check", words[1:], with_e2e=True)
         files, overrides = _files(checked.files, checked.config or args.config)
         return check(files, checked.e2e or args.e2e or dbccheck.OPTIONAL, overrides)
@@ -103,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     databases = [(path, load_dbc(path)) for path in files]  # raises DatabaseError naming the file
     console = Console()
     for path, database in databases:
-        console.print(message_table(path, database, overrides))
+        console.print(message_table(path, database, overrides, values=listed.values or args.values))
     return 0
 
 
@@ -116,16 +123,17 @@ def _files(given: list[str], config: str | None) -> tuple[list[Path], dict[str, 
     return list(project.databases), project.e2e
 
 
-def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None
-                  ) -> Table:
-    """One row per message, sorted by id (= bus priority)."""
+def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None,
+                  values: bool = False) -> Table:
+    """One row per message, sorted by id (= bus priority); `values`: each signal with its range and value
+    table."""
     table = Table(title=_title(path, database), title_justify="left", show_lines=True)
     table.add_column("id", no_wrap=True, justify="right")
     table.add_column("message", no_wrap=True)
     table.add_column("sender", no_wrap=True)
     table.add_column("cycle ms", justify="right", no_wrap=True)
     table.add_column("E2E", no_wrap=True)
-    table.add_column(Text("signals [unit]"))
+    table.add_column(Text("signals [unit] range: value table" if values else "signals [unit]"))
     definitions = dict(getattr(database.dbc, "attribute_definitions", None) or {}) if database.dbc else {}
     overrides = e2e_overrides or {}
     for message in sorted(database.messages, key=lambda m: m.frame_id):
@@ -135,7 +143,7 @@ def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Ma
             Text(", ".join(message.senders) or "-"),
             Text("-" if message.cycle_time is None else str(message.cycle_time)),
             _protection(message, definitions, overrides.get(message.name)),
-            _signals(message),
+            _signals(message, values),
         )
     return table
 
@@ -158,10 +166,20 @@ def _title(path: Path, database: Database) -> Text:
     return Text(f"{path.name}: {len(database.messages)} messages{baud}; nodes {nodes}")
 
 
-def _signals(message: Message) -> Text:
+def _signals(message: Message, values: bool = False) -> Text:
     """Text, not markup: '[deg]' would otherwise be read as a rich style tag."""
-    lines = [f"{s.name} [{s.unit or '-'}]" for s in sorted(message.signals, key=lambda s: s.start)]
+    lines = [f"{s.name} [{s.unit or '-'}]" + (_values(s) if values else "")
+             for s in sorted(message.signals, key=lambda s: s.start)]
     return Text("\n".join(lines))
+
+
+def _values(signal: Signal) -> str:
+    """' -80..80' and, for a signal with a value table, ': 0 NORMAL, 1 CRAB, ...' (raw value, name)."""
+    low, high = ("?" if v is None else f"{v:g}" for v in (signal.minimum, signal.maximum))
+    text = "" if signal.minimum is None and signal.maximum is None else f" {low}..{high}"
+    if signal.choices:
+        text += ": " + ", ".join(f"{raw} {name}" for raw, name in sorted(signal.choices.items()))
+    return text
 
 
 def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import re
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,7 @@ from rich.table import Table
 
 from bench.canio import frame_to_message
 from bench.errors import LogError
-from bench.logread import LoggedFrame, LogSummary, read_frames, summarise
+from bench.logread import LoggedFrame, LogSummary, read_frames, run_start, summarise
 
 #: --format -> (python-can writer, file suffix). Direction (Rx/Tx) is carried by BLF (the DIR flag),
 #: ASC ("Rx"/"Tx") and candump (python-can's trailing R/T); CSV has no column for it.
@@ -81,7 +82,10 @@ def export(source: Path, output: Path, fmt: str) -> int:
     frames = read_frames(source)
     first = next(frames, None)          # a missing or non-MCAP source fails here, before the output exists
     try:
-        writer = writer_class(output)
+        if writer_class is can.ASCWriter:
+            writer: can.io.generic.MessageWriter = _ASCWriter(output, _start_date(source, first))
+        else:
+            writer = writer_class(output)
     except OSError as exc:
         raise LogError(f"{output}: cannot write: {exc.strerror or exc}") from None
     if isinstance(writer, can.BLFWriter) and first is not None and first.t < BLF_UNIX_EPOCH_MIN:
@@ -102,6 +106,29 @@ def export(source: Path, output: Path, fmt: str) -> int:
     return count
 
 
+class _ASCWriter(can.ASCWriter):
+    """python-can's ASC writer with the header's `date` the run's start: python-can writes the time the file is
+    created, which for an export is the export's time, not the measurement's."""
+
+    def __init__(self, file: Path, date: datetime | None) -> None:
+        self._date = date
+        super().__init__(file)
+
+    def _format_header_datetime(self, dt: datetime) -> str:
+        if self._date is not None:   # the first call: the `date` line (then: the first frame's, as given)
+            dt, self._date = self._date, None
+        return super()._format_header_datetime(dt)
+
+
+def _start_date(source: Path, first: LoggedFrame | None) -> datetime | None:
+    """The run's start as ASC writes dates (local time, as python-can writes the first frame's): bench time 0 of
+    a bench run's log, else the first frame's time when it is a Unix time; None (the export's time) otherwise."""
+    start = run_start(source)
+    if start is None and first is not None and first.t >= BLF_UNIX_EPOCH_MIN:
+        start = first.t
+    return None if start is None else datetime.fromtimestamp(start)
+
+
 def _write(writer: can.io.generic.MessageWriter, frame: LoggedFrame, fmt: str, channels: dict[str, int]) -> int:
     message = frame_to_message(frame)
     index = channels.setdefault(frame.channel, len(channels))
@@ -114,6 +141,11 @@ def _write(writer: can.io.generic.MessageWriter, frame: LoggedFrame, fmt: str, c
     return 1
 
 
+def _date(seconds: float) -> str:
+    """A Unix time as an ISO 8601 date in UTC, to the microsecond: 2026-11-27T13:30:05.123456+00:00."""
+    return datetime.fromtimestamp(seconds, UTC).isoformat(timespec="microseconds")
+
+
 def show(summary: LogSummary, console: Console) -> None:
     facts = Table.grid(padding=(0, 2))
     facts.add_column(style="bold")
@@ -123,6 +155,12 @@ def show(summary: LogSummary, console: Console) -> None:
                   else "[yellow]truncated[/] (no footer: killed run or cut file)")
     if summary.start is None or summary.end is None:
         facts.add_row("Time", "no messages")
+    elif summary.origin is not None or summary.start >= BLF_UNIX_EPOCH_MIN:   # Unix times: dates
+        span = f"{_date(summary.start)} … {_date(summary.end)} (duration {summary.end - summary.start:.6f} s)"
+        if summary.origin is not None:
+            span += (f"; bench time {summary.start - summary.origin:.6f} s … {summary.end - summary.origin:.6f} s, "
+                     f"bench time 0 at {_date(summary.origin)}")
+        facts.add_row("Time", span)
     else:
         facts.add_row("Time", f"{summary.start:.6f} s … {summary.end:.6f} s "
                               f"(duration {summary.end - summary.start:.6f} s)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import gc
+import itertools
 import os
 import sys
 from collections.abc import Callable
@@ -30,10 +31,11 @@ from bench.cli.common import (
 from bench.clock import settle_heap
 from bench.codec import load_codebook
 from bench.config import ProjectConfig, load_config
-from bench.errors import BenchError, InputProblems
+from bench.errors import BenchError, ConfigError, InputProblems, did_you_mean
 from bench.faults import validate as validate_faults
 from bench.marks import split_names
 from bench.options import add_cli_options
+from bench.plugins import load_plant
 from bench.run import default_out_dir
 from bench.session import resolve_bus_options, resolve_external
 
@@ -74,6 +76,7 @@ class _Progress:
         self.total = 0
         self.done = 0
         self.collect_errors: list[str] = []
+        self.deselected = 0   # cases -k or --dut left out (this process's collection; none on an xdist controller)
 
     def pytest_collectreport(self, report: pytest.CollectReport) -> None:
         if report.failed:
@@ -88,6 +91,9 @@ class _Progress:
             reason = str(excinfo.value.msg).removeprefix("bench: ")
             self.console.print(f"[bold red]bench run: error:[/] {escape(reason)}", highlight=False)
 
+    def pytest_deselected(self, items: list[pytest.Item]) -> None:
+        self.deselected += len(items)
+
     def pytest_collection_finish(self, session: pytest.Session) -> None:
         if getattr(session.config.option, "numprocesses", None):
             return                                  # the xdist controller: the workers collect
@@ -100,7 +106,8 @@ class _Progress:
 
     def _announce(self, total: int) -> None:
         self.total = total
-        self.console.print(f"bench: {self.total} cases", highlight=False)
+        if total:   # none: `run` says why, in one line
+            self.console.print(f"bench: {self.total} cases", highlight=False)
 
     @pytest.hookimpl(trylast=True)
     def pytest_sessionfinish(self, session: pytest.Session) -> None:
@@ -153,7 +160,14 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
     for path in args.paths:
         if not Path(path.partition("::")[0]).exists():
             problems.append(f"{path}: no such test file or folder")
-    check(resolve_external, codebook, project.stimulus, args.external)
+    if not args.paths:
+        problems.extend(_testcases_problems(project))
+    external = check(resolve_external, codebook, project.stimulus, args.external)
+    if isinstance(external, set) and set(codebook.nodes) - set(project.stimulus) - external:   # a plant is needed
+        try:
+            load_plant(project.plant)
+        except BenchError as exc:
+            problems.append(f"{project.path}: [bench] plant: {exc}")
     unknown = [n for n in split_names(args.dut) if n not in codebook.nodes]
     if unknown:
         problems.append(f"--dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(codebook.nodes)})")
@@ -162,7 +176,10 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
         problems.append(f"--interface: unknown python-can interface {args.interface!r} "
                         f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
     check(check_channel, args.interface, args.channel)
-    if args.workers and not is_virtual(args.interface):
+    if args.workers is not None and not _workers_ok(args.workers):
+        problems.append(f"-n {args.workers}: not a number of worker processes (a whole number, or auto: one "
+                        "per core)")
+    elif args.workers and not is_virtual(args.interface):
         problems.append("-n: parallel workers each need their own in-process virtual bus; "
                         f"--interface {args.interface} is one shared bus")
     options = check(resolve_bus_options, project, given_bus_options(args), codebook)
@@ -174,6 +191,49 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
         check(probe_bus, args.interface, args.channel, options)
     if problems:
         raise InputProblems(problems)
+
+
+def _testcases_problems(project: ProjectConfig) -> list[str]:
+    """bench.toml's `testcases` names a file or folder that exists (else pytest would say "file or directory not
+    found" after the bench has started), with the folder beside it that was most likely meant."""
+    if project.testcases.exists():
+        return []
+    base = project.path.parent
+    shown = project.testcases.relative_to(base) if project.testcases.is_relative_to(base) else project.testcases
+    parent = project.testcases.parent
+    beside = [p.name for p in parent.iterdir() if p.is_dir() and not p.name.startswith(".")] if parent.is_dir() else []
+    return [f"{project.path}: [bench] testcases: no such file or folder {str(shown)!r}"
+            f"{did_you_mean(project.testcases.name, beside)} (relative to {base})"]
+
+
+def _workers_ok(text: str) -> bool:
+    """-n as pytest-xdist takes it: a whole number of processes (0: none), `auto` or `logical`."""
+    return text in ("auto", "logical") or (text.isascii() and text.isdigit())
+
+
+def _new_folders(folder: Path) -> list[Path]:
+    """The folders on the way to `folder` that do not exist yet, deepest first: what the run creates, and
+    removes again (if still empty) when it is rejected or no case runs."""
+    return list(itertools.takewhile(lambda f: not f.exists(), (folder, *folder.parents)))
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for folder in folders:
+        try:
+            folder.rmdir()   # only an empty folder: whatever a run wrote stays
+        except OSError:
+            return
+
+
+def _nothing_selected(args: argparse.Namespace, paths: list[str], progress: _Progress) -> ConfigError:
+    """No case to run: the selection that left none (-k, --dut) named, or the paths that hold none."""
+    where = " ".join(paths)
+    chosen = [f"-k {args.keyword!r}"] if args.keyword else []
+    chosen += [f"--dut {' '.join(args.dut)}"] if args.dut else []
+    if chosen:
+        of = f"none of the {progress.deselected} cases" if progress.deselected else "no case"
+        return ConfigError(f"{' and '.join(chosen)}: selects {of} in {where}")
+    return ConfigError(f"{where}: no test case there (pytest collects test_*.py files and their test_ functions)")
 
 
 def _rootdir(project: ProjectConfig, paths: list[str]) -> Path:
@@ -192,7 +252,12 @@ def run(args: argparse.Namespace) -> int:
     console = Console(soft_wrap=not sys.stdout.isatty())   # a CI log keeps whole lines, never cut at 80 columns
     project = load_config(Path(args.config) if args.config else None)
     out_dir = Path(args.out) if args.out else default_out_dir(project.reports)
-    _check_before_running(project, args, out_dir)
+    made = _new_folders(out_dir)
+    try:
+        _check_before_running(project, args, out_dir)
+    except BenchError:
+        _remove_empty(made)   # a rejected run leaves no empty report folder behind
+        raise
     paths = args.paths or [str(project.testcases)]
     args.config, args.out = str(project.path), str(out_dir)   # as resolved here, for the plugin
     pytest_args = [*paths, "-p", "no:terminal", "-p", "no:cacheprovider",
@@ -207,6 +272,9 @@ def run(args: argparse.Namespace) -> int:
         _settle_at_exit()
     result = finished_run()
     if result is None:
+        _remove_empty(made)
+        if code == pytest.ExitCode.NO_TESTS_COLLECTED:
+            raise _nothing_selected(args, paths, progress)
         console.print(f"[bold red]bench run: no case ran[/] (pytest exit code {int(code)})", highlight=False)
         return int(code) or 1
     if args.shard and not result.cases and not result.aborted:   # more shards than cases: nothing to fail

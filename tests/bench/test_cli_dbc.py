@@ -138,3 +138,30 @@ def test_no_project_is_a_one_line_error(tmp_path: Path, monkeypatch: pytest.Monk
     assert main(["dbc"]) == 2
     err = capsys.readouterr().err
     assert "bench.toml" in err and "--config" in err and "Traceback" not in err
+
+
+# -- issue 27, finding 6: the value tables a case names (DriveMode="PIVOT", Vehicle="EV4WIS") ------------------
+@pytest.mark.parametrize("argv", [["dbc", "--values"], ["dbc", "dbc/chassis.dbc", "dbc/bench.dbc", "--values"]])
+def test_values_lists_ranges_and_value_tables(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+                                              argv: list[str]) -> None:
+    from tests.repo import ROOT
+
+    monkeypatch.chdir(ROOT)
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    for text in ("DriveMode [-] 0..3: 0 NORMAL, 1 LATERAL, 2 ADAPTIVE, 3 PIVOT", "TargetSpeed [m/s] -80..80",
+                 "Vehicle [-] 0..15: 0 EV4WIS, 1 ACLASS, 2 ACLASS_ABS", "RoadMu [-] 0..1.5"):
+        assert text in out, text
+
+
+def test_the_plain_list_shows_no_value_tables(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["dbc"]) == 0
+    out = capsys.readouterr().out
+    assert "DriveMode [-]" in out and "PIVOT" not in out
+
+
+@pytest.mark.parametrize("argv", [["dbc", "--values", "check"], ["dbc", "check", "--values"]])
+def test_values_is_for_the_listing_only(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip() == (
+        "bench dbc: error: --values: only for the listing, 'bench dbc [FILE ...] --values'")

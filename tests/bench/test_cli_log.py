@@ -82,3 +82,29 @@ def test_info_of_a_bad_file_is_an_error(tmp_path: Path, capsys: pytest.CaptureFi
     assert info(tmp_path / "missing.mcap") == 2
     with pytest.raises(LogError, match="notes.txt"):
         log_cli.info_handler(argparse.Namespace(file=tmp_path / "notes.txt"))
+
+
+def test_info_of_a_run_shows_dates_and_bench_time(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 27, finding 8: a bench run logs Unix times (its start + bench time); info printed them as seconds
+    since 1970 ("1764250000.123000 s"). Now ISO 8601 dates in UTC, and the bench time beside them."""
+    path = tmp_path / "run.mcap"
+    with Recorder(path, []) as recorder:
+        recorder.set_origin(1_732_482_000_000_000_000, "virtual")           # 2024-11-24T21:00:00Z
+        for i in range(11):
+            recorder.frame(0.25 + i * 0.1, 0x100, bytes(8), channel="virtual:bench", direction="rx")
+    assert info(path) == 0
+    out = capsys.readouterr().out
+    assert ("2024-11-24T21:00:00.250000+00:00 … 2024-11-24T21:00:01.250000+00:00 (duration 1.000000 s); bench time "
+            "0.250000 s … 1.250000 s, bench time 0 at 2024-11-24T21:00:00.000000+00:00") in out, out
+    assert "17324" not in out
+
+
+def test_info_of_a_python_can_log_shows_dates(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Unix times without the bench's clock (python-can's logger): dates, no bench time."""
+    path = tmp_path / "unix.mcap"
+    with Recorder(path, []) as recorder:
+        recorder.frame(1_763_700_000.5, 0x100, bytes(8), channel="vcan0", direction="rx")
+    assert info(path) == 0
+    out = capsys.readouterr().out
+    assert "2025-11-21T04:40:00.500000+00:00 … 2025-11-21T04:40:00.500000+00:00 (duration 0.000000 s)" in out, out
+    assert "bench time" not in out

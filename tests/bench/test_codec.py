@@ -105,3 +105,14 @@ def test_decode_of_the_same_payload_again_gives_the_same_values_as_a_new_dict(co
     changed = codec.decode(payload)
     assert changed == codec.decode(bytes(payload)) == {s.name: v for s, v in zip(
         codec.signals, codec.message.decode(bytes(payload), decode_choices=False).values())} != expected
+
+
+def test_text_for_a_signal_without_value_table_is_not_a_number(codebook: Codebook) -> None:
+    """Issue 27, finding 3: `PivotX="5 m"` said "not in its value table (none)"; it is a number typed with its unit."""
+    drive = codebook["DRV_MotionRequest"]
+    with pytest.raises(SignalError) as raised:
+        drive.physical("PivotX", "5 m")
+    assert str(raised.value) == ("DRV_MotionRequest.PivotX: '5 m' is not a number (give a number in m; the signal "
+                                 "has no value table)")
+    with pytest.raises(SignalError, match=r"'PIVT' \(did you mean PIVOT\?\) is not in its value table \(.*PIVOT"):
+        drive.physical("DriveMode", "PIVT")

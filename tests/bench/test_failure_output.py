@@ -19,3 +19,44 @@ def test_failed_steps_are_reported_without_a_traceback(tmp_path: Path) -> None:
     assert "the answer: measured 41.0" in junit
     for noise in ("pluggy", "_callers.py", "Traceback", "def pytest_runtest_call"):
         assert noise not in result.stdout and noise not in junit, noise
+
+
+BAD_VALUES = '''
+def test_speed(bench):
+    bench.start_scenario(Vehicle="EV4WIS")
+    bench.set("DRV_MotionRequest", DriveMode="PIVOT", PivotX=5.0, PivotY=0.0, TargetSpeed=100)
+
+
+def test_pivot(bench):
+    bench.start_scenario(Vehicle="EV4WIS")
+    bench.set("DRV_MotionRequest", DriveMode="PIVOT", PivotX="5 m", PivotY=0.0, TargetSpeed=1)
+'''
+
+
+def test_a_bench_error_in_a_case_is_one_line_at_its_call(tmp_path: Path) -> None:
+    """Issue 27, finding 3: `bench.set(..., TargetSpeed=100)` printed a 25-line traceback through codec.py and
+    restbus.py before its good last line; now that line, at the case's own call, in the console and in JUnit."""
+    (tmp_path / "test_user.py").write_text(BAD_VALUES, encoding="utf-8")
+    result = subprocess.run([sys.executable, "-m", "bench", "run", str(tmp_path / "test_user.py"), "--out",
+                             str(tmp_path / "out")], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 1, result.stdout + result.stderr
+    speed = (f"{tmp_path / 'test_user.py'}:4: SignalError: DRV_MotionRequest.TargetSpeed: 100 m/s is outside the "
+             "DBC range [-80, 80]")
+    pivot = (f"{tmp_path / 'test_user.py'}:9: SignalError: DRV_MotionRequest.PivotX: '5 m' is not a number (give a "
+             "number in m; the signal has no value table)")
+    lines = result.stdout.splitlines()
+    for expected in (speed, pivot):
+        assert lines[lines.index(expected) - 1].split()[2] == "failed", result.stdout   # its progress line
+    junit = (tmp_path / "out" / "junit.xml").read_text()
+    for noise in ("codec.py", "restbus.py", "case.py", "def test_speed", "Traceback"):
+        assert noise not in result.stdout and noise not in junit, noise
+
+
+def test_plain_pytest_with_tb_long_keeps_the_traceback(tmp_path: Path) -> None:
+    """--tb=long asks for every frame (the bench's own bugs): the plugin leaves the report as pytest made it."""
+    (tmp_path / "test_user.py").write_text(BAD_VALUES, encoding="utf-8")
+    result = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "--tb=long",
+                             str(tmp_path / "test_user.py"), "-k", "speed", "--bench-config", str(ROOT / "bench.toml"),
+                             "--bench-out", str(tmp_path / "out")], cwd=ROOT, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 1 and "restbus.py" in result.stdout, result.stdout + result.stderr

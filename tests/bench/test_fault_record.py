@@ -22,6 +22,7 @@ import pytest
 from bench.case import NoFrames
 from bench.codec import Codebook
 from bench.config import RunSettings, load_config
+from bench.errors import ConfigError
 from bench.faults import CASE, FaultPlan, parse_fault, validate
 from bench.logread import read_decoded, summarise
 from bench.results import RunResult
@@ -43,7 +44,7 @@ def test_validate_names_each_bad_spec(codebook: Codebook) -> None:
     bad = {"drop:NoSuchMsg@1-2": "unknown message 'NoSuchMsg'",
            "silence:NOBODY@1-": "unknown node 'NOBODY'",
            "drop:VCU_WheelCmd_FL@3-2": "0 <= START < END",
-           "drop:VCU_WheelCmd_FL@case+-1-2": "must be numbers",
+           "drop:VCU_WheelCmd_FL@case+-1-2": "START is missing",
            "smash:VCU_WheelCmd_FL@1-2": "unknown kind 'smash'",
            "bitflip:VCU_WheelCmd_FL:70@1-2": "bit index",
            "flood:VCU@1-2": "TARGET must be an identifier"}
@@ -51,6 +52,20 @@ def test_validate_names_each_bad_spec(codebook: Codebook) -> None:
     assert len(problems) == len(bad)
     for (spec, why), line in zip(bad.items(), problems):
         assert line.startswith(f"--fault {spec!r}: ") and why in line and "\n" not in line, line
+
+
+@pytest.mark.parametrize(("spec", "why"), [
+    ("drop:WHL_Status_FL@case+1-case+1.5", "END 'case+1.5' is not a number: case+ goes once, at the front of the "
+                                           "window, and makes both times count from each case's start "
+                                           "(e.g. drop:WHL_Status_FL@case+1-1.5)"),
+    ("drop:WHL_Status_FL@x-2", "START 'x' is not a number (s)"),
+    ("delay:WHL_Status_FL:0.1s@1-2", "PARAM '0.1s' is not a number"),
+])
+def test_a_spec_that_is_not_a_number_says_which_part(spec: str, why: str) -> None:
+    """Issue 27, finding 3: "PARAM, START and END must be numbers" did not say which, nor where case+ goes."""
+    with pytest.raises(ConfigError) as raised:
+        parse_fault(spec)
+    assert str(raised.value) == f"--fault {spec!r}: {why}"
 
 
 def test_case_relative_windows(codebook: Codebook) -> None:

@@ -157,3 +157,97 @@ def test_durations_file_that_is_not_json(tmp_path: Path, capsys: pytest.CaptureF
     (tmp_path / "d.json").write_text("testcases/x.py::test_y 1.5\n")
     [line] = errors(capsys, ["--shard", "1/2", "--durations", str(tmp_path / "d.json"), "--out", str(tmp_path / "o")])
     assert "not a durations file" in line
+
+
+# -- issue 27, findings 3 and 4: more bad input at the door, and nothing left behind ------------------------------
+def project(tmp_path: Path, **bench: str) -> Path:
+    """A bench.toml in tmp_path on this repository's databases, with its [bench] keys replaced by `bench`."""
+    keys = {"plant": "chassis", "testcases": "testcases", "reports": "reports", **bench}
+    (tmp_path / "testcases").mkdir(parents=True, exist_ok=True)
+    config = tmp_path / "bench.toml"
+    config.write_text(f'[bench]\ndatabases = ["{ROOT}/dbc/chassis.dbc", "{ROOT}/dbc/bench.dbc"]\n'
+                      'stimulus = ["DRIVER", "TESTER"]\n' + "".join(f'{k} = "{v}"\n' for k, v in keys.items()))
+    return config
+
+
+def test_a_mistyped_plant_is_found_before_collection(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = project(tmp_path, plant="chasis")
+    [line] = errors(capsys, ["--config", str(config)])
+    assert line.startswith(f"bench run: error: {config}: [bench] plant: no plant 'chasis' (did you mean chassis?)")
+    assert not (tmp_path / "reports").exists()
+
+
+def test_no_plant_is_needed_when_every_node_is_external(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--external all`: the plant is another process, so a name this one cannot load is no problem of the run."""
+    config = project(tmp_path, plant="elsewhere")
+    [line] = errors(capsys, ["--config", str(config), "--external", "all", "--interface", "udp_multicast",
+                             "--channel", "nonsense"])
+    assert "plant" not in line and "cannot open interface" in line
+
+
+def test_testcases_that_do_not_exist(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = project(tmp_path, testcases="testcase")
+    assert main(["run", "--config", str(config)]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert line == (f"bench run: error: {config}: [bench] testcases: no such file or folder 'testcase' "
+                    f"(did you mean testcases?) (relative to {tmp_path})")
+    assert not (tmp_path / "reports").exists()
+
+
+@pytest.mark.parametrize("workers", ["abc", "-1", "2.5"])
+def test_workers_that_are_not_a_number(tmp_path: Path, capsys: pytest.CaptureFixture[str], workers: str) -> None:
+    [line] = errors(capsys, ["-n", workers, "--out", str(tmp_path / "out")])
+    assert line == f"bench run: error: -n {workers}: not a number of worker processes (a whole number, or auto: one " \
+                   "per core)"
+
+
+def test_a_rejected_run_leaves_no_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Finding 4: --out (and the folders above it) were created by the check of the folder and left empty."""
+    errors(capsys, ["--dut", "NOPE", "--out", str(tmp_path / "new" / "out")])
+    assert list(tmp_path.iterdir()) == []
+    config = project(tmp_path / "p", plant="chasis")
+    errors(capsys, ["--config", str(config)])
+    assert sorted(p.name for p in config.parent.iterdir()) == ["bench.toml", "testcases"]   # no reports/<stamp>/
+
+
+def test_a_rejected_run_keeps_an_existing_empty_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An empty --out a CI step made is the user's: a rejected run leaves it as it was."""
+    errors(capsys, ["--dut", "NOPE", "--out", str(tmp_path)])
+    assert tmp_path.is_dir()
+
+
+@pytest.mark.parametrize(("argv", "says"), [
+    (["-k", "nothing_matches_this"], "-k 'nothing_matches_this': selects none of the 3 cases in "),
+    (["-k", "nothing_matches_this", "-n", "2"], "-k 'nothing_matches_this': selects no case in "),
+])
+def test_a_keyword_that_selects_nothing(tmp_path: Path, argv: list[str], says: str) -> None:
+    """Finding 3: "no case ran (pytest exit code 5)", exit 5, the -k not named; and an empty --out left behind."""
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, "-m", "bench", "run", str(MINI), *argv, "--out", str(out)],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert result.stdout == "" and "Traceback" not in result.stderr
+    # (pytest-benchmark, where installed, warns on stderr that xdist disables it: not the bench's line)
+    assert [line for line in result.stderr.splitlines() if "Warning" not in line and not line.startswith(" ")] == [
+        f"bench run: error: {says}{MINI}"]
+    assert not out.exists()
+
+
+def test_an_empty_folder_of_cases(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "cases").mkdir()
+    assert main(["run", str(tmp_path / "cases"), "--out", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == (f"bench run: error: {tmp_path / 'cases'}: no test case there (pytest collects test_*.py "
+                            "files and their test_ functions)\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cases"]
+
+
+def test_collect_only_with_a_shard_writes_no_report(tmp_path: Path) -> None:
+    """docs/ci.md's `pytest testcases --collect-only -q --bench-shard 2/3` printed the shard and wrote a report."""
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", str(MINI), "--collect-only",
+                             "-q", "--bench-shard", "2/3", "--bench-out", str(out)],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "test_mini.py::" in result.stdout and not out.exists()

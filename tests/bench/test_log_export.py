@@ -112,3 +112,37 @@ def test_default_output_and_clear_errors(run_log: Path, tmp_path: Path, capsys: 
     err = capsys.readouterr().err
     assert "missing.mcap" in err and "Traceback" not in err
     assert not (tmp_path / "missing.blf").exists()
+
+
+# -- issue 27, finding 8: the ASC header's date is the run's start, not the export's time ------------------------
+def asc_date(t: float) -> str:
+    """An epoch time as python-can writes ASC dates (local time, milliseconds)."""
+    from datetime import datetime
+
+    moment = datetime.fromtimestamp(t)
+    return moment.strftime(can.ASCWriter.FORMAT_DATE.format(moment.microsecond // 1000 % 1000))
+
+
+def test_asc_date_is_the_start_of_the_run(tmp_path: Path) -> None:
+    log = tmp_path / "run.mcap"
+    origin_ns = 1_732_482_000_250_000_000                # 2024-11-24T21:00:00.25Z: not today, whenever this runs
+    with Recorder(log, []) as recorder:
+        recorder.set_origin(origin_ns, "virtual")
+        for i in range(5):
+            recorder.frame(0.5 + i * 0.01, 0x100, bytes(8), channel="virtual:bench", direction="rx")
+    asc = tmp_path / "run.asc"
+    export(log, "asc", asc)
+    lines = asc.read_text().splitlines()
+    assert lines[0] == f"date {asc_date(origin_ns / 1e9)}", lines[:4]             # bench time 0, the run's start
+    assert lines[3] == f"Begin Triggerblock {asc_date(origin_ns / 1e9 + 0.5)}"    # the first frame, as before
+
+
+def test_asc_date_of_a_log_without_origin_is_its_first_frame(tmp_path: Path) -> None:
+    """A log recorded by python-can's logger (Unix times, no bench clock): its first frame is its start."""
+    log = tmp_path / "unix.mcap"
+    t0 = 1_763_700_000.125
+    with Recorder(log, []) as recorder:
+        recorder.frame(t0, 0x100, bytes(8), channel="vcan0", direction="rx")
+    asc = tmp_path / "unix.asc"
+    export(log, "asc", asc)
+    assert asc.read_text().splitlines()[0] == f"date {asc_date(t0)}"

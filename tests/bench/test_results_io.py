@@ -64,3 +64,29 @@ def test_dumps_refuses_what_json_cannot_write() -> None:
     run.cases[0].notes.append(object())   # type: ignore[arg-type]
     with pytest.raises(TypeError, match="object is not JSON serializable"):
         results_io.dumps(run)
+
+
+def test_a_time_plot_is_written_to_the_microsecond(tmp_path: Path) -> None:
+    """Issue 27, finding 4: a campaign's results.json was 16 MB, 60 % of it the times of its time plots written as
+    0.0019999999999999983 (bench time minus the plot's start). To the microsecond they are the ticks again; the
+    values, an xy plot's coordinates, the steps and the verdicts are written as they were."""
+    start = 7.3                                      # a plot that starts late: its times carry the subtraction's noise
+    ticks = [round(start + k * 0.001, 3) - start for k in range(2, 6)]
+    assert ticks[0] != 0.002 and len(repr(ticks[0])) > 18
+    noisy = [0.1 + 0.2, 1 / 3, math.nan]
+    run = _run()
+    case = run.cases[0]
+    case.plots.append(Plot("time", "t [s]", "deg", [Series("FL", [*ticks, math.nan], [*noisy, 1.0], gap=0.025)],
+                           x0=start))
+    text = results_io.dumps(run)
+    written = json.loads(text)["cases"][0]["plots"]
+    assert written[1]["series"][0]["x"][:4] == [0.002, 0.003, 0.004, 0.005] and "0.0019999" not in text
+    assert math.isnan(written[1]["series"][0]["x"][4])
+    assert written[1]["series"][0]["y"][:2] == noisy[:2]                           # values untouched
+    assert written[0] == json.loads(json.dumps(asdict(case.plots[0]), allow_nan=True))   # xy: as it was
+    path = tmp_path / "results.json"
+    results_io.dump(run, path)
+    back = results_io.load(path)
+    assert [(s.name, s.expected, s.verdict, s.time) for s in back.cases[0].steps] == [
+        (s.name, s.expected, s.verdict, s.time) for s in case.steps]
+    assert back.verdict == run.verdict and back.cases[0].outcome == case.outcome

@@ -15,6 +15,7 @@ The other tests run on the host (not in the lane): the lanes' selections name ca
 
 from __future__ import annotations
 
+import os
 import signal
 import statistics
 import subprocess
@@ -158,3 +159,39 @@ def test_report_check_flags_invalid_frames_outside_fault_cases(fault_run: Path,
 def test_report_check_lists_missing_reports(tmp_path: Path) -> None:
     assert load_lane_script().check_report(tmp_path) == [
         "missing or empty report.html", "missing or empty run.mcap", "missing or empty junit.xml"]
+
+
+def _running(pid: int) -> bool:
+    """A process that exists and is not a zombie (a container's init may leave orphans unreaped)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+    return fields[0] != "Z"
+
+
+@on_host
+def test_a_build_step_that_times_out_stops_with_its_children(tmp_path: Path) -> None:
+    """Issue 27, finding 8: the kernel build's timeout killed make alone (subprocess.run kills its direct child);
+    the compilers make had started went on for minutes. The step now runs in its own process group, and the
+    whole group is stopped: here a shell that waits on a child of its own, as make on its compilers."""
+    lane = load_lane_script()
+    pid_file = tmp_path / "child.pid"
+    with open(tmp_path / "build.log", "w", encoding="utf-8") as out:
+        code = lane.run_group(["/bin/sh", "-c", f"sleep 300 & echo $! > {pid_file}; wait"], cwd=tmp_path, stdout=out,
+                              timeout=1.0, grace=2.0)
+    child = int(pid_file.read_text())
+    try:
+        assert code == 124
+        assert not _running(child), "the build step's child outlived the timeout"
+    finally:
+        if _running(child):
+            os.kill(child, signal.SIGKILL)
+
+
+@on_host
+def test_a_build_step_that_finishes_gives_its_exit_code(tmp_path: Path) -> None:
+    lane = load_lane_script()
+    with open(tmp_path / "build.log", "w", encoding="utf-8") as out:
+        assert lane.run_group(["/bin/sh", "-c", "echo made; exit 3"], cwd=tmp_path, stdout=out, timeout=30.0) == 3
+    assert (tmp_path / "build.log").read_text() == "made\n"
