@@ -146,7 +146,7 @@ class Protection:
         else:
             crc, intact, protect = fast
             set_(self, "_protect", protect)
-            set_(self, "_check", lambda data: crc(data) == data[byte])
+            set_(self, "_check", lambda data: intact(data) is not None)
             set_(self, "_intact", intact)
 
     # -- sending ---------------------------------------------------------------------------------
@@ -229,9 +229,10 @@ def _fast_crc(profile: str, mode: str, data_id: int, crc_byte: int, length: int
         return calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF
 
     def intact(data: bytes | bytearray) -> int | None:
-        if calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF != data[crc_byte]:
-            return None
-        return data[counter_byte] & 0x0F
+        counter = data[counter_byte] & 0x0F
+        if counter == 15 or calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF != data[crc_byte]:
+            return None   # (the profiles' checks refuse a counter of 15, which no sender of theirs sends)
+        return counter
 
     def protect(data: bytearray, counter: int) -> None:
         data[counter_byte] = (data[counter_byte] & 0xF0) | (counter % 15)
