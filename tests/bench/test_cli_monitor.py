@@ -165,7 +165,7 @@ def test_the_view_shows_e2e_errors_unknown_ids_and_timeouts(codebook: Codebook) 
     for i in range(100):                                  # 1 s of frames every 10 ms, stamped 1000 s + t
         data = bytearray(restbus.build(slot))
         if i == 50:
-            data[7] ^= 0xFF                               # one bad checksum
+            data[6] ^= 0xFF                               # one bad CRC (byte 6 in the contract's Profile 11)
         live.feed(0.0005 + i * 0.01, can.Message(timestamp=1000.0 + i * 0.01, arbitration_id=frame_id, data=data,
                                                  is_extended_id=False))
     live.feed(1.0, can.Message(timestamp=1000.995, arbitration_id=0x7FF, data=b"\x00", is_extended_id=False))
@@ -175,8 +175,11 @@ def test_the_view_shows_e2e_errors_unknown_ids_and_timeouts(codebook: Codebook) 
     rows = {r["Message"]: r for r in table_rows(text)}
     row = rows["WHL_Status_FL"]
     assert float(row["Rate Hz"]) == pytest.approx(100.0, abs=0.5) and row["p50 ms"] == "10.00"
-    assert row["E2E"] == "checksum 1" and row["Timeout"] == "ok" and "SteerAngle=12.5" in row["Values"]
-    assert "unknown ids 1" in text and "0x7FF ×1" in text and "invalid 2" in text
+    # the profile and its state, then the AUTOSAR statuses other than OK: the bad frame (ERROR) and the next one
+    # (one counter step after the last good frame: OKSOMELOST, not applied while the state machine is INVALID)
+    assert row["E2E"] == "P11 VALID ERROR 1 OKSOMELOST 1" and row["Timeout"] == "ok"
+    assert "SteerAngle=12.5" in row["Values"]
+    assert "unknown ids 1" in text and "0x7FF ×1" in text and "invalid 3" in text
     console = Console(record=True, width=220)
     console.print(render(live, live.tick(1.5), "udp_multicast 239.1.2.3", 1.5))   # 0.5 s of silence: timed out
     row = {r["Message"]: r for r in table_rows(console.export_text())}["WHL_Status_FL"]
