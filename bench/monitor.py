@@ -57,6 +57,7 @@ class MessageState:
     last_seen: float | None = None           # bench time of the last frame, valid or not
     rx: e2e.Receiver | None = field(init=False)   # the E2E receiver (check and state machine); None: unprotected
     e2e_status: dict[str, int] = field(default_factory=dict)   # AUTOSAR check status -> frames
+    starting: int = 0                        # valid frames not applied while the E2E state machine was INIT
     last_invalid: bool = False
     frames: int = 0
     invalid: dict[str, int] = field(default_factory=dict)      # reason -> count
@@ -132,7 +133,10 @@ class Monitor:
     # -- frames ------------------------------------------------------------------------------
     def on_frame(self, t: float, arbitration_id: int, data: bytes, direction: str,
                  is_extended: bool = False, is_error: bool = False) -> bool:
-        """Check one frame; apply it only when valid. Returns the verdict. Never raises on bus data."""
+        """Check one frame; apply it only when valid and its E2E state machine is VALID. Returns whether it was
+        applied: a frame that is valid but came while the state machine was only INIT (the first frame after
+        start-up, docs/spec/e2e.md) is logged as valid, counted in `starting`, and not applied. Never raises on bus
+        data."""
         self.frames += 1
         sink = self.sink
         state = None if (is_extended or is_error) else self.states.get(arbitration_id)
@@ -203,7 +207,8 @@ class Monitor:
                 sink(t, arbitration_id, data, direction, False, reason, codec, None)
             return False
         assert values is not None
-        if starting:
+        if starting:   # a valid frame (so logged), not applied: the E2E state machine is not VALID yet
+            state.starting += 1
             if sink:
                 sink(t, arbitration_id, data, direction, True, "", codec, values)
             return False

@@ -27,7 +27,8 @@ def test_valid_sequence_is_applied(codebook: Codebook) -> None:
     frame_id = codebook["VCU_WheelCmd_FL"].frame_id
     verdicts = [monitor.on_frame(i * 0.01, frame_id, data, "rx")
                 for i, data in enumerate(_frames(codebook, "VCU_WheelCmd_FL", 20, SteerAngleCmd=12.34))]
-    assert verdicts == [False] + [True] * 19
+    assert verdicts == [False] + [True] * 19                        # applied: all but the first, which is valid
+    assert monitor.state("VCU_WheelCmd_FL").starting == 1           # (logged as such) and held back
     assert monitor.latest("VCU_WheelCmd_FL", 0.19)["SteerAngleCmd"] == 12.34
     t, v = monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd")
     assert len(t) == 19 and v[-1] == 12.34
@@ -40,7 +41,8 @@ def test_each_fault_is_detected_and_not_applied(codebook: Codebook) -> None:
     monitor = Monitor(codebook)
     frame_id = codebook["VCU_WheelCmd_FL"].frame_id
     good = _frames(codebook, "VCU_WheelCmd_FL", 6, SteerAngleCmd=5.0)        # counters 0 ... 5
-    assert not monitor.on_frame(0.00, frame_id, good[0], "rx")       # NODATA -> INIT
+    assert not monitor.on_frame(0.00, frame_id, good[0], "rx")       # NODATA -> INIT: valid, not applied
+    assert monitor.latest("VCU_WheelCmd_FL", 0.0) is None
     assert monitor.on_frame(0.01, frame_id, good[1], "rx")           # INIT -> VALID
     bad_crc = bytearray(good[2])
     bad_crc[6] ^= 0x01                                                # the CRC (byte 6)
