@@ -266,29 +266,44 @@ UDP_RECEIVE_BUFFER = 8 * 1024 * 1024
 
 #: s between the two passes that empty a new udp_multicast socket of other groups' datagrams (_drop_queued)
 DROP_SETTLE_S = 0.002
-#: Linux's IP_MULTICAST_ALL (socket.IP_MULTICAST_ALL where Python defines it).
+#: Linux's IP_MULTICAST_ALL (linux/in.h; socket.IP_MULTICAST_ALL where Python defines it).
 IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)
+#: Linux's IPV6_MULTICAST_ALL (linux/in6.h, since Linux 4.20; Python defines no name for it).
+IPV6_MULTICAST_ALL = getattr(socket, "IPV6_MULTICAST_ALL", 29)
 
 
 def _tune_udp_socket(bus: can.BusABC) -> None:
     """python-can's UdpMulticastBus has no options for these; set them on its socket (a private attribute,
     isolated here; without them the bus works, but worse):
     - SO_RCVBUF: see UDP_RECEIVE_BUFFER;
-    - IP_MULTICAST_ALL = 0: the socket is bound to the wildcard address on python-can's fixed port, and
-      Linux then delivers every group joined by any socket on the host to it; two benches on two groups
-      would hear each other's frames."""
+    - only its own group: python-can binds the socket to the wildcard address on its fixed port (43113), and
+      Linux then delivers to it every group joined on that port by any socket of the host, so two benches on
+      two groups would hear each other's frames. Off for both families: IP_MULTICAST_ALL = 0 on an IPv4
+      socket; on an IPv6 socket IPV6_MULTICAST_ALL = 0 (the IPv6 groups) and IP_MULTICAST_ALL = 0 too,
+      because python-can's IPv6 socket is dual-stack ([::], IPV6_V6ONLY off) and also receives the IPv4
+      groups of its port while that option is on. Then the kernel delivers only the group the socket joined;
+      what came before is dropped (_drop_queued)."""
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
     if sock is None:
         return
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RECEIVE_BUFFER)
-    if sock.family == socket.AF_INET and sys.platform.startswith("linux"):
-        sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
-        _drop_queued(sock)
+    if not sys.platform.startswith("linux"):
+        return
+    if sock.family == socket.AF_INET6:
+        try:
+            sock.setsockopt(socket.IPPROTO_IPV6, IPV6_MULTICAST_ALL, 0)
+        except OSError as exc:   # a kernel before 4.20: the socket would hear every IPv6 group of the host
+            raise can.CanInitializationError(
+                f"cannot limit the socket to its own IPv6 group (IPV6_MULTICAST_ALL, Linux 4.20 or later: "
+                f"{exc.strerror}); use an IPv4 group") from None
+    sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
+    _drop_queued(sock)
 
 
 def _drop_queued(sock: socket.socket) -> None:
-    """Discard what the socket received between its bind and IP_MULTICAST_ALL = 0: other groups' frames (with
-    another bench on this host, 48 of 200 fresh buses read a foreign frame first); this bus is not in use yet.
+    """Discard what the socket received between its bind and the settings that limit it to its group: other
+    groups' frames (with another bench on this host, 48 of 200 fresh buses read a foreign frame first); this
+    bus is not in use yet.
     Twice, DROP_SETTLE_S apart: a datagram the kernel had already matched to this socket before the setting may
     still be on its way into the queue while the first pass empties it (1 of 100 fresh buses read one in a CI run)."""
     dropped = 0
@@ -327,7 +342,11 @@ def open_bus(interface: str, channel: str | None, options: BusOptions | None = N
         raise ConfigError(f"interface {interface!r} needs a channel (--channel)")
     try:
         bus = can.Bus(interface=interface, channel=channel, **kwargs)
-        _tune_udp_socket(bus)   # a bus without python-can's multicast socket is left alone
+        try:
+            _tune_udp_socket(bus)   # a bus without python-can's multicast socket is left alone
+        except BaseException:
+            bus.shutdown()
+            raise
         return bus
     except Exception as exc:   # drivers raise anything (vendor DLL errors, TypeError on a bad [bus] key)
         message = f"cannot open interface {interface!r} channel {channel!r}: {type(exc).__name__}: {exc}"
