@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Literal
 
 import numpy as np
+from pytest import fail
 
 from bench.checks import StepLog, percentile, tolerance_text, within
 from bench.codec import SignalCodec
@@ -301,6 +302,33 @@ class Case:
         start) as two numpy arrays: bench time in s and physical values in the DBC's unit. Records no step."""
         t, v = self._monitor.history(message, signal, self.start if since is None else since)
         return np.asarray(t, dtype=float), np.asarray(v, dtype=float)
+
+    def received(self, message: str, signal: str, since: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """`history` of a message the case cannot judge without (a DUT's output it computes figures from): with
+        no valid frame of `message` since `since` (default: case start), the case ends here as failed, with one
+        line naming the message, its sender and how long the bench listened, "no MESSAGE from the external NODE
+        in 2.0 s" (and the invalid frames it had instead, if any), not with a traceback from the case's own
+        arithmetic on empty arrays. Records no step."""
+        t, v = self.history(message, signal, since)
+        if len(t) == 0:
+            fail(self._silence(message, self.start if since is None else since), pytrace=False)
+        return t, v
+
+    def _silence(self, message: str, since: float) -> str:
+        """The one line of `received` for a message without valid frames since `since`."""
+        senders = self.session.codebook[message].senders
+        external = self.session.external
+        who = " / ".join(f"the {'external' if node in external else 'simulated'} {node}" for node in senders)
+        line = f"no {message} from {who or 'its sender'} in {max(0.0, self.now - since):.1f} s"
+        invalid = [f for f in self.invalid_log() if f.message == message and f.t >= since]
+        if invalid:
+            line += f" ({len(invalid)} invalid frames, the first: {invalid[0].reason})"
+        now = self.now
+        faults = [f.describe() for f in self.session.faults.faults
+                  if f.target in (message, *senders) and f.start < now and f.end > since]
+        if faults:
+            line += f" (injected meanwhile: {', '.join(faults)})"
+        return line
 
     def timed_out(self, message: str) -> bool:
         """True when no valid frame of `message` came for more than 3 × its cycle time, or none ever came
