@@ -106,8 +106,9 @@ class Case:
 
     def wait_until(self, predicate: Callable[[], bool], seconds: float) -> bool:
         """Run until `predicate()` is true (checked every 1 ms tick), at most `seconds` s of bench time.
-        Returns True when it held within `seconds` s: as `eventually` judges, without recording a step (in real
-        time, a bench that ran late stops at the clock's limit, not after `seconds` s worth of its ticks)."""
+        Returns True when it held within `seconds` s, as `eventually` judges (in real time, a bench that ran late
+        stops at the clock's limit, not after `seconds` s worth of its ticks). Records no step (`eventually` is
+        the check that does)."""
         took = self._watch(predicate, seconds, until=True, check_first=True)
         return took is not None and took <= seconds
 
@@ -121,9 +122,9 @@ class Case:
         clock passes the limit: a bench whose tick loop runs late (a busy host, a blocking call in a timer)
         would otherwise let `seconds` s worth of late ticks pass, many more seconds of bench time, and pass
         a check whose own figure exceeds its limit (issue 25: "measured 17.7287 s, expected ≤ 0.2"). A check
-        may then find it so a little after the limit (the loop looks at the clock between ticks): the figure
-        says so and the verdict follows it. With the virtual clock the ticks are the clock: the run is the
-        same as `run_until` alone."""
+        may then find it so a little after the limit (the loop looks at the clock between ticks, and looks once
+        more at what the run's end read from the sockets): the figure says so and the verdict follows it. With
+        the virtual clock the ticks are the clock: the run is the same as `run_until` alone."""
         session = self.session
         t0 = self.now
         if check_first and bool(predicate()) is until:
@@ -140,6 +141,8 @@ class Case:
 
         if session.clock.realtime:
             session.run_until(deadline, lambda: found() or recent() >= deadline)
+            if not seen:
+                found()   # once more on what the end of the run read from the sockets: a figure past the limit
         else:
             session.run_until(deadline, found)
         return round(seen[0] - t0, 6) if seen else None
