@@ -11,8 +11,10 @@ receiving bus's channel and `is_rx`; `recv(timeout)` sleeps until a frame arrive
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import socket
+import struct
 import sys
 import threading
 import time
@@ -282,13 +284,20 @@ def _tune_udp_socket(bus: can.BusABC) -> None:
       socket; on an IPv6 socket IPV6_MULTICAST_ALL = 0 (the IPv6 groups) and IP_MULTICAST_ALL = 0 too,
       because python-can's IPv6 socket is dual-stack ([::], IPV6_V6ONLY off) and also receives the IPv4
       groups of its port while that option is on. Then the kernel delivers only the group the socket joined;
-      what came before is dropped (_drop_queued)."""
-    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    - a socket filter that keeps only datagrams addressed to that group (_only_to_group): a datagram sent to
+      the port itself (unicast, broadcast: any process or host may send one) reaches a socket bound so too, and
+      python-can would decode it as a frame of this bus;
+    what came before is dropped (_drop_queued)."""
+    multicast = getattr(bus, "_multicast", None)
+    sock = getattr(multicast, "_socket", None)
     if sock is None:
         return
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RECEIVE_BUFFER)
     if not sys.platform.startswith("linux"):
         return
+    group = getattr(multicast, "group", None)
+    if isinstance(group, str):
+        _only_to_group(sock, group)
     if sock.family == socket.AF_INET6:
         try:
             sock.setsockopt(socket.IPPROTO_IPV6, IPV6_MULTICAST_ALL, 0)
@@ -298,6 +307,36 @@ def _tune_udp_socket(bus: can.BusABC) -> None:
                 f"{exc.strerror}); use an IPv4 group") from None
     sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
     _drop_queued(sock)
+
+
+#: Linux's SO_ATTACH_FILTER (asm-generic/socket.h) and classic BPF (linux/filter.h): load a 32-bit word at an
+#: offset from the network header, jump if equal, return (0 drops the datagram, 0xFFFFFFFF keeps all of it).
+SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
+_SKF_NET_OFF = -0x100000
+_BPF_LD_W_ABS, _BPF_JEQ_K, _BPF_RET_K = 0x20, 0x15, 0x06
+_DESTINATION_OFFSET = {socket.AF_INET: 16, socket.AF_INET6: 24}   # in the IPv4 and the IPv6 header
+
+
+def _only_to_group(sock: socket.socket, group: str) -> None:
+    """Attach a classic BPF filter that drops every datagram whose destination address is not `group`: the
+    kernel then queues nothing else (an IPv4 datagram on python-can's dual-stack IPv6 socket has no such
+    address where the filter looks, and is dropped too). A filter the kernel refuses is logged, not fatal: the
+    multicast options above keep other groups out already."""
+    family = sock.family
+    address = str(socket.getaddrinfo(group, None, family, socket.SOCK_DGRAM)[0][4][0])   # the group, as python-can
+    words = struct.unpack(f"!{4 if family == socket.AF_INET6 else 1}I", socket.inet_pton(family, address))
+    code = []
+    for i, word in enumerate(words):
+        code.append((_BPF_LD_W_ABS, 0, 0, (_SKF_NET_OFF + _DESTINATION_OFFSET[family] + 4 * i) & 0xFFFFFFFF))
+        code.append((_BPF_JEQ_K, 0, 2 * (len(words) - i - 1) + 1, word))   # not equal: on to the drop
+    code += [(_BPF_RET_K, 0, 0, 0xFFFFFFFF), (_BPF_RET_K, 0, 0, 0)]
+    program = ctypes.create_string_buffer(b"".join(struct.pack("@HBBI", *op) for op in code))
+    try:   # struct sock_fprog {unsigned short len; struct sock_filter *filter;}; the kernel copies the program
+        sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER,
+                        struct.pack("@HP", len(code), ctypes.addressof(program)))
+    except OSError as exc:
+        log.warning("udp_multicast %s: no socket filter (%s); datagrams sent to the port itself are read too",
+                    group, exc)
 
 
 def _drop_queued(sock: socket.socket) -> None:

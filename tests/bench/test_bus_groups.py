@@ -13,6 +13,7 @@ Groups: IPv4 administratively scoped 239.255.x.y and IPv6 link-local ff12::..., 
 from __future__ import annotations
 
 import re
+import socket
 import subprocess
 import sys
 import threading
@@ -215,3 +216,23 @@ def test_bench_monitor_shows_only_its_group(group: Callable[[], str]) -> None:
         sender.join()
     assert counts[ours] == 0, f"bench monitor on {ours} showed {counts[ours]} frames of {theirs}"
     assert counts[theirs] > 0, "bench monitor on the sender's group showed nothing: the test would prove nothing"
+
+
+def test_a_datagram_sent_to_the_port_itself_is_no_frame(group: Callable[[], str]) -> None:
+    """python-can's socket is bound to the wildcard address of its port: a unicast datagram to that port (any
+    process or host may send one; here to the loopback address) was read as a frame of the bus. The bench's
+    socket filter keeps only what is addressed to the bus's group; python-can's IPv6 socket is dual-stack, so it
+    is tried with an IPv4 datagram too."""
+    from can.interfaces.udp_multicast.utils import pack_message
+
+    channel = group()
+    ipv6 = ":" in channel
+    with open_bus("udp_multicast", channel) as bus, open_bus("udp_multicast", channel) as sender:
+        port = bus._multicast.port   # type: ignore[attr-defined]
+        for family, loopback in ((socket.AF_INET, "127.0.0.1"), *([(socket.AF_INET6, "::1")] if ipv6 else [])):
+            with socket.socket(family, socket.SOCK_DGRAM) as stray:
+                stray.sendto(pack_message(can.Message(arbitration_id=0x7EE, data=b"\x01", is_extended_id=False)),
+                             (loopback, port))
+        sender.send(can.Message(arbitration_id=0x123, data=b"\x02", is_extended_id=False))
+        seen = [m.arbitration_id for m in _drain(bus)]
+    assert seen == [0x123], [hex(i) for i in seen]
