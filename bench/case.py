@@ -54,10 +54,11 @@ class Case:
     """The `bench` fixture: one test case on a bench session.
 
     A case drives the stimulus messages (`set`, `start_scenario`), lets bench time pass (`run`,
-    `wait_until`), reads what the monitor accepted (`value`, `history`, `detections`) and checks it
-    (`expect`, `expect_between`, `eventually`, `always`, `check_cycle_times`). Every check records one
+    `wait_until`), reads what the monitor accepted (`value`, `history`, `received`, `detections`) and checks
+    it (`expect`, `expect_between`, `eventually`, `always`, `check_cycle_times`). Every check records one
     *step* in the report: name, measured, expected, tolerance, verdict and the bench time of the check.
-    Checks never raise: the case runs to its end and fails when any step failed. Times are bench time in
+    Checks never raise: the case runs to its end and fails when any step failed; only `received` ends a
+    case, in one line, when a message it cannot be judged without never came. Times are bench time in
     seconds (virtual on the embedded default, wall-clock on a real bus); signal values are physical values
     in the DBC's units. Every time limit ("for how long") is the argument `seconds`: `run(seconds)`,
     `wait_until(predicate, seconds)`, `eventually(name, predicate, seconds)`, `always(name, predicate,
