@@ -25,6 +25,7 @@ import can
 import pytest
 
 from bench.bus import open_bus
+from bench.busopts import BusOptions
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError
 from bench.session import BenchSession
@@ -37,6 +38,7 @@ SENDER = """
 import sys, time
 import can
 from bench.bus import open_bus
+from bench.busopts import BusOptions
 bus = open_bus("udp_multicast", sys.argv[1])
 end = time.monotonic() + 60.0
 while time.monotonic() < end:
@@ -218,21 +220,31 @@ def test_bench_monitor_shows_only_its_group(group: Callable[[], str]) -> None:
     assert counts[theirs] > 0, "bench monitor on the sender's group showed nothing: the test would prove nothing"
 
 
+def _private_port(family: socket.AddressFamily) -> int:
+    """A UDP port no other process of this host uses now (the kernel's choice of a free one)."""
+    with socket.socket(family, socket.SOCK_DGRAM) as probe:
+        probe.bind(("", 0))
+        return int(probe.getsockname()[1])
+
+
 def test_a_datagram_sent_to_the_port_itself_is_no_frame(group: Callable[[], str]) -> None:
     """python-can's socket is bound to the wildcard address of its port: a unicast datagram to that port (any
     process or host may send one; here to the loopback address) was read as a frame of the bus. The bench's
     socket filter keeps only what is addressed to the bus's group; python-can's IPv6 socket is dual-stack, so it
-    is tried with an IPv4 datagram too."""
+    is tried with an IPv4 datagram too. On a port of the test's own: on python-can's default port the stray
+    datagram would reach another bench of this host (one that still reads such datagrams read it as a frame)."""
     from can.interfaces.udp_multicast.utils import pack_message
 
     channel = group()
     ipv6 = ":" in channel
-    with open_bus("udp_multicast", channel) as bus, open_bus("udp_multicast", channel) as sender:
-        port = bus._multicast.port   # type: ignore[attr-defined]
+    port = _private_port(socket.AF_INET6 if ipv6 else socket.AF_INET)
+    options = BusOptions(extra={"port": port})
+    with open_bus("udp_multicast", channel, options) as bus:   # alone on its port: a unicast datagram is its
         for family, loopback in ((socket.AF_INET, "127.0.0.1"), *([(socket.AF_INET6, "::1")] if ipv6 else [])):
             with socket.socket(family, socket.SOCK_DGRAM) as stray:
                 stray.sendto(pack_message(can.Message(arbitration_id=0x7EE, data=b"\x01", is_extended_id=False)),
                              (loopback, port))
-        sender.send(can.Message(arbitration_id=0x123, data=b"\x02", is_extended_id=False))
+        with open_bus("udp_multicast", channel, options) as sender:
+            sender.send(can.Message(arbitration_id=0x123, data=b"\x02", is_extended_id=False))
         seen = [m.arbitration_id for m in _drain(bus)]
     assert seen == [0x123], [hex(i) for i in seen]
