@@ -319,15 +319,21 @@ class Case:
         return t, v
 
     def _silence(self, message: str, since: float) -> str:
-        """The one line of `received` for a message without valid frames since `since`."""
+        """The one line of `received` for a message without valid frames since `since`: silent for the whole
+        case when none came since it started (the time then counts from the start), else since `since`."""
         senders = self.session.codebook[message].senders
         external = self.session.external
         who = " / ".join(f"the {'external' if node in external else 'simulated'} {node}" for node in senders)
-        line = f"no {message} from {who or 'its sender'} in {max(0.0, self.now - since):.1f} s"
+        now = self.now
+        last = self._monitor.state(message).last_valid
+        if last is None or last < self.start:
+            since = min(since, self.start)
+        line = f"no {message} from {who or 'its sender'} in {max(0.0, now - since):.1f} s"
+        if last is not None and last >= self.start:
+            line += f" (the last at {last:.3f} s)"
         invalid = [f for f in self.invalid_log() if f.message == message and f.t >= since]
         if invalid:
             line += f" ({len(invalid)} invalid frames, the first: {invalid[0].reason})"
-        now = self.now
         faults = [f.describe() for f in self.session.faults.faults
                   if f.target in (message, *senders) and f.start < now and f.end > since]
         if faults:

@@ -39,14 +39,24 @@ def test_a_message_with_frames_is_its_history(case: Case) -> None:
 
 
 def test_a_message_without_frames_ends_the_case_in_one_line(case: Case) -> None:
+    case.run(0.1)
     fault = case.inject("drop", MESSAGE)
     case.run(0.5)
-    since = case.now - 0.2
+    last = case.history(MESSAGE, SIGNAL)[0][-1]
     with pytest.raises(pytest.fail.Exception) as ended:
-        case.received(MESSAGE, SIGNAL, since)
+        case.received(MESSAGE, SIGNAL, case.now - 0.2)
     line = str(ended.value)
-    assert line == (f"no {MESSAGE} from the simulated {NODE} in 0.2 s (injected meanwhile: {fault.describe()})")
+    assert line == (f"no {MESSAGE} from the simulated {NODE} in 0.2 s (the last at {last:.3f} s) "
+                     f"(injected meanwhile: {fault.describe()})")
     assert "\n" not in line and not ended.value.pytrace   # pytest shows the line, no traceback
+
+
+def test_silent_since_the_case_started_counts_from_there(case: Case) -> None:
+    """Asked for the last 0.2 s of a message that never came in the case: the line says the whole case."""
+    case.inject("drop", MESSAGE)
+    case.run(0.5)
+    with pytest.raises(pytest.fail.Exception, match=rf"^no {MESSAGE} from the simulated {NODE} in 0\.5 s \("):
+        case.received(MESSAGE, SIGNAL, case.now - 0.2)
 
 
 def test_the_line_names_an_external_sender() -> None:
