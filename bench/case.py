@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Literal
 
 import numpy as np
+from pytest import fail
 
 from bench.checks import StepLog, percentile, tolerance_text, within
 from bench.codec import SignalCodec
@@ -53,12 +54,15 @@ class Case:
     """The `bench` fixture: one test case on a bench session.
 
     A case drives the stimulus messages (`set`, `start_scenario`), lets bench time pass (`run`,
-    `wait_until`), reads what the monitor accepted (`value`, `history`, `detections`) and checks it
-    (`expect`, `expect_between`, `eventually`, `always`, `check_cycle_times`). Every check records one
+    `wait_until`), reads what the monitor accepted (`value`, `history`, `received`, `detections`) and checks
+    it (`expect`, `expect_between`, `eventually`, `always`, `check_cycle_times`). Every check records one
     *step* in the report: name, measured, expected, tolerance, verdict and the bench time of the check.
-    Checks never raise: the case runs to its end and fails when any step failed. Times are bench time in
+    Checks never raise: the case runs to its end and fails when any step failed; only `received` ends a
+    case, in one line, when a message it cannot be judged without never came. Times are bench time in
     seconds (virtual on the embedded default, wall-clock on a real bus); signal values are physical values
-    in the DBC's units.
+    in the DBC's units. Every time limit ("for how long") is the argument `seconds`: `run(seconds)`,
+    `wait_until(predicate, seconds)`, `eventually(name, predicate, seconds)`, `always(name, predicate,
+    seconds)` (before: `timeout`, `within_s` and `during`).
     """
 
     def __init__(self, session: BenchSession, result: CaseResult, steps: StepLog) -> None:
@@ -101,13 +105,48 @@ class Case:
         sent, received and checked meanwhile). Records no step."""
         self.session.run_until(self.now + seconds)
 
-    def wait_until(self, predicate: Callable[[], bool], timeout: float) -> bool:
-        """Run until `predicate()` is true (checked every 1 ms tick) or `timeout` s of bench time pass.
-        Returns `predicate()` at the end: True as soon as it held. Records no step (`eventually` is the
-        check that does)."""
-        if predicate():
-            return True
-        return self.session.run_until(self.now + timeout, predicate)
+    def wait_until(self, predicate: Callable[[], bool], seconds: float) -> bool:
+        """Run until `predicate()` is true (checked every 1 ms tick), at most `seconds` s of bench time.
+        Returns True when it held within `seconds` s, as `eventually` judges (in real time, a bench that ran late
+        stops at the clock's limit, not after `seconds` s worth of its ticks). Records no step (`eventually` is
+        the check that does)."""
+        took = self._watch(predicate, seconds, until=True, check_first=True)
+        return took is not None and took <= seconds
+
+    def _watch(self, predicate: Callable[[], bool], seconds: float, *, until: bool,
+               check_first: bool) -> float | None:
+        """Run until `bool(predicate()) is until` or `seconds` s of bench time have passed since now. Returns
+        the bench time from now to the check that found it so (s, to the µs), or None when none did.
+
+        The one measure of `wait_until`, `eventually` and `always`: their verdict and their figure are this
+        number. In real time it is the clock's, read when the check found it, and the run also stops when the
+        clock passes the limit: a bench whose tick loop runs late (a busy host, a blocking call in a timer)
+        would otherwise let `seconds` s worth of late ticks pass, many more seconds of bench time, and pass
+        a check whose own figure exceeds its limit (issue 25: "measured 17.7287 s, expected ≤ 0.2"). A check
+        may then find it so a little after the limit (the loop looks at the clock between ticks, and looks once
+        more at what the run's end read from the sockets): the figure says so and the verdict follows it. With
+        the virtual clock the ticks are the clock: the run is the same as `run_until` alone."""
+        session = self.session
+        t0 = self.now
+        if check_first and bool(predicate()) is until:
+            return 0.0
+        deadline = t0 + seconds
+        seen: list[float] = []
+        now, recent = session.now, session.recent
+
+        def found() -> bool:
+            if bool(predicate()) is until:
+                seen.append(now())   # a new read, once: the time of this check, not of the tick's start
+                return True
+            return False
+
+        if session.clock.realtime:
+            session.run_until(deadline, lambda: found() or recent() >= deadline)
+            if not seen:
+                found()   # once more on what the end of the run read from the sockets: a figure past the limit
+        else:
+            session.run_until(deadline, found)
+        return round(seen[0] - t0, 6) if seen else None
 
     def every(self, period: float, callback: Callable[[float], None]) -> Callable[[], None]:
         """Call `callback(now)` every `period` s of bench time while the bench runs (a test node's timer,
@@ -210,7 +249,9 @@ class Case:
             latest = self._monitor.latest(ack, self.now)
             return latest is not None and int(latest[ack_signal]) == scenario
 
-        if not self.wait_until(acknowledged, protocol.timeout):
+        # a setup wait, not a verdict: by the tick loop's time, as before wait_until looked at the clock (a late
+        # bench reads the acknowledgement late, and the case has not started yet)
+        if not (acknowledged() or self.session.run_until(self.now + protocol.timeout, acknowledged)):
             raise BenchError(f"the plant did not acknowledge scenario {scenario} within "
                              f"{protocol.timeout:g} s ({ack}.{ack_signal})")
         self.start = self.now
@@ -266,6 +307,39 @@ class Case:
         t, v = self._monitor.history(message, signal, self.start if since is None else since)
         return np.asarray(t, dtype=float), np.asarray(v, dtype=float)
 
+    def received(self, message: str, signal: str, since: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """`history` of a message the case cannot judge without (a DUT's output it computes figures from): with
+        no valid frame of `message` since `since` (default: case start), the case ends here as failed, with one
+        line naming the message, its sender and how long the bench listened, "no MESSAGE from the external NODE
+        in 2.0 s" (and the invalid frames it had instead, if any), not with a traceback from the case's own
+        arithmetic on empty arrays. Records no step."""
+        t, v = self.history(message, signal, since)
+        if len(t) == 0:
+            fail(self._silence(message, self.start if since is None else since), pytrace=False)
+        return t, v
+
+    def _silence(self, message: str, since: float) -> str:
+        """The one line of `received` for a message without valid frames since `since`: silent for the whole
+        case when none came since it started (the time then counts from the start), else since `since`."""
+        senders = self.session.codebook[message].senders
+        external = self.session.external
+        who = " / ".join(f"the {'external' if node in external else 'simulated'} {node}" for node in senders)
+        now = self.now
+        last = self._monitor.state(message).last_valid
+        if last is None or last < self.start:
+            since = min(since, self.start)
+        line = f"no {message} from {who or 'its sender'} in {max(0.0, now - since):.1f} s"
+        if last is not None and last >= self.start:
+            line += f" (the last at {last:.3f} s)"
+        invalid = [f for f in self.invalid_log() if f.message == message and f.t >= since]
+        if invalid:
+            line += f" ({len(invalid)} invalid frames, the first: {invalid[0].reason})"
+        faults = [f.describe() for f in self.session.faults.faults
+                  if f.target in (message, *senders) and f.start < now and f.end > since]
+        if faults:
+            line += f" (injected meanwhile: {', '.join(faults)})"
+        return line
+
     def timed_out(self, message: str) -> bool:
         """True when no valid frame of `message` came for more than 3 × its cycle time, or none ever came
         (a message without a cycle time times out only so). Records no step."""
@@ -304,24 +378,26 @@ class Case:
         ok = math.isfinite(float(measured)) and low <= float(measured) <= high
         return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail)
 
-    def eventually(self, name: str, predicate: Callable[[], bool], within_s: float) -> bool:
-        """Run until `predicate()` is true, at most `within_s` s of bench time. Records one step: pass
-        when it became true in time, measured = the time it took (s), or "not within N s". Returns the
-        verdict."""
-        t0 = self.now
-        ok = self.wait_until(predicate, within_s)
-        took = self.now - t0
-        return self._steps.record(name, ok, round(took, 6) if ok else f"not within {within_s:g} s",
-                                  f"≤ {within_s:g} s", "eventually", "s")
+    def eventually(self, name: str, predicate: Callable[[], bool], seconds: float) -> bool:
+        """Run until `predicate()` is true, at most `seconds` s of bench time. Records one step: measured =
+        the time it took (s) or "not within N", expected "≤ N", unit s; pass exactly when the measured time is
+        ≤ `seconds` (the figure is the verdict's number; in real time the clock's, see `wait_until`). Returns
+        the verdict."""
+        took = self._watch(predicate, seconds, until=True, check_first=True)
+        ok = took is not None and took <= seconds
+        measured: float | str = f"not within {seconds:g}" if took is None else took
+        return self._steps.record(name, ok, measured, f"≤ {seconds:g}", "eventually", "s")
 
-    def always(self, name: str, predicate: Callable[[], bool], during: float) -> bool:
-        """Run for `during` s of bench time and check `predicate()` at every 1 ms tick; stops at the first
-        tick where it is false. Records one step: "held N s", or "violated at +t s" (since the call).
-        Returns the verdict."""
-        t0 = self.now
-        violated = self.session.run_until(t0 + during, lambda: not predicate())
-        measured = f"violated at +{self.now - t0:.3f} s" if violated else f"held {during:g} s"
-        return self._steps.record(name, not violated, measured, f"for {during:g} s", "always")
+    def always(self, name: str, predicate: Callable[[], bool], seconds: float) -> bool:
+        """Run for `seconds` s of bench time and check `predicate()` at every 1 ms tick; stops at the first
+        tick where it is false. Records one step: "held N s", or "violated at +t s" (since the call); fail
+        exactly when it was found false at t ≤ `seconds` (in real time, a check that finds it false only after
+        the limit, because the bench ran late, is outside the window: it held; see `wait_until`). Returns the
+        verdict."""
+        violated = self._watch(predicate, seconds, until=False, check_first=False)
+        if violated is not None and violated <= seconds:
+            return self._steps.record(name, False, f"violated at +{violated:g} s", f"for {seconds:g} s", "always")
+        return self._steps.record(name, True, f"held {seconds:g} s", f"for {seconds:g} s", "always")
 
     def check_cycle_times(self, messages: Iterable[str] | None = None, *, p50_band: float = 0.05,
                           p99_max: float = 1.5, max_max: float = 3.0, min_frames: int = 10) -> bool:

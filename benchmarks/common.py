@@ -350,15 +350,19 @@ def note_udp_users(result: Result, quiet: dict[str, Any], seen: dict[str, float]
 
 
 def isolate_group(bus: Any) -> bool:
-    """Make a python-can udp_multicast bus receive only its own group (IP_MULTICAST_ALL = 0, Linux)."""
+    """Make a python-can udp_multicast bus receive only its own group, IPv4 or IPv6 (Linux; bench.bus does it for
+    the bench's own buses: IP_MULTICAST_ALL = 0, and IPV6_MULTICAST_ALL = 0 on an IPv6 socket)."""
     import socket
 
+    from bench.bus import IP_MULTICAST_ALL, IPV6_MULTICAST_ALL
+
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
-    option = getattr(socket, "IP_MULTICAST_ALL", 49)
-    if sock is None or sock.family != socket.AF_INET:
+    if sock is None or sock.family not in (socket.AF_INET, socket.AF_INET6):
         return False
     try:
-        sock.setsockopt(socket.IPPROTO_IP, option, 0)
+        if sock.family == socket.AF_INET6:
+            sock.setsockopt(socket.IPPROTO_IPV6, IPV6_MULTICAST_ALL, 0)
+        sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
     except OSError:
         return False
     return True

@@ -41,11 +41,14 @@ def protect(frame_id: int, payload: bytes, counter: int) -> bytes:
 def own_group_only(bus: can.BusABC) -> None:
     """udp_multicast on Linux: python-can binds its socket to the wildcard address on one fixed port, so it
     hears every group joined on this host: another bench's WHL_Status frames would be read as the plant's.
-    Limit the socket to its own group (IP_MULTICAST_ALL = 0, python-can has no option for it) and drop what it
-    queued before. Other interfaces are left alone."""
+    Limit the socket to its own group (python-can has no option for it): IP_MULTICAST_ALL = 0 (49), and for an
+    IPv6 group IPV6_MULTICAST_ALL = 0 (29) as well (python-can's IPv6 socket is dual-stack: it could also hear
+    the port's IPv4 groups); then drop what it queued before. Other interfaces are left alone."""
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
-    if sock is None or sock.family != socket.AF_INET or not sys.platform.startswith("linux"):
+    if sock is None or not sys.platform.startswith("linux"):
         return
+    if sock.family == socket.AF_INET6:
+        sock.setsockopt(socket.IPPROTO_IPV6, 29, 0)   # IPV6_MULTICAST_ALL, linux/in6.h
     sock.setsockopt(socket.IPPROTO_IP, getattr(socket, "IP_MULTICAST_ALL", 49), 0)
     while True:
         try:

@@ -69,11 +69,14 @@ def brake(bench: Case, pressure_bar: float) -> None:
 
 # -- samples -----------------------------------------------------------------------------------------------
 
-def samples(bench: Case, message: str, signals: Sequence[str], since: float | None = None) -> dict[str, np.ndarray]:
-    """{"t": times since the case start, signal: values} of every valid frame of `message`."""
+def samples(bench: Case, message: str, signals: Sequence[str], since: float | None = None, *,
+            required: bool = False) -> dict[str, np.ndarray]:
+    """{"t": times since the case start, signal: values} of every valid frame of `message`. `required`: a
+    message the case is judged on (the ABS's own): without a frame since `since` (a silent external ABS) the case
+    ends with one line naming it (`bench.received`), not with statistics of nothing."""
     out: dict[str, np.ndarray] = {}
     for signal in signals:
-        t, v = bench.history(message, signal, since)
+        t, v = bench.received(message, signal, since) if required else bench.history(message, signal, since)
         out["t"] = t - bench.start
         out[signal] = v
     return out
@@ -85,14 +88,14 @@ def paired(bench: Case, since: float | None = None) -> dict[str, np.ndarray]:
     Keys: t, ref, angle, turn, active, ps_FL..ps_RR (ABS_SteerState); ws_FL..ws_RR (ABS_WheelSpeeds);
     v_true, angle_true (PLANT_AbsVehicle); slip_FL..slip_RR (PLANT_AbsWheel_xx)."""
     est = samples(bench, "ABS_SteerState", ["RefVehicleSpeed", "FrontWheelAngleEst", "TurnDirection", "AbsActive",
-                                            *[f"PressureState{w}" for w in WHEELS]], since)
+                                            *[f"PressureState{w}" for w in WHEELS]], since, required=True)
     out = {"t": est["t"], "ref": est["RefVehicleSpeed"], "angle": est["FrontWheelAngleEst"],
            "turn": est["TurnDirection"], "active": est["AbsActive"]}
     for w in WHEELS:
         out[f"ps_{w}"] = est[f"PressureState{w}"]
 
-    def take(message: str, signals: Sequence[str]) -> dict[str, np.ndarray]:
-        s = samples(bench, message, signals, since)
+    def take(message: str, signals: Sequence[str], required: bool = False) -> dict[str, np.ndarray]:
+        s = samples(bench, message, signals, since, required=required)
         if s["t"].size == 0:
             return {k: np.full(out["t"].shape, np.nan) for k in signals}
         last = s["t"].size - 1
@@ -103,7 +106,7 @@ def paired(bench: Case, since: float | None = None) -> dict[str, np.ndarray]:
         ok = np.minimum(gap_before, gap_after) <= PAIR_WINDOW
         return {k: np.where(ok, s[k][idx], np.nan) for k in signals}
 
-    wheel = take("ABS_WheelSpeeds", [f"WheelSpeed{w}" for w in WHEELS])
+    wheel = take("ABS_WheelSpeeds", [f"WheelSpeed{w}" for w in WHEELS], required=True)
     truth = take("PLANT_AbsVehicle", ["VehicleSpeed", "FrontWheelAngle"])
     for w in WHEELS:
         out[f"ws_{w}"] = wheel[f"WheelSpeed{w}"]

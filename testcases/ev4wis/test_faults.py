@@ -67,6 +67,9 @@ def _drive(bench: Case) -> None:
     bench.start_scenario(Vehicle="EV4WIS", stimulus=STIMULUS["EV4WIS"])
     bench.set("DRV_MotionRequest", DriveMode="PIVOT", PivotX=6.0, PivotY=-1.38, TargetSpeed=1.0)
     bench.run(1.5)   # wheels at their angles and speeds, no fault
+    bench.received("VCU_VehicleState", "VcuFault")   # a silent node ends the case here, in one line
+    for wheel in ("FL", "FR", "RL", "RR"):
+        bench.received(f"WHL_Status_{wheel}", "WheelFault")
     bench.expect("no fault before the injection", bench.value("VCU_VehicleState", "VcuFault"), 0)
 
 

@@ -127,7 +127,7 @@ def _drive(bench, mode: str) -> dict[str, object]:
     send_car_mode(bench, mode, hand_wheel, V_UTURN)
     arc = math.pi * math.hypot(*centre)                       # path of the geometric centre, m
     bench.eventually(f"{mode}: heading turned 180° (left)", lambda: turn.update() <= -180.0,
-                     within_s=arc / V_UTURN + 2.0)
+                     seconds=arc / V_UTURN + 2.0)
     send_car_mode(bench, mode, hand_wheel, 0.0)
     bench.wait_until(lambda: all(abs(bench.value(f"WHL_Status_{w}", "WheelSpeed")) < 0.05 for w in oracle.WHEELS), 1.0)
     expect_fault(bench, "OK")

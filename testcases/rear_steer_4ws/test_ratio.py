@@ -71,10 +71,11 @@ def _ramp(bench, u_from: float, u_to: float, accel: float) -> tuple[float, float
 
 def _commanded_k(bench, since: float, until: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t, rear axle angle commanded, k commanded, vehicle speed at t) over [since, until]."""
-    t, fl = bench.history("VCU_WheelCmd_FL", "SteerAngleCmd", since)
+    t, fl = bench.received("VCU_WheelCmd_FL", "SteerAngleCmd", since)
     keep = t <= until
     t, fl = t[keep], fl[keep]
-    fr, rl, rr = (np.interp(t, *bench.history(f"VCU_WheelCmd_{w}", "SteerAngleCmd", since)) for w in ("FR", "RL", "RR"))
+    fr, rl, rr = (np.interp(t, *bench.received(f"VCU_WheelCmd_{w}", "SteerAngleCmd", since))
+                  for w in ("FR", "RL", "RR"))
     front, rear = 0.5 * (fl + fr), 0.5 * (rl + rr)
     ts, speed = bench.history("PLANT_Motion", "Speed", since)
     return t, rear, rear / front, np.interp(t, ts, speed)

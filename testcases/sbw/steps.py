@@ -122,15 +122,24 @@ def robot_sine(bench: Case, amplitude: float, frequency: float, duration: float,
 def signal(bench: Case, message: str, name: str, since: float | None = None,
            origin: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(time s since `origin`, values) of every valid frame since `since` (bench times; both default to
-    the start of the case or of its last scenario)."""
+    the start of the case or of its last scenario). A case computes figures from these: a message without a
+    frame since `since` (a silent external SBW) ends the case with one line naming it (`bench.received`)."""
+    t, v = bench.received(message, name, since)
+    return t - (bench.start if origin is None else origin), v
+
+
+def plotted(bench: Case, message: str, name: str, since: float | None = None,
+            origin: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """As `signal`, for a plot only: a message without frames is an empty line (PLANT_SbwAngles, for one, has
+    none when the SBW is external)."""
     t, v = bench.history(message, name, since)
     return t - (bench.start if origin is None else origin), v
 
 
 def steady(bench: Case, message: str, name: str, window: float = STEADY_WINDOW) -> float:
-    """Mean of a signal over the last `window` s."""
-    t, v = bench.history(message, name, bench.now - window)
-    return float(np.mean(v)) if len(v) else math.nan
+    """Mean of a signal over the last `window` s (a message without a frame then ends the case, as `signal`)."""
+    _, v = bench.received(message, name, bench.now - window)
+    return float(np.mean(v))
 
 
 def tracking_error(bench: Case, since: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -163,7 +172,7 @@ def plot_steering(bench: Case, label: str = "", extra_yaw: Sequence[Series] = ()
     xlabel = "time since case start [s]" if since is None else "time [s]"
 
     def series(items: Sequence[tuple[str, str, str]]) -> list[Series]:
-        return [Series(text, *(x.tolist() for x in signal(bench, m, s, origin, origin))) for m, s, text in items]
+        return [Series(text, *(x.tolist() for x in plotted(bench, m, s, origin, origin))) for m, s, text in items]
 
     bench.plot_series(f"{prefix}hand-wheel vs pinion angle", series([
         ("SBW_HandWheel", "HandWheelAngle", "hand wheel (SBW_HandWheel)"),
@@ -172,10 +181,10 @@ def plot_steering(bench: Case, label: str = "", extra_yaw: Sequence[Series] = ()
         ("PLANT_SbwAngles", "HandWheelAngle", "hand wheel, truth"),
         ("PLANT_SbwAngles", "PinionAngle", "pinion, truth")]), xlabel=xlabel, ylabel="angle [deg]")
     t, e = tracking_error(bench, origin)
-    tt, hw = signal(bench, "PLANT_SbwAngles", "HandWheelAngle", origin, origin)
-    _, pin = signal(bench, "PLANT_SbwAngles", "PinionAngle", origin, origin)
-    tp, target = signal(bench, "SBW_Pinion", "PinionAngleTarget", origin, origin)
-    _, pinion = signal(bench, "SBW_Pinion", "PinionAngle", origin, origin)
+    tt, hw = plotted(bench, "PLANT_SbwAngles", "HandWheelAngle", origin, origin)
+    _, pin = plotted(bench, "PLANT_SbwAngles", "PinionAngle", origin, origin)
+    tp, target = plotted(bench, "SBW_Pinion", "PinionAngleTarget", origin, origin)
+    _, pinion = plotted(bench, "SBW_Pinion", "PinionAngle", origin, origin)
     bench.plot_series(f"{prefix}tracking error (hand wheel − pinion; pinion target − pinion)",
                       [Series("SBW_HandWheel − SBW_Pinion", (t + bench.start - origin).tolist(), e.tolist()),
                        Series("hand wheel − pinion, truth (PLANT_SbwAngles)", tt.tolist(), (hw - pin).tolist()),
