@@ -688,7 +688,7 @@ def _not_exactly(signal: Signal, place: Field) -> list[str]:
 
 
 def protection_line(result: CheckResult, entry: MessageProtection) -> str:
-    """What the bench will apply to one message, e.g. `x.dbc: DRV_Steering 0x100: P11 DataID 0x0100 BOTH, ...`."""
+    """What the bench will apply to one message, e.g. `x.dbc: Brake_Status 0x100: P11 DataID 0x0100 BOTH, ...`."""
     return f"{result.path}: {entry.name} 0x{entry.frame_id:03X}: {entry.describe()}"
 
 

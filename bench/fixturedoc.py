@@ -47,10 +47,10 @@ section lists, per node, each requirement with the cases that check it and their
 ```python
 import pytest
 
-pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-MODE-01", "VCU-MODE-02")]
+pytestmark = [pytest.mark.dut("NODE"), pytest.mark.req("NODE-REQ-01", "NODE-REQ-02")]
 
 
-@pytest.mark.reference_only("VCU", reason="configures the reference VCU through BENCH_VcuConfig")
+@pytest.mark.reference_only("NODE", reason="configures the simulated NODE through a bench-private message")
 def test_something(bench): ...
 ```
 
@@ -122,14 +122,23 @@ def _scenario_settings(project: ProjectConfig, codebook: Codebook) -> str:
             "table; a setting not given is its start value:\n\n"
             "| setting | unit | range | start value | value table | what it sets |\n"
             "|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n\n"
-            f"E.g. `bench.start_scenario(Vehicle=\"{_first_choice(codec)}\", InitialSpeed=10.0)`.\n"
+            f"E.g. `bench.start_scenario({_example(codec, id_signal)})`.\n"
             if rows else f"`{message}` has no signal besides `{id_signal}`: `start_scenario` takes no settings.\n")
 
 
-def _first_choice(codec: MessageCodec) -> str:
-    """A value-table name of the message (its lowest raw value) for the example."""
-    tables = [s.choices for s in codec.signals if s.choices]
-    return min(tables[0], key=lambda name: tables[0][name]) if tables else "..."
+def _example(codec: MessageCodec, id_signal: str) -> str:
+    """Keyword arguments for the example call, from the message itself: the first setting with a value table by
+    its lowest name, and the first plain number at its start value."""
+    start = codec.start_values()
+    settings = [s for s in codec.signals if s.name != id_signal and s.name not in codec.e2e_signals]
+    named = next((s for s in settings if s.choices), None)
+    number = next((s for s in settings if not s.choices), None)
+    parts = []
+    if named is not None:
+        parts.append(f"{named.name}=\"{min(named.choices, key=lambda name: named.choices[name])}\"")
+    if number is not None:
+        parts.append(f"{number.name}={start[number.name]:g}")
+    return ", ".join(parts)
 
 
 def render(project: ProjectConfig) -> str:

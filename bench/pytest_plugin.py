@@ -296,7 +296,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
 
 def call_site_error(excinfo: pytest.ExceptionInfo[BaseException]) -> str:
     """A BenchError a case's call raised (a value outside the DBC range, an unknown signal, a bad scenario) as one
-    line at the case's own call: `test_x.py:12: SignalError: DRV_MotionRequest.TargetSpeed: 100 m/s is outside
+    line at the case's own call: `test_x.py:12: SignalError: Brake_Request.Pressure: 300 bar is outside
     ...`. The error names the input and what is wrong; the bench's frames below the call add nothing for the
     case's author."""
     entries = [e for e in excinfo.traceback if not Path(str(e.path)).is_relative_to(_PACKAGE)]

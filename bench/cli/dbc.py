@@ -50,7 +50,7 @@ CHECK_DESCRIPTION = (
     "cannot be read.")
 CONFIG_HELP = "the project's bench.toml, whose [bench] databases are the default FILEs (default: found from here up)"
 VALUES_HELP = ("list only: each signal with its DBC range and its value table (the names a case may give, e.g. "
-               "bench.set(..., DriveMode=\"PIVOT\"))")
+               "bench.set(MESSAGE, SIGNAL=\"NAME\"))")
 
 
 def register(subparsers: Any) -> None:
