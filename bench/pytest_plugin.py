@@ -13,7 +13,6 @@ error, so nothing runs); reference-only cases are skipped at collection when the
 
 from __future__ import annotations
 
-import signal
 import time
 from collections.abc import Generator, Iterator
 from datetime import datetime
@@ -38,6 +37,7 @@ from bench.results import CaseRef, RequirementInfo, RunResult, Table
 from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 from bench.session import resolve_external
 from bench.shard import apply_shard
+from bench.stop import STOP
 
 _RUN_KEY = pytest.StashKey["BenchRun | None"]()
 _CASE_KEY = pytest.StashKey[Case]()
@@ -213,7 +213,9 @@ def _catalogue(project: ProjectConfig) -> list[RequirementInfo]:
                             else str(r.path), r.line) for r in project.requirements]
 
 
-def _run(config: pytest.Config) -> BenchRun:
+def _run(config: pytest.Config, start: bool = True) -> BenchRun:
+    """The run of this session, created at its first case (and its bus opened, unless `start` is False: a run
+    stopped before its first case still writes its report and log)."""
     run = config.stash[_RUN_KEY]
     if run is None:
         project = load_config(_config_path(config))
@@ -234,19 +236,16 @@ def _run(config: pytest.Config) -> BenchRun:
         for item, report, call in config.stash[_PENDING_KEY]:   # cases skipped before the run started
             _record(run, item, report, call)
         config.stash[_PENDING_KEY].clear()
+        STOP.install()   # SIGINT and SIGTERM: an ABORTED report within a second (bench.stop)
+        if not start:
+            return run
         try:
             run.start()
         except BenchError as exc:   # a bus that cannot be opened: one line and stop, not an error per case
             pytest.exit(f"bench: {exc}", returncode=pytest.ExitCode.USAGE_ERROR)
         assert run.session is not None   # started just above (or pytest.exit)
         run.session.faults.extend(faults)
-        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
-            signal.signal(signal.SIGTERM, _terminate)
     return run
-
-
-def _terminate(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt(f"signal {signum}")
 
 
 @pytest.fixture
@@ -300,11 +299,19 @@ def _record(run: BenchRun, item: pytest.Item, report: pytest.TestReport, call: p
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """The run's reports. A stop signal from here on raises nothing: it marks the run aborted (bench.stop)."""
+    with STOP.finishing():
+        _finish_session(session, exitstatus)
+
+
+def _finish_session(session: pytest.Session, exitstatus: int) -> None:
     config = session.config
-    aborted = exitstatus == pytest.ExitCode.INTERRUPTED
+    aborted = exitstatus == pytest.ExitCode.INTERRUPTED or STOP.requested
+    given = config.stash.get(_SELECTED_KEY, [])
     if _xdist_controller(config):
         out_dir = Path(config.getoption("--bench-out"))
-        result = _merge_parts(out_dir, time.monotonic() - config.stash.get(_WALL0_KEY, time.monotonic()), aborted)
+        result = _merge_parts(out_dir, time.monotonic() - config.stash.get(_WALL0_KEY, time.monotonic()), aborted,
+                              given)
         if result is None:
             result = _empty_shard(config, out_dir, aborted)
             if result is None:
@@ -314,6 +321,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         if run is None and config.stash[_PENDING_KEY] and not aborted:
             run = _run_for_skipped_cases(config)
         worker = _worker_id(config)
+        if (run is None and aborted and worker is None and shards.current(config) is None
+                and (_bench_cases(session) or config.getoption("--bench-out"))):
+            run = _run_for_an_aborted_start(config)   # stopped before its first case: an ABORTED report all the same
         if run is None:
             out = config.getoption("--bench-out")
             empty = _empty_shard(config, Path(out) if out else None, aborted, worker)
@@ -322,7 +332,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             result, out_dir = empty, Path(config.getoption("--bench-out"))
         else:
             part = run.out_dir / PARTS_DIR / f"{worker}.json" if worker else None
-            result = run.finish(aborted=aborted, part_of=part)
+            result = run.finish(aborted=aborted, part_of=part, given=None if worker else given)
             out_dir = run.out_dir
     _last_finished.append(result)
     _record_shard(config, out_dir)
@@ -371,6 +381,20 @@ def _record_shard(config: pytest.Config, out_dir: Path) -> None:
         record.dump(out_dir)
 
 
+def _bench_cases(session: pytest.Session) -> bool:
+    """Whether the session collected a case of the bench (one that asks for the `bench` fixture)."""
+    return any("bench" in getattr(item, "fixturenames", ()) for item in session.items)
+
+
+def _run_for_an_aborted_start(config: pytest.Config) -> BenchRun | None:
+    """A run stopped before its first case (SIGINT or SIGTERM while pytest collected): its log and report are
+    written all the same, with no bus opened; the report counts the cases that never ran."""
+    try:
+        return _run(config, start=False)
+    except (BenchError, OSError):
+        return config.stash.get(_RUN_KEY, None)
+
+
 def _run_for_skipped_cases(config: pytest.Config) -> BenchRun | None:
     """Every bench case was skipped (e.g. reference_only with its node external): the run starts only now,
     so that the report still says which cases were skipped and why."""
@@ -383,14 +407,16 @@ def _run_for_skipped_cases(config: pytest.Config) -> BenchRun | None:
         return config.stash.get(_RUN_KEY, None)   # created but not started: finish() still closes its log
 
 
-def _merge_parts(out_dir: Path, wall_time: float, aborted: bool) -> RunResult | None:
+def _merge_parts(out_dir: Path, wall_time: float, aborted: bool, given: list[str]) -> RunResult | None:
     """The controller's report: every worker's part of the run merged into one report.html/junit.xml."""
     folder = out_dir / PARTS_DIR
     paths = sorted(folder.glob("*.json")) if folder.is_dir() else []
     if not paths:
         return None
     result = results_io.merge([(p.stem, results_io.load(p)) for p in paths], wall_time)
-    result.aborted = result.aborted or aborted
+    result.aborted = result.aborted or aborted or STOP.requested
+    if result.aborted:
+        result.not_run = len(set(given) - {c.nodeid for c in result.cases})
     write_reports(result, out_dir)
     for path in paths:
         path.unlink()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Mapping
@@ -22,6 +23,7 @@ from bench.logproc import LogProcess
 from bench.monitor import DuplicateSender, Monitor
 from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
 from bench.session import BenchSession
+from bench.stop import STOP
 from bench.timing import TimingCollector
 
 log = logging.getLogger(__name__)
@@ -132,9 +134,11 @@ class BenchRun:
                       f"{result.outcome} {nodeid}")
 
     # -- end -----------------------------------------------------------------------------------------
-    def finish(self, aborted: bool = False, part_of: Path | None = None) -> RunResult:
+    def finish(self, aborted: bool = False, part_of: Path | None = None, given: list[str] | None = None) -> RunResult:
         """Close the bus and the log, then write the reports (or, for a pytest-xdist worker, its part
-        of the run into `part_of` for the controller to merge); safe to call twice."""
+        of the run into `part_of` for the controller to merge); safe to call twice. `given`: the ids of the
+        cases this run was to run (an aborted report counts those that never started). A stop signal before
+        the reports are written marks the run aborted (bench.stop)."""
         if self.finished is not None:
             return self.finished
 
@@ -177,8 +181,11 @@ class BenchRun:
                     self.recorder.close()
                 except BenchError as exc:   # the report must still be written, and say what happened
                     run.tables.insert(0, Table("Run log problem", ["problem"], [[str(exc)]]))
+            run.aborted = run.aborted or STOP.requested   # a signal while the bus and the log closed
+            if run.aborted and given is not None:
+                run.not_run = len(set(given) - set(self.cases))
             if part_of is not None:
-                results_io.dump(run, part_of)
+                results_io.dump(_without_plots(run) if STOP.requested else run, part_of)
             else:
                 write_reports(run, self.out_dir)
             self.finished = run
@@ -186,11 +193,18 @@ class BenchRun:
 
 
 def write_reports(run: RunResult, out_dir: Path) -> None:
+    """report.html, junit.xml and results.json. After a stop signal (bench.stop) the HTML draws plots only within
+    the signal's budget and results.json leaves the plot data out: the process ends within a second."""
     from bench.report import write_html, write_junit  # jinja2 only when a report is written
 
-    write_html(run, out_dir / HTML_NAME)
+    write_html(run, out_dir / HTML_NAME, STOP.keep_drawing)
     write_junit(run, out_dir / JUNIT_NAME)
-    results_io.dump(run, out_dir / RESULTS_NAME)
+    results_io.dump(_without_plots(run) if STOP.requested else run, out_dir / RESULTS_NAME)
+
+
+def _without_plots(run: RunResult) -> RunResult:
+    """The run without its cases' plot data (0.5 s of JSON for the 147-case campaign; the rest 0.02 s)."""
+    return dataclasses.replace(run, cases=[dataclasses.replace(c, plots=[]) for c in run.cases])
 
 
 def duplicates_table(monitors: list[Monitor]) -> Table | None:

@@ -18,6 +18,7 @@ import hashlib
 import math
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -213,15 +214,24 @@ def _search_key(case: CaseResult) -> str:
     return " ".join([case.name, case.nodeid, *case.reqs, *case.duts, *(f.spec for f in case.faults)]).lower()
 
 
-def render_html(run: RunResult, report_dir: Path = Path(".")) -> str:
-    """The report as a string; ``report_dir`` is where it will live (for relative links)."""
+def render_html(run: RunResult, report_dir: Path = Path("."), keep_drawing: Callable[[], bool] | None = None) -> str:
+    """The report as a string; ``report_dir`` is where it will live (for relative links). ``keep_drawing``: asked
+    before each case's plots; once it says False the remaining cases' plots are left out, and the report says how
+    many (a run stopped by a signal must end within a second: bench.stop)."""
     plotter = Plotter()
-    plots = [[_render_plot(plotter, plot, f"c{i}p{j}", case) for j, plot in enumerate(case.plots)]
-             for i, case in enumerate(run.cases)]
+    plots: list[list[RenderedPlot]] = []
+    left_out = 0
+    for i, case in enumerate(run.cases):
+        if case.plots and keep_drawing is not None and (left_out or not keep_drawing()):
+            left_out += 1
+            plots.append([])
+            continue
+        plots.append([_render_plot(plotter, plot, f"c{i}p{j}", case) for j, plot in enumerate(case.plots)])
     return _env().get_template("report.html.j2").render(
         run=run,
         counts=run.counts,
         plots=plots,
+        plots_left_out=left_out,
         conformance=build_conformance(run),
         mcap_href=_mcap_href(run.mcap_path, report_dir),
         failures=failures(run),
@@ -232,9 +242,9 @@ def render_html(run: RunResult, report_dir: Path = Path(".")) -> str:
     )
 
 
-def write_html(run: RunResult, path: Path) -> Path:
-    """Write the HTML report of ``run`` to ``path`` (parent folders are created)."""
+def write_html(run: RunResult, path: Path, keep_drawing: Callable[[], bool] | None = None) -> Path:
+    """Write the HTML report of ``run`` to ``path`` (parent folders are created); ``keep_drawing``: render_html's."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(render_html(run, path.parent), encoding="utf-8")
+    path.write_text(render_html(run, path.parent, keep_drawing), encoding="utf-8")
     return path

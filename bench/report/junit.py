@@ -122,7 +122,8 @@ def build_junit(run: RunResult) -> ET.ElementTree:
         _testcase(suite, case)
     if run.aborted:
         tc = ET.SubElement(suite, "testcase", classname="bench.run", name="aborted", time="0.000")
-        ET.SubElement(tc, "error", message="run aborted: results are incomplete", type="aborted")
+        never = f"; {run.not_run} of {len(run.cases) + run.not_run} cases never ran" if run.not_run else ""
+        ET.SubElement(tc, "error", message=f"run aborted: results are incomplete{never}", type="aborted")
     ET.indent(root)
     return ET.ElementTree(root)
 
