@@ -26,6 +26,7 @@ from bench import shard as shards
 from bench.bus import check_channel
 from bench.busopts import BusOptions
 from bench.case import Case
+from bench.checks import step_values
 from bench.clock import settle_heap
 from bench.codec import load_codebook
 from bench.config import ProjectConfig, RunSettings, load_config
@@ -269,8 +270,8 @@ def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None
     outcome = yield
     case = item.stash.get(_CASE_KEY, None)
     if case is not None and outcome.excinfo is None and case.result.failed_steps:
-        lines = [f"{s.name}: measured {s.measured}, expected {s.expected} ({s.tolerance})"
-                 for s in case.result.failed_steps]
+        lines = [f"{s.name}: measured {m}, expected {e}" + (f" ({s.tolerance})" if s.tolerance else "")
+                 for s in case.result.failed_steps for m, e in [step_values(s)]]
         outcome.force_exception(FailedSteps("failed steps:\n" + "\n".join(lines)))
 
 

@@ -13,7 +13,7 @@ import pytest
 
 from bench import results_io
 from bench.case import Case
-from bench.checks import LOG_ERROR, LOG_INFO, StepLog
+from bench.checks import LOG_ERROR, LOG_INFO, StepLog, step_values
 from bench.codec import Codebook, MessageCodec
 from bench.config import ProjectConfig, RunSettings
 from bench.errors import BenchError
@@ -106,8 +106,9 @@ class BenchRun:
 
     def _step_listener(self, step: Step) -> None:
         level = LOG_INFO if step.verdict == "pass" else LOG_ERROR
-        self._log(level, step.name, f"{step.verdict.upper()}: measured {step.measured}, expected "
-                                    f"{step.expected} ({step.tolerance}) {step.unit}".rstrip())
+        measured, expected = step_values(step)
+        self._log(level, step.name, f"{step.verdict.upper()}: measured {measured}, expected "
+                                    f"{expected} ({step.tolerance}) {step.unit}".rstrip())
 
     def _log(self, level: int, name: str, message: str) -> None:
         if self.recorder is not None and self.session is not None:
@@ -128,10 +129,15 @@ class BenchRun:
             result.message = _longrepr(report)
         if report.when in ("call", "teardown") and self.session is not None:
             result.sim_time = self.session.now() - result.sim_start
-            result.wall_time = time.monotonic() - self._case_wall0.get(nodeid, time.monotonic())
+            result.wall_time = self._wall_since(nodeid)
         if report.when == "teardown":
             self._log(LOG_INFO if result.outcome in ("passed", "skipped") else LOG_ERROR, "case",
                       f"{result.outcome} {nodeid}")
+
+    def _wall_since(self, nodeid: str) -> float:
+        """Wall time since the case began (0 for one that never did; one clock read, so never -0.00)."""
+        now = time.monotonic()
+        return now - self._case_wall0.get(nodeid, now)
 
     # -- end -----------------------------------------------------------------------------------------
     def finish(self, aborted: bool = False, part_of: Path | None = None, given: list[str] | None = None) -> RunResult:
@@ -146,7 +152,7 @@ class BenchRun:
         for nodeid, result in self.cases.items():
             if result.outcome == "aborted" and session is not None:
                 result.sim_time = session.now() - result.sim_start
-                result.wall_time = time.monotonic() - self._case_wall0.get(nodeid, time.monotonic())
+                result.wall_time = self._wall_since(nodeid)
         monitor = session.monitor if session else None
         run = RunResult(
             started=self.started, interface=self.settings.interface, channel=self.settings.channel or "",

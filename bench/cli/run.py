@@ -228,7 +228,8 @@ def run(args: argparse.Namespace) -> int:
     for case in result.cases:
         passed = sum(1 for s in case.steps if s.verdict == "pass")
         table.add_row(escape(_short(case.nodeid)), f"[{OUTCOME_STYLE.get(case.outcome, '')}]{case.outcome}[/]",
-                      f"{passed}/{len(case.steps)}", f"{case.sim_time:.2f}", f"{case.wall_time:.2f}")
+                      f"{passed}/{len(case.steps)}", *(("–", "–") if case.outcome == "skipped"   # it never ran
+                                                          else (f"{case.sim_time:.2f}", f"{case.wall_time:.2f}")))
     # Not a terminal (a CI log): as wide as the longest row, so no name is folded or cut.
     names = max((len(_short(c.nodeid)) for c in result.cases), default=0)
     if not console.is_terminal:

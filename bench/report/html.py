@@ -6,9 +6,9 @@ escapes. A strict Content-Security-Policy (no fetches; the one script allowed is
 own filter script, by its SHA-256 hash) is a second line of defence should an escaping bug
 ever slip through: an injected script has another hash and does not run.
 
-For an engineer in a hurry: the cases that did not pass come first, with their failed steps;
-a search box and outcome filters narrow the summary and the cases; every case is collapsed
-(<details>) until opened or linked to.
+For an engineer in a hurry: the cases that did not pass come first, listed with their failed steps and then
+opened in full (steps, plots, message) before the summary and every table; a search box and outcome filters
+narrow the summary and the cases; every other case is collapsed (<details>) until opened or linked to.
 """
 
 from __future__ import annotations
@@ -28,7 +28,9 @@ from urllib.parse import quote
 from jinja2 import Environment, PackageLoader, select_autoescape
 from markupsafe import Markup, escape
 
+from bench.checks import step_values
 from bench.report.conformance import build_conformance
+from bench.report.junit import error_line
 from bench.report.plots import Plotter, RenderedPlot
 from bench.results import CaseResult, Plot, RunResult, Step
 
@@ -110,9 +112,13 @@ def _env() -> Environment:
         trim_blocks=True,
         lstrip_blocks=True,
     )
-    env.filters["num"] = fmt
-    env.filters["dur"] = duration
+    env.filters.update(FILTERS)
     return env
+
+
+#: The template's filters. A step's values as JUnit and the console show them (bench.checks.format_value).
+FILTERS = {"num": fmt, "dur": duration, "measured": lambda step: step_values(step)[0],
+           "expected": lambda step: step_values(step)[1]}
 
 
 def _mcap_href(mcap_path: str, report_dir: Path) -> str:
@@ -163,9 +169,7 @@ def failures(run: RunResult) -> list[Failure]:
     for i, case in enumerate(run.cases, 1):
         if case.outcome in FAILED:
             failed = case.failed_steps
-            line = ""
-            if case.message and not case.message.startswith("failed steps:"):
-                line = next((ln for ln in reversed(case.message.splitlines()) if ln.strip()), "")[:300]
+            line = error_line(case.message)[:300]
             out.append(Failure(i, case, failed[:FAILED_STEPS_SHOWN], max(0, len(failed) - FAILED_STEPS_SHOWN), line))
     return out
 
@@ -232,6 +236,9 @@ def render_html(run: RunResult, report_dir: Path = Path("."), keep_drawing: Call
         counts=run.counts,
         plots=plots,
         plots_left_out=left_out,
+        failed_outcomes=FAILED,   # these cases open at the top, before the tables; the others follow them, collapsed
+        failed_index=[i for i, c in enumerate(run.cases) if c.outcome in FAILED],
+        case_index=[i for i, c in enumerate(run.cases) if c.outcome not in FAILED],
         conformance=build_conformance(run),
         mcap_href=_mcap_href(run.mcap_path, report_dir),
         failures=failures(run),
