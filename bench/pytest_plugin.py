@@ -125,8 +125,26 @@ def _facts(config: pytest.Config) -> tuple[ProjectConfig, list[str]]:
 
 
 def _documents(project: ProjectConfig) -> str:
-    return ", ".join(str(p.relative_to(project.path.parent)) if p.is_relative_to(project.path.parent) else str(p)
-                     for p in project.contract)
+    return ", ".join(shown_path(p, project.path.parent) for p in project.contract)
+
+
+#: What marks the top folder of a repository or project: a document outside the bench.toml's folder is shown
+#: relative to the nearest folder above it that has one of these.
+_PROJECT_MARKS = (".git", "bench.toml", "pyproject.toml")
+
+
+def shown_path(path: Path, base: Path) -> str:
+    """A contract document's path as the report shows it: relative to bench.toml's folder `base` when inside it,
+    else relative to its own repository's top folder (issue 27: with --config elsewhere the conformance table
+    showed `../repo/docs/...`), else as given. Never `..` and never this machine's absolute path when a
+    repository holds the document."""
+    resolved, root = path.resolve(), base.resolve()
+    if resolved.is_relative_to(root):
+        return resolved.relative_to(root).as_posix()
+    for folder in resolved.parents:
+        if any((folder / mark).exists() for mark in _PROJECT_MARKS):
+            return resolved.relative_to(folder).as_posix()
+    return str(path)
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -210,8 +228,7 @@ def pytest_deselected(items: list[pytest.Item]) -> None:
 
 def _catalogue(project: ProjectConfig) -> list[RequirementInfo]:
     base = project.path.parent
-    return [RequirementInfo(r.id, r.title, str(r.path.relative_to(base)) if r.path.is_relative_to(base)
-                            else str(r.path), r.line) for r in project.requirements]
+    return [RequirementInfo(r.id, r.title, shown_path(r.path, base), r.line) for r in project.requirements]
 
 
 def _run(config: pytest.Config, start: bool = True) -> BenchRun:
@@ -322,9 +339,9 @@ def _finish_session(session: pytest.Session, exitstatus: int) -> None:
         if run is None and config.stash[_PENDING_KEY] and not aborted:
             run = _run_for_skipped_cases(config)
         worker = _worker_id(config)
-        if (run is None and aborted and worker is None and shards.current(config) is None
-                and (_bench_cases(session) or config.getoption("--bench-out"))):
-            run = _run_for_an_aborted_start(config)   # stopped before its first case: an ABORTED report all the same
+        if run is None and STOP.requested and worker is None and shards.current(config) is None:
+            # stopped by a signal before its first case (not a collection error): an ABORTED report all the same
+            run = _run_for_an_aborted_start(config)
         if run is None:
             out = config.getoption("--bench-out")
             empty = _empty_shard(config, Path(out) if out else None, aborted, worker)
@@ -380,11 +397,6 @@ def _record_shard(config: pytest.Config, out_dir: Path) -> None:
     record = shards.record(config, project.databases, config.stash.get(_SELECTED_KEY, []))
     if record is not None:
         record.dump(out_dir)
-
-
-def _bench_cases(session: pytest.Session) -> bool:
-    """Whether the session collected a case of the bench (one that asks for the `bench` fixture)."""
-    return any("bench" in getattr(item, "fixturenames", ()) for item in session.items)
 
 
 def _run_for_an_aborted_start(config: pytest.Config) -> BenchRun | None:
