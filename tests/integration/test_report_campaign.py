@@ -8,6 +8,10 @@ cases change. The campaign runs once for this module (about 60-75 s on the virtu
 one extra case file written here, run after the whole campaign (so the failing case is the last of the
 summary, the worst place for it): deterministic, unlike a --fault whose window would have to hit one
 case of a campaign whose timing changes with every case added.
+
+This is also the one run of the campaign in the README's test command (pyproject.toml's testpaths is tests/
+alone: testcases/ there as well ran the campaign twice, issue 27 finding 2), so it checks the campaign's verdicts
+too: every case but the injected one passed or was skipped.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +52,21 @@ def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
                             cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert result.returncode == 1, result.stdout[-3000:] + result.stderr[-3000:]   # one failure: exit 1
     return out / "report.html"
+
+
+def test_the_campaign_passes(campaign: Path) -> None:
+    """Every case of testcases/ passed or was skipped (for a reason it states); only the injected case failed."""
+    suite = ET.parse(campaign.parent / "junit.xml").getroot()
+    outcomes: dict[str, list[str]] = {}
+    for case in suite.iter("testcase"):
+        kind = next((k for k in ("failure", "error", "skipped") if case.find(k) is not None), "passed")
+        outcomes.setdefault(kind, []).append(str(case.get("name")))
+    assert outcomes.get("failure") == ["test_injected_failure"], outcomes.get("failure")
+    assert not outcomes.get("error"), outcomes["error"]
+    assert len(outcomes.get("passed", [])) > 100, "the whole campaign ran"
+    for case in suite.iter("testcase"):
+        skipped = case.find("skipped")
+        assert skipped is None or skipped.get("message"), case.get("name")
 
 
 def test_campaign_report_within_budget(campaign: Path) -> None:
