@@ -75,6 +75,8 @@ def pytest_cmdline_main(config: pytest.Config) -> Generator[None, int | pytest.E
 def pytest_configure(config: pytest.Config) -> None:
     for name, text in MARKER_HELP.items():
         config.addinivalue_line("markers", f"{name}: {text}")
+    if _worker_id(config) and config.getoption("--bench-out"):
+        STOP.install()   # a worker of `bench run -n`: the controller forwards SIGINT/SIGTERM (bench.stop)
     config.stash[_RUN_KEY] = None
     config.stash[_DESELECTED_KEY] = []
     config.stash[_PENDING_KEY] = []
@@ -208,6 +210,15 @@ def _external(config: pytest.Config, project: ProjectConfig) -> set[str]:
 
 def pytest_collection_finish(session: pytest.Session) -> None:
     session.config.stash[_SELECTED_KEY] = [item.nodeid for item in session.items]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_newgateway(gateway: object) -> None:
+    """A worker process started (`bench run -n`): the controller's stop signals go on to it (bench.stop)."""
+    popen = getattr(getattr(gateway, "_io", None), "popen", None)
+    pid = getattr(popen, "pid", None)
+    if isinstance(pid, int):
+        STOP.forward_to(pid)
 
 
 @pytest.hookimpl(optionalhook=True)

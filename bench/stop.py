@@ -14,6 +14,7 @@ that embeds the bench and set its own keeps it.
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 import time
@@ -36,6 +37,7 @@ class StopRequests:
         self.signum: int | None = None     # the first stop signal received
         self.at: float | None = None       # time.monotonic() when it came
         self._finishing = 0
+        self._helpers: list[int] = []      # processes that get the signal too (pytest-xdist's workers)
 
     @property
     def requested(self) -> bool:
@@ -50,9 +52,19 @@ class StopRequests:
             if current in (signal.SIG_DFL, signal.default_int_handler, None) or current == self._handle:
                 signal.signal(signum, self._handle)
 
+    def forward_to(self, pid: int) -> None:
+        """Send every stop signal on to this process too (a pytest-xdist worker: a signal to the controller
+        alone left each worker in its case until xdist's shutdown ended it, 5 s after SIGTERM)."""
+        self._helpers.append(pid)
+
     def _handle(self, signum: int, frame: FrameType | None) -> None:
         if self.signum is None:
             self.signum, self.at = signum, time.monotonic()
+            for pid in self._helpers:
+                try:
+                    os.kill(pid, signum)
+                except OSError:    # it ended already
+                    pass
         if not self._finishing:
             raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
 
@@ -70,8 +82,9 @@ class StopRequests:
         return self.at is None or time.monotonic() - self.at < DRAW_BUDGET
 
     def reset(self) -> None:
-        """Forget a received signal (a process that runs the bench again, e.g. a test)."""
+        """Forget a received signal and the helpers (a process that runs the bench again, e.g. a test)."""
         self.signum = self.at = None
+        self._helpers.clear()
 
 
 STOP = StopRequests()

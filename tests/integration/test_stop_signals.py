@@ -123,3 +123,23 @@ def test_sigterm_before_the_first_case(tmp_path: Path) -> None:
     assert took <= LIMIT, f"{took:.2f} s from SIGTERM to the end"
     _aborted_report(run.out)
     _frames_in_log(run.out / "run.mcap")
+
+
+def _worker_logs_grew(run: Run) -> bool:
+    logs = list(run.out.glob("run-gw*.mcap"))
+    return bool(logs) and max(log.stat().st_size for log in logs) > 500_000
+
+
+def test_sigterm_with_parallel_workers(tmp_path: Path) -> None:
+    """`bench run -n 2`: the signal goes to the controller, which hands it on to its workers (before, each worker
+    stayed in its case until pytest-xdist's shutdown ended it: 5.3 s). Every worker's log is complete."""
+    run = Run(tmp_path / "out", "-n", "2", str(CASES / "test_long.py"), str(CASES / "test_mini.py"))
+    run.wait_for(_worker_logs_grew)
+    time.sleep(0.5)
+    took = run.stop(signal.SIGTERM)
+    assert run.process.returncode == 130, run.text()
+    assert took <= LIMIT, f"{took:.2f} s from SIGTERM to the end"
+    html = _aborted_report(run.out)
+    assert "test_runs_long" in html
+    logs = sorted(run.out.glob("run-gw*.mcap"))
+    assert len(logs) == 2 and all(_frames_in_log(log) > 0 for log in logs)
