@@ -64,3 +64,15 @@ def test_dumps_refuses_what_json_cannot_write() -> None:
     run.cases[0].notes.append(object())   # type: ignore[arg-type]
     with pytest.raises(TypeError, match="object is not JSON serializable"):
         results_io.dumps(run)
+
+
+def test_cases_that_never_ran_survive_the_round_trip_and_the_merge(tmp_path: Path) -> None:
+    """Issue 27 finding 7: an aborted run counts the cases that never ran; results.json keeps the count and merging
+    stopped shards sums it."""
+    run = _run()
+    run.tables.pop()
+    run.aborted, run.not_run = True, 6
+    results_io.dump(run, tmp_path / "r.json")
+    back = results_io.load(tmp_path / "r.json")
+    assert back.not_run == 6
+    assert results_io.merge([("a", back), ("b", results_io.load(tmp_path / "r.json"))], 1.0).not_run == 12

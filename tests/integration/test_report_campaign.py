@@ -102,3 +102,27 @@ def test_failure_on_the_first_screen(campaign: Path, tmp_path: Path) -> None:
     assert len(borders) >= 2, "no failures box on the first screen"
     top, bottom = borders.min(), borders.max()
     assert top < SCREEN[1] / 3 and bottom - top > 40, (top, bottom)   # the whole box, near the top
+
+
+def test_failing_case_open_with_its_steps_on_the_first_screen(campaign: Path, tmp_path: Path) -> None:
+    """Issue 27 acceptance 4 on the real campaign: the failing case is open at the top, before the summary and the
+    timing and database tables, and its step rows (painted in a copy; the layout is the report's) show on the
+    first screen."""
+    html = campaign.read_text(encoding="utf-8")
+    found = re.search(r'<a href="#case-(\d+)">test_injected_failure</a>', html)
+    assert found is not None
+    anchor = f'id="case-{found.group(1)}"'
+    opening = html[html.rfind("<details", 0, html.index(anchor)):html.index(">", html.index(anchor))]
+    assert " open" in opening
+    assert html.index(anchor) < html.index('id="summary"') < html.index("Databases: the messages this run checked")
+    painted = tmp_path / "painted.html"
+    paint = f"<style>#case-{found.group(1)} table.steps td {{ background: #00ff00 !important; }}</style></head>"
+    painted.write_text(html.replace("</head>", paint, 1), encoding="utf-8")
+    shot = tmp_path / "painted.png"
+    run_browser(tmp_path, f"--screenshot={shot}", f"--window-size={SCREEN[0]},{SCREEN[1]}", painted.as_uri())
+    import matplotlib.image
+
+    pixels = (matplotlib.image.imread(shot)[..., :3] * 255).round().astype(int)
+    green = np.all(np.abs(pixels - (0, 255, 0)) < 24, axis=-1)
+    rows = np.flatnonzero(green.sum(axis=1) > 40)
+    assert len(rows) > 10 and rows.max() < SCREEN[1] - 1, "the failing case's step is not whole on the first screen"
