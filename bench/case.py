@@ -403,20 +403,29 @@ class Case:
                           p99_max: float = 1.5, max_max: float = 3.0, min_frames: int = 10) -> bool:
         """Measured cycle time per message since the case started: p50 within ±p50_band of the DBC
         cycle (GenMsgCycleTime), p99 ≤ p99_max × cycle and max < max_max × cycle (the timeout bound), as
-        fractions. Without `messages`: every periodic message seen on the bus since the case started.
-        Records one step per message (measured p50 / p99 / max in ms); fewer than `min_frames` intervals
-        fail. Returns True when every message passed."""
+        fractions. Without `messages`: every periodic message seen on the bus since the case started, and
+        every periodic message a node the bench simulates sends now (its restbus sends it), seen or not: one
+        that never arrived fails. Records one step per message (measured p50 / p99 / max in ms); fewer than
+        `min_frames` intervals fail. Returns True when every message passed."""
         ok_all = True
-        names = list(messages) if messages is not None else [
-            n for n, s in self._monitor.by_name.items()
-            if s.codec.cycle_time and s.intervals_dropped + len(s.intervals) > self._interval_marks.get(n, 0)]
+        if messages is None:
+            # A simulated node's periodic message the restbus sends now is due on the bus whether it came or
+            # not (a fault may have dropped every frame); an external node's are known only by their frames.
+            sent = {name for station in self.session.stations
+                    for name, slot in station.restbus.periodic.items() if slot.enabled}
+            names = [n for n, s in self._monitor.by_name.items() if s.codec.cycle_time and (
+                n in sent or s.intervals_dropped + len(s.intervals) > self._interval_marks.get(n, 0))]
+        else:
+            names = list(messages)
         for name in names:
             state = self._monitor.state(name)
             cycle = state.codec.cycle_time
             intervals = state.intervals[max(0, self._interval_marks.get(name, 0) - state.intervals_dropped):]
             if cycle is None or len(intervals) < min_frames:
-                ok_all &= self._steps.record(f"cycle time {name}", False, f"{len(intervals)} intervals",
-                                             f"≥ {min_frames}", "", "s")
+                arrived = state.last_valid is not None and state.last_valid >= self.start
+                ok_all &= self._steps.record(f"cycle time {name}", False,
+                                             f"{len(intervals)} intervals" if arrived or intervals
+                                             else "no frames since the case started", f"≥ {min_frames}", "", "s")
                 continue
             p50, p99, worst = percentile(intervals, 50), percentile(intervals, 99), max(intervals)
             ms = 1000.0

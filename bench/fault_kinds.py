@@ -29,6 +29,11 @@ if TYPE_CHECKING:
 #: Babbling frames per ms from which lower-priority frames never win arbitration (500 kbit/s carries about
 #: 4.3 eight-byte frames per ms). The virtual-time bus has no arbitration: `flood` models it.
 FLOOD_SATURATION = 4.0
+#: The most frames per ms a flood may send: about what a classic CAN bus at 500 kbit/s carries at most (a frame
+#: without data is 47 bits with its intermission, 10.6 per ms; an eight-byte one 111 to 135 bits, 3.7 to 4.5 per
+#: ms). A higher RATE asks for more than the bus carries, and its frames per tick only cost memory and time
+#: (issue 27: `flood:0x000:1e9` built 10^9 frames per 1 ms tick, 7.9 GB, and ignored Ctrl-C while it did).
+FLOOD_MAX_RATE = 8.0
 
 # What TARGET names (the word shown in specs, help and docs).
 MESSAGE, NODE, IDENTIFIER, BUS = "MESSAGE", "NODE", "IDENTIFIER", "BUS"
@@ -234,11 +239,15 @@ class BusOff(Silence):
 
 # -- bus kinds ---------------------------------------------------------------------------------------------
 class Flood(FaultKind):
-    name, target, param, param_doc = "flood", IDENTIFIER, "RATE", "frames per ms, > 0"
+    name, target, param = "flood", IDENTIFIER, "RATE"
+    param_doc = f"frames per ms, > 0 and at most {FLOOD_MAX_RATE:g}: a classic CAN bus at 500 kbit/s carries about that"
     summary = (f"a babbling node sends RATE all-zero frames per ms at IDENTIFIER (e.g. 0x000); from "
                f"{FLOOD_SATURATION:g} per ms on, every frame of a lower priority (higher identifier) is lost")
 
     def check_param(self, value: float) -> str | None:
+        if value > FLOOD_MAX_RATE:
+            return (f"RATE is frames per ms, at most {FLOOD_MAX_RATE:g} (about what a classic CAN bus at 500 kbit/s "
+                    f"carries), not {value:g}")
         return None if value > 0 else "PARAM must be frames per ms > 0"
 
     def applies(self, fault: Fault, frame_id: int, codec: MessageCodec) -> bool:
@@ -281,8 +290,9 @@ def kinds_with_target(target: str) -> tuple[str, ...]:
 
 
 def help_text() -> str:
-    """The kinds for `--fault`'s help: each spec pattern, one line."""
-    return "kinds: " + ", ".join(kind.spec() for kind in KINDS.values())
+    """The kinds for `--fault`'s help: each spec pattern with its PARAM's unit and range, one line."""
+    return "kinds: " + ", ".join(kind.spec() + (f" ({kind.param}: {kind.param_doc})" if kind.param else "")
+                                 for kind in KINDS.values())
 
 
 DOC_BEGIN = "<!-- fault kinds: generated from bench/fault_kinds.py by `python -m bench.fault_kinds FILE` -->"

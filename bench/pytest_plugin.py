@@ -13,7 +13,6 @@ error, so nothing runs); reference-only cases are skipped at collection when the
 
 from __future__ import annotations
 
-import signal
 import time
 from collections.abc import Generator, Iterator
 from datetime import datetime
@@ -27,6 +26,7 @@ from bench import shard as shards
 from bench.bus import check_channel
 from bench.busopts import BusOptions
 from bench.case import Case
+from bench.checks import step_values
 from bench.clock import settle_heap
 from bench.codec import load_codebook
 from bench.config import ProjectConfig, RunSettings, load_config
@@ -38,6 +38,7 @@ from bench.results import CaseRef, RequirementInfo, RunResult, Table
 from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 from bench.session import resolve_external
 from bench.shard import apply_shard
+from bench.stop import STOP
 
 _RUN_KEY = pytest.StashKey["BenchRun | None"]()
 _CASE_KEY = pytest.StashKey[Case]()
@@ -74,6 +75,8 @@ def pytest_cmdline_main(config: pytest.Config) -> Generator[None, int | pytest.E
 def pytest_configure(config: pytest.Config) -> None:
     for name, text in MARKER_HELP.items():
         config.addinivalue_line("markers", f"{name}: {text}")
+    if _worker_id(config) and config.getoption("--bench-out"):
+        STOP.install()   # a worker of `bench run -n`: the controller forwards SIGINT/SIGTERM (bench.stop)
     config.stash[_RUN_KEY] = None
     config.stash[_DESELECTED_KEY] = []
     config.stash[_PENDING_KEY] = []
@@ -124,8 +127,26 @@ def _facts(config: pytest.Config) -> tuple[ProjectConfig, list[str]]:
 
 
 def _documents(project: ProjectConfig) -> str:
-    return ", ".join(str(p.relative_to(project.path.parent)) if p.is_relative_to(project.path.parent) else str(p)
-                     for p in project.contract)
+    return ", ".join(shown_path(p, project.path.parent) for p in project.contract)
+
+
+#: What marks the top folder of a repository or project: a document outside the bench.toml's folder is shown
+#: relative to the nearest folder above it that has one of these.
+_PROJECT_MARKS = (".git", "bench.toml", "pyproject.toml")
+
+
+def shown_path(path: Path, base: Path) -> str:
+    """A contract document's path as the report shows it: relative to bench.toml's folder `base` when inside it,
+    else relative to its own repository's top folder (issue 27: with --config elsewhere the conformance table
+    showed `../repo/docs/...`), else as given. Never `..` and never this machine's absolute path when a
+    repository holds the document."""
+    resolved, root = path.resolve(), base.resolve()
+    if resolved.is_relative_to(root):
+        return resolved.relative_to(root).as_posix()
+    for folder in resolved.parents:
+        if any((folder / mark).exists() for mark in _PROJECT_MARKS):
+            return resolved.relative_to(folder).as_posix()
+    return str(path)
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -192,6 +213,15 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 
 
 @pytest.hookimpl(optionalhook=True)
+def pytest_xdist_newgateway(gateway: object) -> None:
+    """A worker process started (`bench run -n`): the controller's stop signals go on to it (bench.stop)."""
+    popen = getattr(getattr(gateway, "_io", None), "popen", None)
+    pid = getattr(popen, "pid", None)
+    if isinstance(pid, int):
+        STOP.forward_to(pid)
+
+
+@pytest.hookimpl(optionalhook=True)
 def pytest_xdist_node_collection_finished(node: object, ids: list[str]) -> None:
     """The xdist controller collects nothing: its workers' collection (all alike) is the shard's."""
     config = getattr(node, "config", None)
@@ -209,11 +239,12 @@ def pytest_deselected(items: list[pytest.Item]) -> None:
 
 def _catalogue(project: ProjectConfig) -> list[RequirementInfo]:
     base = project.path.parent
-    return [RequirementInfo(r.id, r.title, str(r.path.relative_to(base)) if r.path.is_relative_to(base)
-                            else str(r.path), r.line) for r in project.requirements]
+    return [RequirementInfo(r.id, r.title, shown_path(r.path, base), r.line) for r in project.requirements]
 
 
-def _run(config: pytest.Config) -> BenchRun:
+def _run(config: pytest.Config, start: bool = True) -> BenchRun:
+    """The run of this session, created at its first case (and its bus opened, unless `start` is False: a run
+    stopped before its first case still writes its report and log)."""
     run = config.stash[_RUN_KEY]
     if run is None:
         project = load_config(_config_path(config))
@@ -234,19 +265,16 @@ def _run(config: pytest.Config) -> BenchRun:
         for item, report, call in config.stash[_PENDING_KEY]:   # cases skipped before the run started
             _record(run, item, report, call)
         config.stash[_PENDING_KEY].clear()
+        STOP.install()   # SIGINT and SIGTERM: an ABORTED report within a second (bench.stop)
+        if not start:
+            return run
         try:
             run.start()
         except BenchError as exc:   # a bus that cannot be opened: one line and stop, not an error per case
             pytest.exit(f"bench: {exc}", returncode=pytest.ExitCode.USAGE_ERROR)
         assert run.session is not None   # started just above (or pytest.exit)
         run.session.faults.extend(faults)
-        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
-            signal.signal(signal.SIGTERM, _terminate)
     return run
-
-
-def _terminate(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt(f"signal {signum}")
 
 
 @pytest.fixture
@@ -270,8 +298,8 @@ def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None
     outcome = yield
     case = item.stash.get(_CASE_KEY, None)
     if case is not None and outcome.excinfo is None and case.result.failed_steps:
-        lines = [f"{s.name}: measured {s.measured}, expected {s.expected} ({s.tolerance})"
-                 for s in case.result.failed_steps]
+        lines = [f"{s.name}: measured {m}, expected {e}" + (f" ({s.tolerance})" if s.tolerance else "")
+                 for s in case.result.failed_steps for m, e in [step_values(s)]]
         outcome.force_exception(FailedSteps("failed steps:\n" + "\n".join(lines)))
 
 
@@ -319,11 +347,19 @@ def _record(run: BenchRun, item: pytest.Item, report: pytest.TestReport, call: p
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """The run's reports. A stop signal from here on raises nothing: it marks the run aborted (bench.stop)."""
+    with STOP.finishing():
+        _finish_session(session, exitstatus)
+
+
+def _finish_session(session: pytest.Session, exitstatus: int) -> None:
     config = session.config
-    aborted = exitstatus == pytest.ExitCode.INTERRUPTED
+    aborted = exitstatus == pytest.ExitCode.INTERRUPTED or STOP.requested
+    given = config.stash.get(_SELECTED_KEY, [])
     if _xdist_controller(config):
         out_dir = Path(config.getoption("--bench-out"))
-        result = _merge_parts(out_dir, time.monotonic() - config.stash.get(_WALL0_KEY, time.monotonic()), aborted)
+        result = _merge_parts(out_dir, time.monotonic() - config.stash.get(_WALL0_KEY, time.monotonic()), aborted,
+                              given)
         if result is None:
             result = _empty_shard(config, out_dir, aborted)
             if result is None:
@@ -333,6 +369,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         if run is None and config.stash[_PENDING_KEY] and not aborted:
             run = _run_for_skipped_cases(config)
         worker = _worker_id(config)
+        if run is None and STOP.requested and worker is None and shards.current(config) is None:
+            # stopped by a signal before its first case (not a collection error): an ABORTED report all the same
+            run = _run_for_an_aborted_start(config)
         if run is None:
             out = config.getoption("--bench-out")
             empty = _empty_shard(config, Path(out) if out else None, aborted, worker)
@@ -341,7 +380,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             result, out_dir = empty, Path(config.getoption("--bench-out"))
         else:
             part = run.out_dir / PARTS_DIR / f"{worker}.json" if worker else None
-            result = run.finish(aborted=aborted, part_of=part)
+            result = run.finish(aborted=aborted, part_of=part, given=None if worker else given)
             out_dir = run.out_dir
     _last_finished.append(result)
     _record_shard(config, out_dir)
@@ -390,6 +429,15 @@ def _record_shard(config: pytest.Config, out_dir: Path) -> None:
         record.dump(out_dir)
 
 
+def _run_for_an_aborted_start(config: pytest.Config) -> BenchRun | None:
+    """A run stopped before its first case (SIGINT or SIGTERM while pytest collected): its log and report are
+    written all the same, with no bus opened; the report counts the cases that never ran."""
+    try:
+        return _run(config, start=False)
+    except (BenchError, OSError):
+        return config.stash.get(_RUN_KEY, None)
+
+
 def _run_for_skipped_cases(config: pytest.Config) -> BenchRun | None:
     """Every bench case was skipped (e.g. reference_only with its node external): the run starts only now,
     so that the report still says which cases were skipped and why."""
@@ -402,14 +450,16 @@ def _run_for_skipped_cases(config: pytest.Config) -> BenchRun | None:
         return config.stash.get(_RUN_KEY, None)   # created but not started: finish() still closes its log
 
 
-def _merge_parts(out_dir: Path, wall_time: float, aborted: bool) -> RunResult | None:
+def _merge_parts(out_dir: Path, wall_time: float, aborted: bool, given: list[str]) -> RunResult | None:
     """The controller's report: every worker's part of the run merged into one report.html/junit.xml."""
     folder = out_dir / PARTS_DIR
     paths = sorted(folder.glob("*.json")) if folder.is_dir() else []
     if not paths:
         return None
     result = results_io.merge([(p.stem, results_io.load(p)) for p in paths], wall_time)
-    result.aborted = result.aborted or aborted
+    result.aborted = result.aborted or aborted or STOP.requested
+    if result.aborted:
+        result.not_run = len(set(given) - {c.nodeid for c in result.cases})
     write_reports(result, out_dir)
     for path in paths:
         path.unlink()

@@ -146,6 +146,7 @@ class RunResult:
     deselected: list[CaseRef] = field(default_factory=list)
     faults: list[FaultRecord] = field(default_factory=list)   # every fault injected in the run
     findings: list[Finding] = field(default_factory=list)     # warnings logged during the run (bench.findings)
+    not_run: int = 0             # cases this run was given that never started (an aborted run's rest)
 
     @property
     def counts(self) -> dict[str, int]:

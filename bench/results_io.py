@@ -120,6 +120,7 @@ def merge(parts: list[tuple[str, RunResult]], wall_time: float) -> RunResult:
             title = table.title if table.title.startswith("Databases") else f"[{worker}] {table.title}"
             merged.tables.append(Table(title, table.columns, table.rows))
     merged.cases.sort(key=lambda c: c.nodeid)
+    merged.not_run = sum(part.not_run for _, part in parts)   # shards stopped early (bench report merge)
     ran = {c.nodeid for c in merged.cases}
     seen: set[str] = set()
     for _, part in parts:   # every worker deselects the same cases; none of them ran anywhere

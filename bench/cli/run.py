@@ -38,6 +38,7 @@ from bench.options import add_cli_options
 from bench.plugins import load_plant
 from bench.run import default_out_dir
 from bench.session import resolve_bus_options, resolve_external
+from bench.stop import STOP
 
 OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "skipped": "yellow",
                  "aborted": "bold magenta"}
@@ -113,8 +114,12 @@ class _Progress:
     def pytest_sessionfinish(self, session: pytest.Session) -> None:
         """After the reports (the bench plugin's sessionfinish): collect once, then keep the finished run's heap
         out of the collector's view, so that pytest's unraisable-exception cleanup does not run five full
-        collections over it (about 0.3 s of CPU in a 200-case run). `run` gives the heap back when pytest is done."""
-        settle_heap()
+        collections over it (about 0.3 s of CPU in a 200-case run). `run` gives the heap back when pytest is done.
+        After a stop signal only the freeze: the process must end within a second of it (bench.stop)."""
+        if STOP.requested:
+            gc.freeze()
+        else:
+            settle_heap()
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         if report.when == "call" or (report.when == "setup" and not report.passed):
@@ -130,9 +135,11 @@ class _Progress:
 def _settle_at_exit() -> None:
     """Once per process: when the interpreter exits, collect once and freeze what is left (bench.clock.settle_heap).
     Python's shutdown otherwise runs several full collections over a heap that a run made large (0.3-0.5 s after
-    the report is out, measured on a 200-case run); the garbage present at exit is still collected."""
+    the report is out, measured on a 200-case run); the garbage present at exit is still collected, except after a
+    stop signal (then only the freeze: the process ends within a second of the signal, bench.stop)."""
     atexit.unregister(settle_heap)   # registered once however often run() is called
-    atexit.register(settle_heap)
+    atexit.unregister(gc.freeze)
+    atexit.register(gc.freeze if STOP.requested else settle_heap)
 
 
 def _short(nodeid: str) -> str:
@@ -250,6 +257,8 @@ def run(args: argparse.Namespace) -> int:
     from bench.pytest_plugin import finished_run
 
     console = Console(soft_wrap=not sys.stdout.isatty())   # a CI log keeps whole lines, never cut at 80 columns
+    STOP.reset()
+    STOP.install()   # from here SIGINT and SIGTERM end the run within a second with an ABORTED report (bench.stop)
     project = load_config(Path(args.config) if args.config else None)
     out_dir = Path(args.out) if args.out else default_out_dir(project.reports)
     made = _new_folders(out_dir)
@@ -288,14 +297,16 @@ def run(args: argparse.Namespace) -> int:
     for case in result.cases:
         passed = sum(1 for s in case.steps if s.verdict == "pass")
         table.add_row(escape(_short(case.nodeid)), f"[{OUTCOME_STYLE.get(case.outcome, '')}]{case.outcome}[/]",
-                      f"{passed}/{len(case.steps)}", f"{case.sim_time:.2f}", f"{case.wall_time:.2f}")
+                      f"{passed}/{len(case.steps)}", *(("–", "–") if case.outcome == "skipped"   # it never ran
+                                                          else (f"{case.sim_time:.2f}", f"{case.wall_time:.2f}")))
     # Not a terminal (a CI log): as wide as the longest row, so no name is folded or cut.
     names = max((len(_short(c.nodeid)) for c in result.cases), default=0)
     if not console.is_terminal:
         console.width = max(console.width, names + 48)
     console.print(table)
     counts = result.counts
-    console.print(", ".join(f"{n} {k}" for k, n in counts.items() if n) +
+    never = [f"{result.not_run} never ran"] if result.not_run else []
+    console.print(", ".join([*(f"{n} {k}" for k, n in counts.items() if n), *never]) +
                   f"; bench time {result.sim_time:.1f} s in {result.wall_time:.1f} s wall "
                   f"({result.sim_time / max(result.wall_time, 1e-9):.1f}× real time); "
                   f"{result.frames} frames, {result.invalid_frames} invalid", highlight=False)

@@ -6,9 +6,9 @@ escapes. A strict Content-Security-Policy (no fetches; the one script allowed is
 own filter script, by its SHA-256 hash) is a second line of defence should an escaping bug
 ever slip through: an injected script has another hash and does not run.
 
-For an engineer in a hurry: the cases that did not pass come first, with their failed steps;
-a search box and outcome filters narrow the summary and the cases; every case is collapsed
-(<details>) until opened or linked to.
+For an engineer in a hurry: the cases that did not pass come first, listed with their failed steps and then
+opened in full (steps, plots, message) before the summary and every table; a search box and outcome filters
+narrow the summary and the cases; every other case is collapsed (<details>) until opened or linked to.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import hashlib
 import math
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -27,7 +28,9 @@ from urllib.parse import quote
 from jinja2 import Environment, PackageLoader, select_autoescape
 from markupsafe import Markup, escape
 
+from bench.checks import step_values
 from bench.report.conformance import build_conformance
+from bench.report.junit import error_line
 from bench.report.plots import Plotter, RenderedPlot
 from bench.results import CaseResult, Plot, RunResult, Step
 
@@ -109,9 +112,13 @@ def _env() -> Environment:
         trim_blocks=True,
         lstrip_blocks=True,
     )
-    env.filters["num"] = fmt
-    env.filters["dur"] = duration
+    env.filters.update(FILTERS)
     return env
+
+
+#: The template's filters. A step's values as JUnit and the console show them (bench.checks.format_value).
+FILTERS = {"num": fmt, "dur": duration, "measured": lambda step: step_values(step)[0],
+           "expected": lambda step: step_values(step)[1]}
 
 
 def _mcap_href(mcap_path: str, report_dir: Path) -> str:
@@ -162,9 +169,7 @@ def failures(run: RunResult) -> list[Failure]:
     for i, case in enumerate(run.cases, 1):
         if case.outcome in FAILED:
             failed = case.failed_steps
-            line = ""
-            if case.message and not case.message.startswith("failed steps:"):
-                line = next((ln for ln in reversed(case.message.splitlines()) if ln.strip()), "")[:300]
+            line = error_line(case.message)[:300]
             out.append(Failure(i, case, failed[:FAILED_STEPS_SHOWN], max(0, len(failed) - FAILED_STEPS_SHOWN), line))
     return out
 
@@ -213,15 +218,27 @@ def _search_key(case: CaseResult) -> str:
     return " ".join([case.name, case.nodeid, *case.reqs, *case.duts, *(f.spec for f in case.faults)]).lower()
 
 
-def render_html(run: RunResult, report_dir: Path = Path(".")) -> str:
-    """The report as a string; ``report_dir`` is where it will live (for relative links)."""
+def render_html(run: RunResult, report_dir: Path = Path("."), keep_drawing: Callable[[], bool] | None = None) -> str:
+    """The report as a string; ``report_dir`` is where it will live (for relative links). ``keep_drawing``: asked
+    before each case's plots; once it says False the remaining cases' plots are left out, and the report says how
+    many (a run stopped by a signal must end within a second: bench.stop)."""
     plotter = Plotter()
-    plots = [[_render_plot(plotter, plot, f"c{i}p{j}", case) for j, plot in enumerate(case.plots)]
-             for i, case in enumerate(run.cases)]
+    plots: list[list[RenderedPlot]] = []
+    left_out = 0
+    for i, case in enumerate(run.cases):
+        if case.plots and keep_drawing is not None and (left_out or not keep_drawing()):
+            left_out += 1
+            plots.append([])
+            continue
+        plots.append([_render_plot(plotter, plot, f"c{i}p{j}", case) for j, plot in enumerate(case.plots)])
     return _env().get_template("report.html.j2").render(
         run=run,
         counts=run.counts,
         plots=plots,
+        plots_left_out=left_out,
+        failed_outcomes=FAILED,   # these cases open at the top, before the tables; the others follow them, collapsed
+        failed_index=[i for i, c in enumerate(run.cases) if c.outcome in FAILED],
+        case_index=[i for i, c in enumerate(run.cases) if c.outcome not in FAILED],
         conformance=build_conformance(run),
         mcap_href=_mcap_href(run.mcap_path, report_dir),
         failures=failures(run),
@@ -232,9 +249,9 @@ def render_html(run: RunResult, report_dir: Path = Path(".")) -> str:
     )
 
 
-def write_html(run: RunResult, path: Path) -> Path:
-    """Write the HTML report of ``run`` to ``path`` (parent folders are created)."""
+def write_html(run: RunResult, path: Path, keep_drawing: Callable[[], bool] | None = None) -> Path:
+    """Write the HTML report of ``run`` to ``path`` (parent folders are created); ``keep_drawing``: render_html's."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(render_html(run, path.parent), encoding="utf-8")
+    path.write_text(render_html(run, path.parent, keep_drawing), encoding="utf-8")
     return path

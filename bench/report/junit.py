@@ -12,6 +12,7 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from bench.checks import step_values
 from bench.results import CaseResult, FaultRecord, RunResult, Step
 
 _ILLEGAL_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
@@ -36,20 +37,35 @@ def split_nodeid(nodeid: str, fallback: str = "") -> tuple[str, str]:
     return classname, parts[-1] + bracket + param
 
 
-def _num(value: float | str | None) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return str(value)
+FAILED_STEPS_HEAD = "failed steps:"   # how the pytest plugin's message of a case with failed steps begins
+
+
+def error_line(message: str) -> str:
+    """The line of a case's failure message that says what went wrong: "" for the plugin's failed-steps message
+    (the steps say it), else the exception pytest reports (its first `E   ` line, without the test's source
+    lines before it), else a Python traceback's last line (the exception), else the message's first line."""
+    if not message or message.startswith(FAILED_STEPS_HEAD):
+        return ""
+    lines = [ln for ln in message.splitlines() if ln.strip()]
+    error = next((ln[1:].strip() for ln in lines if ln.startswith("E ") and ln[1:].strip()), "")
+    if error or not lines:
+        return error
+    return (lines[-1] if lines[0].startswith("Traceback") else lines[0]).strip()
+
+
+def step_summary(step: Step) -> str:
+    """A failed step in a sentence: name, measured and expected (bench.checks.format_value) and the tolerance."""
+    measured, expected = step_values(step)
+    return f"{step.name}: measured {measured}, expected {expected}" + (f" ({step.tolerance})" if step.tolerance else "")
 
 
 def step_line(step: Step) -> str:
     """One step as a line of text: verdict, name, measured vs expected with tolerance."""
     unit = f" {step.unit}" if step.unit else ""
     tol = f" ({step.tolerance})" if step.tolerance else ""
-    line = (f"{step.verdict.upper():4} {step.name}: measured {_num(step.measured)}{unit}, "
-            f"expected {_num(step.expected)}{unit}{tol} at t={step.time:.3f} s")
+    measured, expected = step_values(step)
+    line = (f"{step.verdict.upper():4} {step.name}: measured {measured}{unit}, "
+            f"expected {expected}{unit}{tol} at t={step.time:.3f} s")
     return line + (f" – {step.detail}" if step.detail else "")
 
 
@@ -71,18 +87,16 @@ def _testcase(parent: ET.Element, case: CaseResult) -> None:
                 ET.SubElement(props, "property", name=key, value=xml_safe(value))
     failed = case.failed_steps
     if case.outcome == "failed":
-        summary = "; ".join(
-            f"{s.name}: measured {_num(s.measured)}, expected {_num(s.expected)}"
-            + (f" ({s.tolerance})" if s.tolerance else "") for s in failed)
-        message = "; ".join(p for p in (summary, case.message.splitlines()[0] if case.message else "") if p)
-        body = "\n".join([*(step_line(s) for s in failed), *([case.message] if case.message else [])])
+        message = "; ".join(p for p in (*(step_summary(s) for s in failed), error_line(case.message)) if p)
+        traceback = [case.message] if error_line(case.message) else []   # not the plugin's list of the steps again
+        body = "\n".join([*(step_line(s) for s in failed), *traceback])
         el = ET.SubElement(tc, "failure", message=xml_safe(message or "failed"), type="failure")
         el.text = xml_safe(body)
     elif case.outcome == "skipped":
         ET.SubElement(tc, "skipped", message=xml_safe(case.message or "skipped"), type="skip")
     elif case.outcome in ("error", "aborted"):
         prefix = "aborted" if case.outcome == "aborted" else "error"
-        first = case.message.splitlines()[0] if case.message else ""
+        first = error_line(case.message)
         el = ET.SubElement(tc, "error", message=xml_safe(f"{prefix}: {first}" if first else prefix),
                            type=prefix)
         el.text = xml_safe("\n".join([*(step_line(s) for s in failed), case.message]))
@@ -122,7 +136,8 @@ def build_junit(run: RunResult) -> ET.ElementTree:
         _testcase(suite, case)
     if run.aborted:
         tc = ET.SubElement(suite, "testcase", classname="bench.run", name="aborted", time="0.000")
-        ET.SubElement(tc, "error", message="run aborted: results are incomplete", type="aborted")
+        never = f"; {run.not_run} of {len(run.cases) + run.not_run} cases never ran" if run.not_run else ""
+        ET.SubElement(tc, "error", message=f"run aborted: results are incomplete{never}", type="aborted")
     ET.indent(root)
     return ET.ElementTree(root)
 

@@ -33,6 +33,9 @@ SIMPLIFY_PX = 0.4
 
 _SIZE = {"time": (640, 210), "xy": (420, 380)}        # viewBox width, height (CSS px at natural size)
 _LEFT, _RIGHT, _TOP, _BOTTOM = 56, 10, 8, 34         # axes margins, px
+#: The data ranges' margins, as fractions of their span on each side. A signal's plateau at its maximum or minimum
+#: (a steering angle held, a speed reached) otherwise lies on the frame, where it cannot be told from it (issue 27).
+X_MARGIN, Y_MARGIN = 0.03, 0.08
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd",
            "#8c564b", "#e377c2", "#17becf", "#7f7f7f", "#bcbd22")
 NO_FRAMES = " (no frames)"
@@ -130,7 +133,9 @@ def nice_ticks(lo: float, hi: float, bins: int) -> tuple[list[float], int]:
     return ticks, decimals
 
 
-def _limits(values: list[np.ndarray]) -> tuple[float, float]:
+def _limits(values: list[np.ndarray], margin: float = X_MARGIN) -> tuple[float, float]:
+    """The axis range of the finite values, widened by `margin` of their span on each side (a flat line: ±5 %
+    of its value, at least ±0.5)."""
     finite = [v[np.isfinite(v)] for v in values]
     finite = [v for v in finite if len(v)]
     if not finite:
@@ -140,7 +145,7 @@ def _limits(values: list[np.ndarray]) -> tuple[float, float]:
     if hi - lo < 1e-12 * max(1.0, abs(hi)):
         pad = max(abs(hi) * 0.05, 0.5)
         return lo - pad, hi + pad
-    pad = (hi - lo) * 0.03
+    pad = (hi - lo) * margin
     return lo - pad, hi + pad
 
 
@@ -218,7 +223,7 @@ class Plotter:
                 x, y = decimate(x, y, max_points=20 * MAX_POINTS, keep_extremes=False)
             reduced.append((s, x, y))
         xlo, xhi = _limits([x for _, x, _ in reduced])
-        ylo, yhi = _limits([y for _, _, y in reduced])
+        ylo, yhi = _limits([y for _, _, y in reduced], Y_MARGIN)
         if kind == "xy":   # equal scales: widen the range that is short for its side
             scale = max((xhi - xlo) / ax_w, (yhi - ylo) / ax_h)
             cx, cy = (xlo + xhi) / 2, (ylo + yhi) / 2

@@ -90,6 +90,7 @@ def project(tmp_path: Path, bus_table: str = "", baudrate: int | None = None) ->
 
 
 # -- acceptance 3: the command line reaches python-can ------------------------------------------------------
+@pytest.mark.realtime
 def test_bench_run_pcan_bitrate_reaches_python_can(tmp_path: Path, fake_pcan: tuple[dict[str, str], Path]) -> None:
     env, log = fake_pcan
     result = bench(env, "run", str(MINI), "-k", "pivot", "--interface", "pcan", "--channel", "PCAN_USBBUS1",
@@ -135,6 +136,7 @@ def test_bus_table_passes_through_and_the_command_line_wins(tmp_path: Path,
     assert second["app_name"] == "CANalyzer"
 
 
+@pytest.mark.realtime
 def test_pytest_plugin_options_reach_python_can(tmp_path: Path, fake_pcan: tuple[dict[str, str], Path]) -> None:
     env, log = fake_pcan
     result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(MINI), "-k", "pivot",

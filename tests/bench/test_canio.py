@@ -57,6 +57,7 @@ def wait_for_output(process: subprocess.Popen, needle: bytes, timeout: float) ->
     return seen
 
 
+@pytest.mark.realtime
 def test_can_logger_records_a_bench_log(tmp_path: Path) -> None:
     channel = group()
     # A port of its own: python-can's logger cannot restrict its socket to its group (IP_MULTICAST_ALL), and

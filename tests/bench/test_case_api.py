@@ -72,3 +72,19 @@ def test_always_holds_and_is_violated(on_bench: tuple[BenchSession, Case]) -> No
     held, violated = case.result.steps[-2:]
     assert (held.verdict, held.measured, held.expected) == ("pass", "held 0.05 s", "for 0.05 s")
     assert violated.verdict == "fail" and violated.measured.startswith("violated at +0.02")   # type: ignore[union-attr]
+
+
+def test_check_cycle_times_fails_a_periodic_message_that_never_arrived(on_bench: tuple[BenchSession, Case]) -> None:
+    """Issue 27 finding 5: a message a simulated node sends periodically, dropped for the whole case, is a failed
+    cycle-time step (it used to get no step at all: only messages seen were checked)."""
+    _, case = on_bench
+    case.start_scenario(Vehicle="EV4WIS")
+    case.inject("drop", "WHL_Status_FL")
+    case.start_scenario(Vehicle="EV4WIS")          # the case's measurement starts after the last frame came
+    case.run(0.5)
+    assert not case.check_cycle_times()
+    steps = {s.name: s for s in case.result.steps}
+    dropped = steps["cycle time WHL_Status_FL"]
+    assert (dropped.verdict, dropped.measured) == ("fail", "no frames since the case started")
+    assert steps["cycle time WHL_Status_FR"].verdict == "pass"   # its neighbours came and pass
+    assert [s.name for s in case.result.steps if s.verdict == "fail"] == ["cycle time WHL_Status_FL"]

@@ -62,6 +62,7 @@ def _kept_cycle(row: dict[str, str]) -> bool:
         return False
 
 
+@pytest.mark.realtime
 def test_monitor_shows_the_plant_messages_with_their_rates(tmp_path: Path) -> None:
     binary = tmux()
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"

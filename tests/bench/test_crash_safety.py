@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from bench.bus import open_bus
 from bench.logread import read_frames, summarise
 from tests.repo import ROOT
@@ -18,6 +20,7 @@ from tests.repo import ROOT
 RUN_SECONDS = 8.0
 
 
+@pytest.mark.realtime
 def test_sigkill_keeps_95_percent_of_the_frames_sent(tmp_path: Path) -> None:
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
     listener = open_bus("udp_multicast", group)   # hop limit 0, and only this group's frames

@@ -4,10 +4,12 @@ registry (bench/fault_kinds.py) from which the checks, the --fault help and docs
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
 from bench import fault_kinds
+from bench.cli import main
 from bench.codec import Codebook, load_codebook
 from bench.errors import ConfigError
 from bench.fault_kinds import FaultKind, Outgoing
@@ -173,3 +175,20 @@ def test_a_new_kind_is_one_class_and_one_entry(codebook: Codebook, monkeypatch: 
     assert validate(["invert:NoSuchMessage@0-1"], codebook)[0].endswith("unknown message 'NoSuchMessage' "
                                                                          "(in none of the databases)")
     assert "invert:MESSAGE" in fault_kinds.help_text() and "| `invert` |" in fault_kinds.markdown_table()
+
+
+def test_a_flood_is_bounded_by_what_the_bus_carries(codebook: Codebook, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 27 finding 1: `flood:0x000:1e9` was accepted and built 10^9 frames per 1 ms tick (7.9 GB, deaf to
+    Ctrl-C). RATE is frames per ms, at most what a classic CAN bus at 500 kbit/s carries; the help says so."""
+    assert validate([f"flood:0x000:{fault_kinds.FLOOD_MAX_RATE:g}@1-2"], codebook) == []   # the limit itself
+    [line] = validate(["flood:0x000:1e9@0-1"], codebook)
+    assert "frames per ms, at most 8" in line and "1e+09" in line, line
+    with pytest.raises(ConfigError, match="at most 8"):
+        FaultPlan(codebook).add(Fault("flood", "0x000", 0, 1, 9))          # bench.inject from a case too
+    assert "flood:IDENTIFIER:RATE (RATE: frames per ms" in fault_kinds.help_text()
+    assert main(["run", str(ROOT / "tests/fixtures/cases/test_mini.py"), "--out", str(tmp_path / "out"),
+                 "--fault", "flood:0x000:1e9@0-1"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured
+    assert captured.err.startswith("bench run: error: --fault 'flood:0x000:1e9@0-1': RATE is frames per ms")

@@ -299,6 +299,7 @@ def test_other_buses_and_the_switch_keep_the_scheduler(codebook: Codebook, fake:
 # Inside the vcan lane (VCAN_CHANNEL set) it never skips: a lane without vcan0 must fail, not pass empty.
 @pytest.mark.skipif(not has_vcan("vcan0") and not IN_LANE,
                     reason="needs SocketCAN and vcan0 (the vcan lane runs it: scripts/vcan-lane)")
+@pytest.mark.realtime
 def test_real_bcm_on_vcan(codebook: Codebook) -> None:
     """The real BCM: a station on vcan0 through stable values, a change and a ramp; an independent
     socket sees every frame (counter, checksum, cycle) and the station's log holds the same frames."""

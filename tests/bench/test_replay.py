@@ -68,6 +68,7 @@ def group() -> str:
     return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
 
 
+@pytest.mark.realtime
 def test_replay_sends_the_logged_frames_with_their_spacing(tmp_path: Path) -> None:
     log = tmp_path / "run.mcap"
     sent = make_log(log)
@@ -81,6 +82,7 @@ def test_replay_sends_the_logged_frames_with_their_spacing(tmp_path: Path) -> No
     assert "sent 40 frames" in result.stderr and "1 error frames skipped" in result.stderr
 
 
+@pytest.mark.realtime
 def test_speed_and_direction(tmp_path: Path) -> None:
     log = tmp_path / "run.mcap"
     make_log(log)

@@ -203,11 +203,11 @@ def test_junit(tmp_path: Path) -> None:
         ("testcases.test_abs", "test_split_mu")]
     failure = cases[1].find("failure")
     assert failure is not None
-    assert "stop distance: measured 41.5, expected 38 (±2)" in failure.get("message", "")
+    assert "stop distance: measured 41.5, expected 38.0 (±2)" in failure.get("message", "")
     assert "assert 41.5 <= 40" in failure.get("message", "") and IMG in (failure.text or "")
     assert cases[2].find("skipped") is not None and cases[0].find("failure") is None
     out = cases[0].findtext("system-out") or ""
-    assert out.splitlines()[0].startswith(f"PASS angle {SCRIPT}: measured 1.23457 deg")
+    assert out.splitlines()[0].startswith(f"PASS angle {SCRIPT}: measured 1.235 deg, expected 1.200 deg (±0.05)")
 
 
 def test_aborted_run(tmp_path: Path) -> None:

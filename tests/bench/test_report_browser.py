@@ -152,7 +152,7 @@ def test_report_in_browser(tmp_path: Path) -> None:
 
 def _no_escape_env() -> Environment:
     env = Environment(loader=PackageLoader("bench.report", "templates"), autoescape=False)
-    env.filters.update(num=report_html.fmt, dur=report_html.duration)
+    env.filters.update(report_html.FILTERS)
     return env
 
 

@@ -52,7 +52,10 @@ def test_filters_search_and_collapsed_cases(tmp_path: Path) -> None:
     assert len(rows) == 62 and rows[30][0] == "failed" and "drop:vcu_wheelcmd_fl@case+1-2" in rows[30][1]
     assert "vcu-mode-01" in rows[0][1]                                         # requirements are searchable
     cases = re.findall(r"<details class=\"case (\w+)\"([^>]*)>", html)
-    assert len(cases) == 62 and not any(" open" in attrs for _, attrs in cases)  # collapsed by default
+    assert len(cases) == 62
+    # the two that did not pass open at the top (issue 27 finding 7), in the summary's order; the rest collapsed
+    assert [(c, " open" in attrs) for c, attrs in cases[:2]] == [("failed", True), ("error", True)]
+    assert not any(" open" in attrs for _, attrs in cases[2:])
 
 
 def test_plots_are_small_and_break_at_gaps() -> None:
@@ -83,3 +86,29 @@ def test_fault_window_is_shaded(tmp_path: Path) -> None:
     x0, width = float(rect.group(1)), float(rect.group(2))
     span = 4.99 * 1.06    # the data range plus 3 % padding either side
     assert abs(width - 574 * 1.0 / span) < 1.0 and abs(x0 - (56 + 574 * (1.0 + 0.03 * 4.99) / span)) < 1.0
+
+
+def _points(d: str) -> list[tuple[float, float]]:
+    """The absolute points of a path written as bench.report.plots._path writes it (M x y, then l dx dy ...)."""
+    head, _, steps = d.partition("l")
+    x, y = (float(v) for v in head[1:].split())
+    points = [(x, y)]
+    numbers = [float(v) for v in re.findall(r"-?\d*\.?\d+", steps)]
+    for dx, dy in zip(numbers[::2], numbers[1::2]):
+        x, y = x + dx, y + dy
+        points.append((x, y))
+    return points
+
+
+def test_plot_y_range_has_a_margin() -> None:
+    """Issue 27 finding 7: a signal held at its maximum or minimum lay on the plot's frame (3 % margin). Now the
+    extremes are at least 5 % of the axes' height inside it."""
+    from bench.report import plots
+
+    t = [0.0, 1.0, 1.0, 2.0, 2.0, 3.0]
+    held = plots.Plotter().render(Plot("step", "t", "deg", [Series("held", t, [0.0, 0.0, 1.0, 1.0, 0.0, 0.0])]), "m")
+    [d] = re.findall(r'<path class="s" stroke="[^"]+" d="([^"]*)"', held.svg)
+    ys = [y for _, y in _points(d)]
+    height = plots._SIZE["time"][1] - plots._TOP - plots._BOTTOM
+    top, bottom = plots._TOP, plots._TOP + height
+    assert min(ys) - top >= 0.05 * height and bottom - max(ys) >= 0.05 * height, (top, min(ys), max(ys), bottom)

@@ -90,3 +90,15 @@ def test_a_time_plot_is_written_to_the_microsecond(tmp_path: Path) -> None:
     assert [(s.name, s.expected, s.verdict, s.time) for s in back.cases[0].steps] == [
         (s.name, s.expected, s.verdict, s.time) for s in case.steps]
     assert back.verdict == run.verdict and back.cases[0].outcome == case.outcome
+
+
+def test_cases_that_never_ran_survive_the_round_trip_and_the_merge(tmp_path: Path) -> None:
+    """Issue 27 finding 7: an aborted run counts the cases that never ran; results.json keeps the count and merging
+    stopped shards sums it."""
+    run = _run()
+    run.tables.pop()
+    run.aborted, run.not_run = True, 6
+    results_io.dump(run, tmp_path / "r.json")
+    back = results_io.load(tmp_path / "r.json")
+    assert back.not_run == 6
+    assert results_io.merge([("a", back), ("b", results_io.load(tmp_path / "r.json"))], 1.0).not_run == 12

@@ -66,6 +66,7 @@ def test_poll_takes_at_most_a_batch_and_leaves_the_rest_in_the_socket(codebook) 
     assert station.monitor.frames == POLL_BATCH + 10
 
 
+@pytest.mark.realtime
 def test_wall_clock_keeps_its_deadline_on_a_bus_that_never_goes_quiet(codebook) -> None:
     clock = WallClock()
     station = _station(codebook, FloodBus(_frame(codebook, "VCU_WheelCmd_FL")), clock)
@@ -104,6 +105,7 @@ def test_a_timestamp_of_another_time_base_gets_the_time_of_reading(codebook) -> 
     assert clock.stamp(time.time() - 2 * STAMP_WINDOW, clock.now()) == pytest.approx(clock.now(), abs=0.01)
 
 
+@pytest.mark.realtime
 def test_a_late_reader_measures_the_intervals_the_bus_had() -> None:
     """Over udp_multicast (loopback, hop limit 0): 20 frames 10 ms apart, read in one go 0.3 s later."""
     codebook = load_codebook(load_config().databases)

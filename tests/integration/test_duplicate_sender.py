@@ -219,6 +219,7 @@ def _group() -> str:
     return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
 
 
+@pytest.mark.realtime
 def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
     """Two `bench plant` on one udp_multicast group (hop limit 0, loopback only): each says which
     identifiers have a second sender, and a listener's monitor (as `bench monitor` runs it) finds them by the

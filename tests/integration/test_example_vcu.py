@@ -21,6 +21,7 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -31,6 +32,7 @@ EXAMPLE = ROOT / "examples" / "vcu_ecu.py"
 BENCH = [sys.executable, "-m", "bench"]
 
 
+@pytest.mark.realtime
 def test_campaign_passes_against_the_example_vcu(tmp_path: Path) -> None:
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
     bus = ["--interface", "udp_multicast", "--channel", group]

@@ -9,6 +9,8 @@ import random
 import subprocess
 import sys
 
+import pytest
+
 from tests.child import Child
 from tests.repo import ROOT
 
@@ -30,6 +32,7 @@ def expected(x: float, y: float, v_o: float) -> dict[str, tuple[float, float]]:
     return out
 
 
+@pytest.mark.realtime
 def test_plant_answers_a_foreign_driver_per_formulas() -> None:
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
     plant = Child([sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast", "--channel", group,

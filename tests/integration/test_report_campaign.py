@@ -8,6 +8,10 @@ cases change. The campaign runs once for this module (about 60-75 s on the virtu
 one extra case file written here, run after the whole campaign (so the failing case is the last of the
 summary, the worst place for it): deterministic, unlike a --fault whose window would have to hit one
 case of a campaign whose timing changes with every case added.
+
+This is also the one run of the campaign in the README's test command (pyproject.toml's testpaths is tests/
+alone: testcases/ there as well ran the campaign twice, issue 27 finding 2), so it checks the campaign's verdicts
+too: every case but the injected one passed or was skipped.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +52,21 @@ def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
                             cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert result.returncode == 1, result.stdout[-3000:] + result.stderr[-3000:]   # one failure: exit 1
     return out / "report.html"
+
+
+def test_the_campaign_passes(campaign: Path) -> None:
+    """Every case of testcases/ passed or was skipped (for a reason it states); only the injected case failed."""
+    suite = ET.parse(campaign.parent / "junit.xml").getroot()
+    outcomes: dict[str, list[str]] = {}
+    for case in suite.iter("testcase"):
+        kind = next((k for k in ("failure", "error", "skipped") if case.find(k) is not None), "passed")
+        outcomes.setdefault(kind, []).append(str(case.get("name")))
+    assert outcomes.get("failure") == ["test_injected_failure"], outcomes.get("failure")
+    assert not outcomes.get("error"), outcomes["error"]
+    assert len(outcomes.get("passed", [])) > 100, "the whole campaign ran"
+    for case in suite.iter("testcase"):
+        skipped = case.find("skipped")
+        assert skipped is None or skipped.get("message"), case.get("name")
 
 
 def test_campaign_report_within_budget(campaign: Path) -> None:
@@ -82,3 +102,27 @@ def test_failure_on_the_first_screen(campaign: Path, tmp_path: Path) -> None:
     assert len(borders) >= 2, "no failures box on the first screen"
     top, bottom = borders.min(), borders.max()
     assert top < SCREEN[1] / 3 and bottom - top > 40, (top, bottom)   # the whole box, near the top
+
+
+def test_failing_case_open_with_its_steps_on_the_first_screen(campaign: Path, tmp_path: Path) -> None:
+    """Issue 27 acceptance 4 on the real campaign: the failing case is open at the top, before the summary and the
+    timing and database tables, and its step rows (painted in a copy; the layout is the report's) show on the
+    first screen."""
+    html = campaign.read_text(encoding="utf-8")
+    found = re.search(r'<a href="#case-(\d+)">test_injected_failure</a>', html)
+    assert found is not None
+    anchor = f'id="case-{found.group(1)}"'
+    opening = html[html.rfind("<details", 0, html.index(anchor)):html.index(">", html.index(anchor))]
+    assert " open" in opening
+    assert html.index(anchor) < html.index('id="summary"') < html.index("Databases: the messages this run checked")
+    painted = tmp_path / "painted.html"
+    paint = f"<style>#case-{found.group(1)} table.steps td {{ background: #00ff00 !important; }}</style></head>"
+    painted.write_text(html.replace("</head>", paint, 1), encoding="utf-8")
+    shot = tmp_path / "painted.png"
+    run_browser(tmp_path, f"--screenshot={shot}", f"--window-size={SCREEN[0]},{SCREEN[1]}", painted.as_uri())
+    import matplotlib.image
+
+    pixels = (matplotlib.image.imread(shot)[..., :3] * 255).round().astype(int)
+    green = np.all(np.abs(pixels - (0, 255, 0)) < 24, axis=-1)
+    rows = np.flatnonzero(green.sum(axis=1) > 40)
+    assert len(rows) > 10 and rows.max() < SCREEN[1] - 1, "the failing case's step is not whole on the first screen"

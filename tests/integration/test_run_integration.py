@@ -77,6 +77,7 @@ def test_two_runs_give_the_same_frame_sequence(first_run: Path, tmp_path: Path) 
     assert frames_of(first_run / "run.mcap") == frames_of(tmp_path / "run.mcap")
 
 
+@pytest.mark.realtime
 def test_plant_and_runner_in_two_processes_over_udp_multicast(tmp_path: Path) -> None:
     # An administratively scoped group, random per test run; hop limit 0 keeps it on this host.
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"

@@ -7,6 +7,8 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import pytest
+
 from tests.repo import ROOT
 
 
@@ -17,6 +19,7 @@ def _soak_module():
     return module
 
 
+@pytest.mark.realtime
 def test_short_soak(tmp_path: Path) -> None:
     result = _soak_module().soak(20.0, tmp_path, sample_every=2.0)
     assert result["runner_exit"] == 0, result["runner_tail"]

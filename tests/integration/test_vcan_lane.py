@@ -44,6 +44,7 @@ needs_vcan = pytest.mark.skipif(not has_vcan(), reason=f"needs SocketCAN and {CH
 on_host = pytest.mark.skipif(IN_LANE, reason="the lane script's host-side logic; not run inside the lane")
 
 
+@pytest.mark.realtime
 @needs_vcan
 def test_plant_process_keeps_the_contract_on_vcan() -> None:
     codebook = load_codebook(load_config().databases)
