@@ -18,7 +18,7 @@ Run it as the external VCU of the bench (three processes on one host):
     bench run --interface udp_multicast --channel 239.255.1.2 --external all --dut VCU
 
 It prints a line with `running` once it is on the bus; Ctrl-C (SIGINT) stops it. Needs python-can, cantools,
-autosar-e2e (import name `e2e`) and numpy only; nothing of the bench.
+autosar-e2e (import name `e2e`) and the standard library only; nothing of the bench.
 """
 
 from __future__ import annotations
@@ -36,7 +36,6 @@ from pathlib import Path
 
 import can
 import cantools
-import numpy as np
 from e2e import p01, p02, p05, p11
 
 # --- Vehicle A (docs/spec/vehicles.md A, vcu.md symbols, vcu-4ws.md symbols) ---------------------------------
@@ -622,28 +621,29 @@ def exceeds_limits(command: Command) -> bool:
 # ==============================================================================================================
 # Vehicle speed (VCU-OUT-05, VCU-4WS-01)
 # ==============================================================================================================
-def _rigid_fit_matrix() -> np.ndarray:
-    """Least-squares pseudo-inverse of u_i = (v_x + w y_i, v_y - w x_i) over the four wheels (VCU-OUT-05)."""
-    rows = []
-    for xi, yi in WHEELS.values():
-        rows.append([1.0, 0.0, yi])
-        rows.append([0.0, 1.0, -xi])
-    return np.linalg.pinv(np.array(rows))
-
-
-RIGID_FIT = _rigid_fit_matrix()
+#: Sums over the four wheels for the rigid fit's normal equations (VCU-OUT-05)
+_N = len(WHEELS)
+_SUM_X = sum(x for x, _ in WHEELS.values())
+_SUM_Y = sum(y for _, y in WHEELS.values())
+_SUM_R2 = sum(x * x + y * y for x, y in WHEELS.values())
 
 
 def rigid_fit(status: dict[str, tuple[float, float]]) -> tuple[float, float, float]:
-    """(v_x, v_y, omega) of the centre from each wheel's (SteerAngle deg, WheelSpeed rpm) (VCU-OUT-05)."""
-    velocities = []
-    for name in WHEELS:
+    """(v_x, v_y, omega) of the centre from each wheel's (SteerAngle deg, WheelSpeed rpm) (VCU-OUT-05): the least
+    squares fit of u_i = (v_x + omega y_i, v_y - omega x_i) to the wheels' velocities, by its normal equations
+    (n v_x + omega Sy = Sux, n v_y - omega Sx = Suy, v_x Sy - v_y Sx + omega Sr2 = S(y ux - x uy))."""
+    sum_ux = sum_uy = moment = 0.0
+    for name, (xi, yi) in WHEELS.items():
         angle, rpm = status[name]
         speed = rpm / RPM_PER_MPS
         a = math.radians(angle)
-        velocities += [speed * math.sin(a), speed * math.cos(a)]
-    v_x, v_y, omega = RIGID_FIT @ np.array(velocities)
-    return float(v_x), float(v_y), float(omega)
+        ux, uy = speed * math.sin(a), speed * math.cos(a)
+        sum_ux += ux
+        sum_uy += uy
+        moment += yi * ux - xi * uy
+    omega = ((moment - (_SUM_Y * sum_ux - _SUM_X * sum_uy) / _N)
+             / (_SUM_R2 - (_SUM_X * _SUM_X + _SUM_Y * _SUM_Y) / _N))
+    return (sum_ux - omega * _SUM_Y) / _N, (sum_uy + omega * _SUM_X) / _N, omega
 
 
 def signed_vehicle_speed(v_x: float, v_y: float, forward: tuple[float, float]) -> float:

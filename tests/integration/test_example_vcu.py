@@ -136,6 +136,36 @@ def test_example_car_modes_put_the_centre_where_the_contract_says() -> None:
     assert all(math.isclose(n, -1.5 * RPM_PER_MPS) for n in command.speeds.values())
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.floats(-90, 90), st.floats(-1500, 1500)), min_size=4, max_size=4))
+def test_example_rigid_fit_is_the_least_squares_fit(wheels: list[tuple[float, float]]) -> None:
+    """VCU-OUT-05 without numpy in the example: its normal equations give numpy's pseudo-inverse fit."""
+    import numpy as np
+
+    rows, velocities = [], []
+    for (x, y), (angle, rpm) in zip(WHEELS.values(), wheels):
+        rows += [[1.0, 0.0, y], [0.0, 1.0, -x]]
+        speed = rpm / RPM_PER_MPS
+        velocities += [speed * math.sin(math.radians(angle)), speed * math.cos(math.radians(angle))]
+    expected = np.linalg.pinv(np.array(rows)) @ np.array(velocities)
+    fit = VCU.rigid_fit(dict(zip(WHEELS, wheels)))
+    assert np.allclose(fit, expected, rtol=1e-12, atol=1e-12), (fit, expected)
+
+
+def test_example_needs_nothing_of_the_bench() -> None:
+    """The example is what a supplier writes from the documents: python-can, cantools, autosar-e2e (`e2e`) and the
+    standard library, nothing of bench or plant."""
+    import ast
+
+    imported = set()
+    for node in ast.walk(ast.parse(EXAMPLE.read_text())):
+        if isinstance(node, ast.Import):
+            imported |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            imported.add(node.module.split(".")[0])
+    assert imported - set(sys.stdlib_module_names) == {"can", "cantools", "e2e"}, imported
+
+
 def _chassis():
     import cantools
 
