@@ -262,13 +262,21 @@ def _check_header_place(message: cantools.database.Message, config: E2EConfig, c
 
 
 # --- The receiver (COM-RX-01, docs/spec/e2e.md) ---------------------------------------------------------------
-# The profile's check: one status per received frame (E2E_PXXCheckStatusType).
-OK, OKSOMELOST, REPEATED, WRONGSEQUENCE, ERROR = "OK", "OKSOMELOST", "REPEATED", "WRONGSEQUENCE", "ERROR"
-# The E2E state machine's states (E2E_SMStateType).
-NODATA, INIT, VALID, INVALID = "NODATA", "INIT", "VALID", "INVALID"
+class Status:
+    """The profile check's status of one received frame (E2E_PXXCheckStatusType)."""
+
+    OK, OKSOMELOST, REPEATED, WRONGSEQUENCE, ERROR = "OK", "OKSOMELOST", "REPEATED", "WRONGSEQUENCE", "ERROR"
+
+
+class SMState:
+    """The E2E state machine's states (E2E_SMStateType)."""
+
+    NODATA, INIT, VALID, INVALID = "NODATA", "INIT", "VALID", "INVALID"
+
+
 #: Statuses the state machine's window counts as OK; ERROR counts as an error, REPEATED and WRONGSEQUENCE as
 #: neither (they take their place in the window all the same).
-OK_STATUSES = (OK, OKSOMELOST)
+OK_STATUSES = (Status.OK, Status.OKSOMELOST)
 
 
 class E2EReceiver:
@@ -286,7 +294,7 @@ class E2EReceiver:
         # the check's state (E2E_PXXCheckInit): the counter before a first 0, so that 0 is in sequence
         self.last_counter = self.e2e.counter_values - 1 if self.e2e is not None else 0
         # the state machine (E2E_SMCheckInit): NODATA, an empty window of the last WindowSize statuses
-        self.state = NODATA
+        self.state = SMState.NODATA
         self.window: deque[str] = deque(maxlen=self.e2e.window_size if self.e2e is not None else 1)
         self.last_accepted_t: float | None = None
         self.values: dict[str, float] | None = None
@@ -302,7 +310,7 @@ class E2EReceiver:
             status = self.check(data)
             self.statuses[status] += 1
             state = self.sm_check(status)  # every status enters the state machine, ERROR included
-            applicable = status in OK_STATUSES and state == VALID
+            applicable = status in OK_STATUSES and state == SMState.VALID
         accepted = applicable and self._apply_if_in_range(data, t)
         self.last_rejected = not accepted
         self.accepted += accepted
@@ -321,17 +329,17 @@ class E2EReceiver:
         frame but an ERROR becomes the reference."""
         assert self.e2e is not None
         if len(data) != self.message.length or not self.e2e.check(data):
-            return ERROR
+            return Status.ERROR
         counter = self.e2e.counter_of(data)
         if counter >= self.e2e.counter_values:  # P01/P11: 15 is never sent (the library's check refuses it too)
-            return ERROR
+            return Status.ERROR
         step = (counter - self.last_counter) % self.e2e.counter_values
         self.last_counter = counter
         if step == 1:
-            return OK
+            return Status.OK
         if step == 0:
-            return REPEATED
-        return OKSOMELOST if step <= self.e2e.max_delta_counter else WRONGSEQUENCE
+            return Status.REPEATED
+        return Status.OKSOMELOST if step <= self.e2e.max_delta_counter else Status.WRONGSEQUENCE
 
     def sm_check(self, status: str) -> str:
         """The E2E state machine (E2E_SMCheck), one status in, the state after it out. NODATA leaves for INIT at
@@ -343,25 +351,25 @@ class E2EReceiver:
         MinOkStateInvalid OK and at most MaxErrorStateInvalid ERROR."""
         e2e = self.e2e
         assert e2e is not None
-        if self.state == NODATA:
-            if status != ERROR:
+        if self.state == SMState.NODATA:
+            if status != Status.ERROR:
                 self.window.clear()
-                self.state = INIT
+                self.state = SMState.INIT
             return self.state
         self.window.append(status)
         ok = sum(1 for s in self.window if s in OK_STATUSES)
-        errors = self.window.count(ERROR)
+        errors = self.window.count(Status.ERROR)
         fits = ok >= e2e.min_ok[self.state] and errors <= e2e.max_error[self.state]
-        if self.state == INIT:
+        if self.state == SMState.INIT:
             if fits:
-                self.state = VALID
-            elif errors > e2e.max_error[INIT]:
-                self.state = INVALID
-        elif self.state == VALID:
+                self.state = SMState.VALID
+            elif errors > e2e.max_error[SMState.INIT]:
+                self.state = SMState.INVALID
+        elif self.state == SMState.VALID:
             if not fits:
-                self.state = INVALID
+                self.state = SMState.INVALID
         elif fits:  # INVALID
-            self.state = VALID
+            self.state = SMState.VALID
         return self.state
 
     def _apply_if_in_range(self, data: bytes, t: float) -> bool:

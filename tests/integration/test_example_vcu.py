@@ -245,6 +245,32 @@ def test_example_receiver_accepts_the_bench_and_rejects_what_autosar_rejects() -
     assert rx.on_frame(frame((counter + 6) % 15), t) is True and rx.state == "VALID"
 
 
+def test_example_runs_on_the_benchs_frames() -> None:
+    """A few tasks of the example on frames the bench protects: the second frame of each input is applied (NODATA
+    -> INIT -> VALID), the VCU reports no fault and sends its six messages, each passing the bench's check."""
+    import can
+
+    from bench.e2e import protection
+
+    db = _chassis()
+    vcu, tx = VCU.Vcu(db, 0.0), VCU.Transmitter(db)
+    faults = []
+    for task in range(12):
+        t = task * 0.010
+        for name in VCU.INPUTS:
+            message = db.get_message_by_name(name)
+            data = bytearray(message.encode({s.name: 0 for s in message.signals}, scaling=False))
+            protection(message, db.dbc.attribute_definitions).protect(data, task)
+            vcu.receive(can.Message(arbitration_id=message.frame_id, data=bytes(data), is_extended_id=False), t)
+        faults.append(vcu.evaluate(t).fault)
+        for frame in VCU.frames_of_task(tx, vcu.out, task):
+            tx.sent(frame)
+            assert protection(db.get_message_by_frame_id(frame.arbitration_id), db.dbc.attribute_definitions).intact(
+                frame.data)
+    assert faults[0] == VCU.REQUEST_TIMEOUT and faults[-1] == VCU.OK == 0, faults
+    assert all(rx.accepted == 11 and rx.rejected == 1 and rx.state == "VALID" for rx in vcu.rx.values())
+
+
 def _operations():
     return st.lists(st.sampled_from(["next", "next", "next", "repeat", "skip2", "skip3", "back", "crc", "other_id",
                                      "second_sender"]), max_size=80)
