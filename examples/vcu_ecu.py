@@ -68,13 +68,9 @@ INPUTS = ("DRV_MotionRequest", "DRV_Steering", "IMU_Motion", *(f"WHL_Status_{w}"
 # E2E protection: AUTOSAR E2E by the autosar-e2e library, configured from the DBC (COM-E2E-*, docs/spec/e2e.md)
 # ==============================================================================================================
 #: A message's E2E parameters are DBC attributes named "E2E_" + the AUTOSAR parameter (E2E_Profile, E2E_DataID,
-#: E2E_MaxDeltaCounter, ...); what a message does not set is the database's default (BA_DEF_DEF_).
+#: E2E_MaxDeltaCounter, ...); what a message does not set is the database's default (BA_DEF_DEF_). A profile
+#: reads only the parameters it has (P02: E2E_DataIDList, no E2E_Offset or E2E_DataID; P05: no E2E_DataIDMode).
 E2E_ATTRIBUTE = "E2E_"
-#: Every parameter a profile needs; where a profile has no use for one (P02: Offset, DataID; P05: DataIDMode;
-#: all but P02: DataIDList) it is not read.
-E2E_PARAMETERS = ("DataID", "DataIDMode", "DataIDList", "Offset", "DataLength", "MaxDeltaCounter", "WindowSize",
-                  "MinOkStateInit", "MaxErrorStateInit", "MinOkStateValid", "MaxErrorStateValid",
-                  "MinOkStateInvalid", "MaxErrorStateInvalid")
 
 
 class E2EConfigError(ValueError):
