@@ -2,9 +2,14 @@
 
 Node `VCU` of `dbc/chassis.dbc`, built only from README.md, `docs/contract/common.md`, `docs/contract/vcu.md`,
 `docs/contract/vcu-4ws.md`, `docs/spec/*.md` and the DBC, as an outside supplier would (issue 13). It reads
-`DRV_MotionRequest`, `DRV_Steering`, the four `WHL_Status_xx` and `IMU_Motion`, judges every frame by the
-receiver rules of `docs/spec/e2e.md`, and sends `VCU_WheelCmd_FL/FR/RL/RR` (10 ms), `VCU_VehicleState` and
-`VCU_RotationCentre` (20 ms) with AliveCounter and CRC-8 Checksum. Comments cite the requirement ids.
+`DRV_MotionRequest`, `DRV_Steering`, the four `WHL_Status_xx` and `IMU_Motion` and sends `VCU_WheelCmd_FL/FR/RL/RR`
+(10 ms), `VCU_VehicleState` and `VCU_RotationCentre` (20 ms). Comments cite the requirement ids.
+
+End-to-end protection as an AUTOSAR stack does it (docs/spec/e2e.md, COM-E2E-*, COM-RX-*): each message's
+profile and parameters are the DBC's `E2E_*` attributes (read through cantools), the CRC and the counter's
+increment are the `autosar-e2e` library's (P01, P02, P05, P11), and each received message has the profile's
+check (OK, OKSOMELOST, REPEATED, WRONGSEQUENCE, ERROR) and the E2E state machine (NODATA, INIT, VALID, INVALID);
+a frame is applied only when its status is OK or OKSOMELOST and the state is VALID after it.
 
 Run it as the external VCU of the bench (three processes on one host):
 
@@ -12,8 +17,8 @@ Run it as the external VCU of the bench (three processes on one host):
     python examples/vcu_ecu.py --interface udp_multicast --channel 239.255.1.2
     bench run --interface udp_multicast --channel 239.255.1.2 --external all --dut VCU
 
-It prints a line with `running` once it is on the bus; Ctrl-C (SIGINT) stops it. Needs python-can, cantools
-and numpy only.
+It prints a line with `running` once it is on the bus; Ctrl-C (SIGINT) stops it. Needs python-can, cantools,
+autosar-e2e (import name `e2e`) and the standard library only; nothing of the bench.
 """
 
 from __future__ import annotations
@@ -24,14 +29,14 @@ import signal
 import socket
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import can
 import cantools
-import numpy as np
+from e2e import p01, p02, p05, p11
 
 # --- Vehicle A (docs/spec/vehicles.md A, vcu.md symbols, vcu-4ws.md symbols) ---------------------------------
 K = 0.555  # half track, m
@@ -60,64 +65,249 @@ INPUTS = ("DRV_MotionRequest", "DRV_Steering", "IMU_Motion", *(f"WHL_Status_{w}"
 
 
 # ==============================================================================================================
-# E2E protection (COM-E2E-01/02, docs/spec/e2e.md)
+# E2E protection: AUTOSAR E2E by the autosar-e2e library, configured from the DBC (COM-E2E-*, docs/spec/e2e.md)
 # ==============================================================================================================
-def _crc8_table(poly: int = 0x1D) -> list[int]:
-    """The byte-wise table of the CRC-8 polynomial 0x1D, MSB first (no reflection)."""
-    table = []
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ poly) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-        table.append(crc)
-    return table
+#: A message's E2E parameters are DBC attributes named "E2E_" + the AUTOSAR parameter (E2E_Profile, E2E_DataID,
+#: E2E_MaxDeltaCounter, ...); what a message does not set is the database's default (BA_DEF_DEF_). A profile
+#: reads only the parameters it has (P02: E2E_DataIDList, no E2E_Offset or E2E_DataID; P05: no E2E_DataIDMode).
+E2E_ATTRIBUTE = "E2E_"
 
 
-CRC8_TABLE = _crc8_table()
+class E2EConfigError(ValueError):
+    """The DBC configures a message's protection in a way no profile of the library can use."""
 
 
-def crc8_sae_j1850(data: bytes) -> int:
-    """CRC-8/SAE-J1850: poly 0x1D, init 0xFF, no reflection, final XOR 0xFF (COM-E2E-02)."""
-    crc = 0xFF
-    for byte in data:
-        crc = CRC8_TABLE[crc ^ byte]
-    return crc ^ 0xFF
+@dataclass(frozen=True)
+class Layout:
+    """A profile as the library lays its header out, from the header's first byte (E2E_Offset / 8; P02: byte 0):
+    the CRC's bytes, the counter's byte and bits, and how many counter values there are (the library's
+    increment wraps after the last: P01 and P11 count 0-14, P02 0-15, P05 0-255)."""
+
+    protect: Callable[..., None]
+    check: Callable[..., bool]
+    crc_bytes: int
+    counter_byte: int
+    counter_mask: int
+    counter_values: int
+    modes: dict[str, int] = field(default_factory=dict)  # E2E_DataIDMode -> the library's constant
+    has_offset: bool = True
+    data_id_list: bool = False  # P02: 16 Data IDs (E2E_DataIDList), one per counter value, not one E2E_DataID
 
 
-def frame_checksum(arbitration_id: int, data: bytes) -> int:
-    """COM-E2E-02: CRC over the identifier's low byte, its high byte, then data bytes 0-6."""
-    return crc8_sae_j1850(bytes([arbitration_id & 0xFF, (arbitration_id >> 8) & 0xFF]) + bytes(data[:7]))
+LAYOUTS = {
+    "P01": Layout(p01.e2e_p01_protect, p01.e2e_p01_check, 1, 1, 0x0F, 15,
+                  {"BOTH": p01.E2E_P01_DATAID_BOTH, "ALT": p01.E2E_P01_DATAID_ALT, "LOW": p01.E2E_P01_DATAID_LOW,
+                   "NIBBLE": p01.E2E_P01_DATAID_NIBBLE}),
+    "P02": Layout(p02.e2e_p02_protect, p02.e2e_p02_check, 1, 1, 0x0F, 16, has_offset=False, data_id_list=True),
+    "P05": Layout(p05.e2e_p05_protect, p05.e2e_p05_check, 2, 2, 0xFF, 256),
+    "P11": Layout(p11.e2e_p11_protect, p11.e2e_p11_check, 1, 1, 0x0F, 15,
+                  {"BOTH": p11.E2E_P11_DATAID_BOTH, "NIBBLE": p11.E2E_P11_DATAID_NIBBLE}),
+}
 
 
-assert crc8_sae_j1850(b"123456789") == 0x4B  # COM-E2E-02 check value
-assert frame_checksum(0x110, bytes(8)) == 0x3D  # COM-E2E-02 example
+def e2e_attributes(db: cantools.database.Database, message: cantools.database.Message) -> dict[str, object]:
+    """The message's E2E_* attributes by parameter name: its own value, else the database's default. cantools
+    gives a message's ENUM value as the index of its choice and a default as the choice itself: both become
+    the choice (E2E_Profile "P11", E2E_DataIDMode "BOTH")."""
+    definitions = db.dbc.attribute_definitions if db.dbc is not None else {}
+    values = {name[len(E2E_ATTRIBUTE):]: _choice(definition, definition.default_value)
+              for name, definition in definitions.items()
+              if name.startswith(E2E_ATTRIBUTE) and definition.default_value is not None}
+    own = message.dbc.attributes if message.dbc is not None else {}
+    values.update({name[len(E2E_ATTRIBUTE):]: _choice(attribute.definition, attribute.value)
+                   for name, attribute in own.items() if name.startswith(E2E_ATTRIBUTE)})
+    return values
+
+
+def _choice(definition: object, value: object) -> object:
+    choices = getattr(definition, "choices", None)
+    if getattr(definition, "type_name", None) == "ENUM" and choices and isinstance(value, int):
+        return choices[value] if isinstance(choices, list) else choices.get(value, value)
+    return value
+
+
+@dataclass(frozen=True)
+class E2EConfig:
+    """One message's AUTOSAR E2E configuration (E2E_PXXConfigType and E2E_SMConfigType), every value from the DBC.
+
+    `protect` and `check` are the library's (COM-E2E-02: the CRC is the profile's, computed by the library);
+    this VCU only writes the counter it sends and reads the counter it receives, in the field where the
+    library's layout puts it."""
+
+    message: str
+    profile: str
+    layout: Layout
+    data_id: int | bytes  # P02: the DataIDList
+    offset: int  # byte of the header's first byte (E2E_Offset / 8)
+    library_args: dict[str, int]  # length (E2E_DataLength / 8, 0: the whole frame), offset, data_id_mode
+    max_delta_counter: int
+    window_size: int
+    min_ok: dict[str, int]  # per state (INIT, VALID, INVALID): MinOkState*
+    max_error: dict[str, int]  # per state: MaxErrorState*
+    nibble: bool = False  # E2E_DataIDMode NIBBLE: the library also writes the Data ID's bits 8-11 (P01, P11)
+
+    @property
+    def counter_values(self) -> int:
+        return self.layout.counter_values
+
+    def counter_of(self, data: bytes | bytearray) -> int:
+        """The counter a frame carries (in the library's layout)."""
+        return data[self.offset + self.layout.counter_byte] & self.layout.counter_mask
+
+    def protect(self, data: bytearray, previous: int) -> None:
+        """COM-E2E-01/02: the counter after `previous` (the library increments it and wraps it) and the CRC,
+        written in place; `data` holds the frame's signals, the header's bits 0."""
+        index, mask = self.offset + self.layout.counter_byte, self.layout.counter_mask
+        data[index] = (data[index] & ~mask & 0xFF) | (previous & mask)
+        self.layout.protect(data, self.data_id, increment_counter=True, **self.library_args)
+
+    def check(self, data: bytes | bytearray) -> bool:
+        """Whether the frame's CRC is right (the library's check; it wants a writable buffer)."""
+        return self.layout.check(bytearray(data), self.data_id, **self.library_args)
+
+    def header_bits(self) -> tuple[set[int], set[int], set[int]]:
+        """The CRC's bits, the counter's bits and every bit the library writes (Intel numbering: bit 0 = the LSB
+        of byte 0). In the NIBBLE modes the library also writes the Data ID's bits 8-11 into the counter's byte."""
+        first = 8 * self.offset
+        crc = set(range(first, first + 8 * self.layout.crc_bytes))
+        counter_first = 8 * (self.offset + self.layout.counter_byte)
+        counter = {counter_first + bit for bit in range(8) if self.layout.counter_mask >> bit & 1}
+        written = crc | counter
+        if self.nibble:  # into the upper half of the counter's byte
+            written |= set(range(counter_first, counter_first + 8))
+        return crc, counter, written
+
+
+def e2e_config(db: cantools.database.Database, message: cantools.database.Message) -> E2EConfig | None:
+    """The protection the DBC gives a message, or None for E2E_Profile "None" (an unprotected message: judged on
+    its length and ranges only). An E2EConfigError names the message and the attribute."""
+    values = e2e_attributes(db, message)
+    name = message.name
+    profile = str(values.get("Profile", "None"))
+    if profile == "None":
+        return None
+    if profile not in LAYOUTS:
+        raise E2EConfigError(f"{name}: E2E_Profile {profile!r} is none of {', '.join(LAYOUTS)}")
+    layout = LAYOUTS[profile]
+
+    def integer(parameter: str, lo: int, hi: int) -> int:
+        if parameter not in values:
+            raise E2EConfigError(f"{name}: no E2E_{parameter}, and the database defines no default for it")
+        raw = values[parameter]
+        try:
+            number = int(raw, 0) if isinstance(raw, str) else int(raw)  # type: ignore[call-overload]
+        except (TypeError, ValueError):
+            raise E2EConfigError(f"{name}: E2E_{parameter} {raw!r} is not a whole number") from None
+        if not lo <= number <= hi:
+            raise E2EConfigError(f"{name}: E2E_{parameter} {number} is outside {lo}-{hi}")
+        return number
+
+    frame_bits = 8 * message.length
+    data_id: int | bytes
+    if layout.data_id_list:
+        try:
+            data_id = bytes(int(part, 16) for part in str(values.get("DataIDList", "")).replace(",", " ").split())
+        except ValueError:
+            data_id = b""
+        if len(data_id) != 16:
+            raise E2EConfigError(f"{name}: E2E_DataIDList {values.get('DataIDList')!r} is not 16 hex bytes")
+    else:
+        data_id = integer("DataID", 0, 0xFFFF)
+    offset_bits = integer("Offset", 0, frame_bits - 8) if layout.has_offset else 0
+    length_bits = integer("DataLength", 0, frame_bits)
+    if offset_bits % 8 or length_bits % 8:
+        raise E2EConfigError(f"{name}: E2E_Offset {offset_bits} and E2E_DataLength {length_bits} must be whole bytes")
+    library_args = {"length": length_bits // 8}
+    if layout.has_offset:
+        library_args["offset"] = offset_bits // 8
+    mode = ""
+    if layout.modes:
+        mode = str(values.get("DataIDMode", ""))
+        if mode not in layout.modes:
+            raise E2EConfigError(f"{name}: E2E_DataIDMode {mode!r} is none of {', '.join(layout.modes)} for {profile}")
+        library_args["data_id_mode"] = layout.modes[mode]
+    window = integer("WindowSize", 1, 255)
+    states = ("Init", "Valid", "Invalid")
+    config = E2EConfig(
+        message=name, profile=profile, layout=layout, data_id=data_id, offset=offset_bits // 8,
+        library_args=library_args,
+        max_delta_counter=integer("MaxDeltaCounter", 1, layout.counter_values - 1),
+        window_size=window,
+        min_ok={state.upper(): integer(f"MinOkState{state}", 0, window) for state in states},
+        max_error={state.upper(): integer(f"MaxErrorState{state}", 0, window) for state in states},
+        nibble=mode == "NIBBLE",
+    )
+    _check_header_place(message, config, length_bits or frame_bits)
+    return config
+
+
+def _check_header_place(message: cantools.database.Message, config: E2EConfig, covered_bits: int) -> None:
+    """The header lies in the frame and in what the CRC covers, and no signal lies on it but the CRC's and the
+    counter's own (the library writes those bits: a signal there would be overwritten)."""
+    crc, counter, written = config.header_bits()
+    if max(written) >= min(8 * message.length, covered_bits):
+        raise E2EConfigError(f"{message.name}: the {config.profile} header (bits {min(written)}-{max(written)}) is "
+                             f"not within the frame's {covered_bits // 8} protected bytes")
+    for sig in message.signals:
+        if sig.byte_order != "little_endian":
+            continue  # COM-FRM-01: the contract's signals are Intel
+        bits = set(range(sig.start, sig.start + sig.length))
+        if bits & written and bits not in (crc, counter):
+            raise E2EConfigError(f"{message.name}: signal {sig.name} (bits {sig.start}-{sig.start + sig.length - 1})"
+                                 f" lies on the {config.profile} header (bits {min(written)}-{max(written)})")
+
+
+# --- The receiver (COM-RX-01, docs/spec/e2e.md) ---------------------------------------------------------------
+class Status:
+    """The profile check's status of one received frame (E2E_PXXCheckStatusType)."""
+
+    OK, OKSOMELOST, REPEATED, WRONGSEQUENCE, ERROR = "OK", "OKSOMELOST", "REPEATED", "WRONGSEQUENCE", "ERROR"
+
+
+class SMState:
+    """The E2E state machine's states (E2E_SMStateType)."""
+
+    NODATA, INIT, VALID, INVALID = "NODATA", "INIT", "VALID", "INVALID"
+
+
+#: Statuses the state machine's window counts as OK; ERROR counts as an error, REPEATED and WRONGSEQUENCE as
+#: neither (they take their place in the window all the same).
+OK_STATUSES = (Status.OK, Status.OKSOMELOST)
 
 
 class E2EReceiver:
-    """The receiver of one message: the states and transitions of docs/spec/e2e.md (COM-RX-01, COM-RX-02)."""
+    """The receiver of one message (COM-RX-01, COM-RX-02): the profile's check, the E2E state machine and the
+    consumer's rule: a frame's values are applied only when its status is OK or OKSOMELOST and the state
+    machine is VALID after it, and then only when every signal is within its DBC range (COM-VAL-01).
 
-    NODATA, VALID, INVALID = "NODATA", "VALID", "INVALID"
-    REVALIDATION_FRAMES = 2
+    The check and the state machine run once per received frame; that a message stopped coming is the
+    deadline monitoring of `timed_out` (COM-RX-02), not theirs: there is no resynchronisation on a gap."""
 
-    def __init__(self, message: cantools.database.Message) -> None:
+    def __init__(self, db: cantools.database.Database, message: cantools.database.Message) -> None:
         self.message = message
+        self.e2e = e2e_config(db, message)  # None: an unprotected message, judged on length and ranges only
         self.cycle_s = message.cycle_time / 1000.0
-        self.state = self.NODATA
-        self.reference: int | None = None
-        self.good = 0
-        self.last_frame_t: float | None = None
+        # the check's state (E2E_PXXCheckInit): the counter before a first 0, so that 0 is in sequence
+        self.last_counter = self.e2e.counter_values - 1 if self.e2e is not None else 0
+        # the state machine (E2E_SMCheckInit): NODATA, an empty window of the last WindowSize statuses
+        self.state = SMState.NODATA
+        self.window: deque[str] = deque(maxlen=self.e2e.window_size if self.e2e is not None else 1)
         self.last_accepted_t: float | None = None
         self.values: dict[str, float] | None = None
         self.last_rejected = False  # the last received frame was rejected ("invalid" in vcu.md)
-        self.resyncs = 0  # resynchronisations after a reception gap (a source that restarted)
         self.accepted = self.rejected = 0  # for --stats
+        self.statuses: Counter[str] = Counter()  # status -> frames, for --stats
 
     def on_frame(self, data: bytes, t: float) -> bool:
         """Judge one frame; return whether it was accepted and its values applied."""
-        if self.last_frame_t is not None and t - self.last_frame_t > 3 * self.cycle_s:
-            self._resynchronise()  # e2e.md "Timeout and resynchronisation": only after a real reception gap
-        self.last_frame_t = t
-        accepted = self._judge_protection(data) and self._apply_if_in_range(data, t)
+        if self.e2e is None:
+            applicable = len(data) == self.message.length  # COM-RX-01: the DBC length
+        else:
+            status = self.check(data)
+            self.statuses[status] += 1
+            state = self.sm_check(status)  # every status enters the state machine, ERROR included
+            applicable = status in OK_STATUSES and state == SMState.VALID
+        accepted = applicable and self._apply_if_in_range(data, t)
         self.last_rejected = not accepted
         self.accepted += accepted
         self.rejected += not accepted
@@ -127,33 +317,56 @@ class E2EReceiver:
         """COM-RX-02: no accepted frame for more than 3 cycles, or never one since power-up."""
         return self.last_accepted_t is None or now - self.last_accepted_t > 3 * self.cycle_s
 
-    def _resynchronise(self) -> None:
-        self.state, self.reference, self.good = self.NODATA, None, 0
-        self.resyncs += 1
+    def check(self, data: bytes) -> str:
+        """The profile's check of one frame (E2E_PXXCheck with new data): ERROR when the length is not the DBC's
+        or the library finds the CRC wrong (the counter is not read: the reference counter stays); else the
+        counter's step from the previous frame's, modulo the counter's values: 1 OK, 0 REPEATED,
+        2 to E2E_MaxDeltaCounter OKSOMELOST, any other WRONGSEQUENCE (too far, back, a second sender). Every
+        frame but an ERROR becomes the reference."""
+        assert self.e2e is not None
+        if len(data) != self.message.length or not self.e2e.check(data):
+            return Status.ERROR
+        counter = self.e2e.counter_of(data)
+        if counter >= self.e2e.counter_values:  # P01/P11: 15 is never sent (the library's check refuses it too)
+            return Status.ERROR
+        step = (counter - self.last_counter) % self.e2e.counter_values
+        self.last_counter = counter
+        if step == 1:
+            return Status.OK
+        if step == 0:
+            return Status.REPEATED
+        return Status.OKSOMELOST if step <= self.e2e.max_delta_counter else Status.WRONGSEQUENCE
 
-    def _judge_protection(self, data: bytes) -> bool:
-        """The transition table of e2e.md; every intact frame becomes the new reference counter."""
-        intact = len(data) == self.message.length == 8 and frame_checksum(self.message.frame_id, data) == data[7]
-        if not intact:  # ERROR: the reference counter stays
-            if self.state != self.NODATA:
-                self.state, self.good = self.INVALID, 0
-            return False
-        counter = data[6] & 0x0F
-        delta = None if self.reference is None else (counter - self.reference) % 16
-        self.reference = counter
-        if self.state == self.NODATA:  # INITIAL
-            self.state = self.VALID
-            return True
-        if delta != 1:  # REPEATED or WRONG_SEQUENCE
-            self.state, self.good = self.INVALID, 0
-            return False
-        if self.state == self.VALID:
-            return True
-        self.good += 1  # INVALID: re-validation, COM-RX-01 "the first in-sequence frame is still rejected"
-        if self.good >= self.REVALIDATION_FRAMES:
-            self.state, self.good = self.VALID, 0
-            return True
-        return False
+    def sm_check(self, status: str) -> str:
+        """The E2E state machine (E2E_SMCheck), one status in, the state after it out. NODATA leaves for INIT at
+        the first status that is not ERROR, with the window emptied and that status not in it. In the other
+        states the status enters the window (the oldest of WindowSize leaves) and the window's OK count (OK and
+        OKSOMELOST) and ERROR count decide: INIT -> VALID with at least MinOkStateInit OK and at most
+        MaxErrorStateInit ERROR, -> INVALID with more ERROR than that; VALID stays with at least MinOkStateValid
+        OK and at most MaxErrorStateValid ERROR, else -> INVALID; INVALID -> VALID with at least
+        MinOkStateInvalid OK and at most MaxErrorStateInvalid ERROR."""
+        e2e = self.e2e
+        assert e2e is not None
+        if self.state == SMState.NODATA:
+            if status != Status.ERROR:
+                self.window.clear()
+                self.state = SMState.INIT
+            return self.state
+        self.window.append(status)
+        ok = sum(1 for s in self.window if s in OK_STATUSES)
+        errors = self.window.count(Status.ERROR)
+        fits = ok >= e2e.min_ok[self.state] and errors <= e2e.max_error[self.state]
+        if self.state == SMState.INIT:
+            if fits:
+                self.state = SMState.VALID
+            elif errors > e2e.max_error[SMState.INIT]:
+                self.state = SMState.INVALID
+        elif self.state == SMState.VALID:
+            if not fits:
+                self.state = SMState.INVALID
+        elif fits:  # INVALID
+            self.state = SMState.VALID
+        return self.state
 
     def _apply_if_in_range(self, data: bytes, t: float) -> bool:
         """COM-VAL-01 / COM-RX-01: a frame with a signal outside its DBC range is rejected, no E2E error."""
@@ -172,24 +385,29 @@ class E2EReceiver:
 
 
 class E2ESender:
-    """COM-E2E-01/02/03: write the signals, then the AliveCounter, then the Checksum. The counter advances when
-    the frame was transmitted (`sent`): a frame the driver refused is not on the bus, and its counter value goes
-    with the next frame, so that receivers see neither a skipped nor a repeated value (COM-E2E-01)."""
+    """COM-E2E-01/02/03: write the signals, then the library writes the next counter and the CRC. The counter
+    advances when the frame was transmitted (`sent`): a frame the driver refused is not on the bus, and its
+    counter value goes with the next frame, so that receivers see neither a skipped nor a repeated value."""
 
-    def __init__(self, message: cantools.database.Message) -> None:
+    def __init__(self, db: cantools.database.Database, message: cantools.database.Message) -> None:
         self.message = message
-        self.counter = 0  # COM-E2E-01: the first value after power-up is free
+        self.e2e = e2e_config(db, message)
+        # the counter of the last transmitted frame; the library's increment makes the first frame's 0
+        # (COM-E2E-01: the first value after power-up is free)
+        self.counter = self.e2e.counter_values - 1 if self.e2e is not None else 0
 
     def frame(self, values: dict[str, float]) -> can.Message:
+        # the CRC's and the counter's signals get their start value: protect writes over them
         raw = {s.name: _raw_on_grid(s, values.get(s.name, s.initial or 0)) for s in self.message.signals}
-        raw["AliveCounter"], raw["Checksum"] = self.counter, 0
         data = bytearray(self.message.encode(raw, scaling=False, strict=False))  # COM-FRM-01: unused bits 0
-        data[7] = frame_checksum(self.message.frame_id, data)
+        if self.e2e is not None:
+            self.e2e.protect(data, self.counter)
         return can.Message(arbitration_id=self.message.frame_id, data=bytes(data), is_extended_id=False)
 
-    def sent(self) -> None:
-        """The last frame built went out: the next one carries the next counter value (COM-E2E-01)."""
-        self.counter = (self.counter + 1) % 16
+    def sent(self, frame: can.Message) -> None:
+        """The frame went out: the next one carries the next counter value (COM-E2E-01)."""
+        if self.e2e is not None:
+            self.counter = self.e2e.counter_of(frame.data)
 
 
 def _raw_on_grid(signal: cantools.database.Signal, value: float) -> int:
@@ -407,28 +625,29 @@ def exceeds_limits(command: Command) -> bool:
 # ==============================================================================================================
 # Vehicle speed (VCU-OUT-05, VCU-4WS-01)
 # ==============================================================================================================
-def _rigid_fit_matrix() -> np.ndarray:
-    """Least-squares pseudo-inverse of u_i = (v_x + w y_i, v_y - w x_i) over the four wheels (VCU-OUT-05)."""
-    rows = []
-    for xi, yi in WHEELS.values():
-        rows.append([1.0, 0.0, yi])
-        rows.append([0.0, 1.0, -xi])
-    return np.linalg.pinv(np.array(rows))
-
-
-RIGID_FIT = _rigid_fit_matrix()
+#: Sums over the four wheels for the rigid fit's normal equations (VCU-OUT-05)
+_N = len(WHEELS)
+_SUM_X = sum(x for x, _ in WHEELS.values())
+_SUM_Y = sum(y for _, y in WHEELS.values())
+_SUM_R2 = sum(x * x + y * y for x, y in WHEELS.values())
 
 
 def rigid_fit(status: dict[str, tuple[float, float]]) -> tuple[float, float, float]:
-    """(v_x, v_y, omega) of the centre from each wheel's (SteerAngle deg, WheelSpeed rpm) (VCU-OUT-05)."""
-    velocities = []
-    for name in WHEELS:
+    """(v_x, v_y, omega) of the centre from each wheel's (SteerAngle deg, WheelSpeed rpm) (VCU-OUT-05): the least
+    squares fit of u_i = (v_x + omega y_i, v_y - omega x_i) to the wheels' velocities, by its normal equations
+    (n v_x + omega Sy = Sux, n v_y - omega Sx = Suy, v_x Sy - v_y Sx + omega Sr2 = S(y ux - x uy))."""
+    sum_ux = sum_uy = moment = 0.0
+    for name, (xi, yi) in WHEELS.items():
         angle, rpm = status[name]
         speed = rpm / RPM_PER_MPS
         a = math.radians(angle)
-        velocities += [speed * math.sin(a), speed * math.cos(a)]
-    v_x, v_y, omega = RIGID_FIT @ np.array(velocities)
-    return float(v_x), float(v_y), float(omega)
+        ux, uy = speed * math.sin(a), speed * math.cos(a)
+        sum_ux += ux
+        sum_uy += uy
+        moment += yi * ux - xi * uy
+    omega = ((moment - (_SUM_Y * sum_ux - _SUM_X * sum_uy) / _N)
+             / (_SUM_R2 - (_SUM_X * _SUM_X + _SUM_Y * _SUM_Y) / _N))
+    return (sum_ux - omega * _SUM_Y) / _N, (sum_uy + omega * _SUM_X) / _N, omega
 
 
 def signed_vehicle_speed(v_x: float, v_y: float, forward: tuple[float, float]) -> float:
@@ -493,7 +712,7 @@ class Vcu:
 
     def __init__(self, db: cantools.database.Database, start: float) -> None:
         self.start = start
-        self.rx = {name: E2EReceiver(db.get_message_by_name(name)) for name in INPUTS}
+        self.rx = {name: E2EReceiver(db, db.get_message_by_name(name)) for name in INPUTS}
         self.by_id = {r.message.frame_id: r for r in self.rx.values()}
         self.last_executed = POWER_UP  # VCU-FLT-08: 0 deg before any executed command
         self.out = Outputs()
@@ -502,7 +721,8 @@ class Vcu:
 
     def receive(self, msg: can.Message, t: float) -> None:
         receiver = self.by_id.get(msg.arbitration_id)
-        if receiver is not None and not msg.is_extended_id and not msg.is_remote_frame:
+        # COM-RX-03: an error frame belongs to no message
+        if receiver is not None and not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame):
             receiver.on_frame(bytes(msg.data), t)
 
     # --- one evaluation (VCU-GEN-02) ---
@@ -598,14 +818,14 @@ class Transmitter:
     """Builds the VCU's frames from the latest outputs (COM-E2E-*, COM-VAL-01)."""
 
     def __init__(self, db: cantools.database.Database) -> None:
-        self.wheel_cmd = {w: E2ESender(db.get_message_by_name(f"VCU_WheelCmd_{w}")) for w in WHEELS}
-        self.state = E2ESender(db.get_message_by_name("VCU_VehicleState"))
-        self.centre = E2ESender(db.get_message_by_name("VCU_RotationCentre"))
+        self.wheel_cmd = {w: E2ESender(db, db.get_message_by_name(f"VCU_WheelCmd_{w}")) for w in WHEELS}
+        self.state = E2ESender(db, db.get_message_by_name("VCU_VehicleState"))
+        self.centre = E2ESender(db, db.get_message_by_name("VCU_RotationCentre"))
         self.by_id = {s.message.frame_id: s for s in (*self.wheel_cmd.values(), self.state, self.centre)}
 
     def sent(self, frame: can.Message) -> None:
         """COM-E2E-01: a transmitted frame advances its message's AliveCounter."""
-        self.by_id[frame.arbitration_id].sent()
+        self.by_id[frame.arbitration_id].sent(frame)
 
     def wheel_frames(self, out: Outputs) -> list[can.Message]:
         """VCU-OUT-01: SteerAngleCmd and WheelSpeedCmd of each wheel."""
@@ -658,9 +878,11 @@ class TaskStats:
     max_late_ms: float = 0.0
 
     def report(self, vcu: Vcu) -> str:
-        inputs = " ".join(f"{name}:{rx.accepted}/{rx.rejected}/{rx.resyncs}" for name, rx in vcu.rx.items())
+        inputs = " ".join(f"{name}:{rx.accepted}/{rx.rejected}/{rx.state}"
+                          + "".join(f" {s}={n}" for s, n in sorted(rx.statuses.items()) if s != OK)
+                          for name, rx in vcu.rx.items())
         line = (f"stats faults={dict(sorted(self.faults.items()))} skipped={self.skipped_slots} "
-                f"max_late={self.max_late_ms:.1f}ms accepted/rejected/resyncs {inputs}")
+                f"max_late={self.max_late_ms:.1f}ms accepted/rejected/E2E state {inputs}")
         self.faults.clear()
         self.skipped_slots, self.max_late_ms = 0, 0.0
         return line
