@@ -22,7 +22,9 @@ from bench.faults import KINDS, Fault
 from bench.monitor import InvalidFrame
 from bench.results import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
+from bench.timing import SelfTiming
 
+BENCH_FIGURES = 8            # figures of the bench's own timing on a case's record at most (the worst)
 GAP_CYCLES = 2.5             # a plotted signal's line breaks where frames are this many cycles apart
 _NUMBER = re.compile(r"(?<![A-Za-z0-9])\d+(?:\.\d+)?(?![A-Za-z])")   # 7, 0.5; not the 2 of "E2E"
 
@@ -71,6 +73,7 @@ class Case:
             raise BenchError("a test case needs the runner station")
         self._runner = runner
         self._monitor = runner.monitor
+        self._monitor.history_from = self.start   # the case's whole history is kept (bench.monitor)
         self._timers: list[_Timer] = []
         self._mark_counts()
         self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
@@ -134,6 +137,7 @@ class Case:
         if self._closed:
             return
         self._closed = True
+        self._monitor.history_from = math.inf   # between cases only the last HISTORY_CAP frames are kept
         now = self.now
         plan = self.session.faults
         plan.end_case(now)
@@ -151,6 +155,18 @@ class Case:
         seen = monitor.invalid_log[max(0, self._case_invalid_mark - monitor.invalid_dropped):]
         counts = Counter((f.message, _NUMBER.sub("N", f.reason)) for f in seen)
         self.result.invalid = [[m, r, str(n)] for (m, r), n in sorted(counts.items(), key=lambda x: -x[1])]
+        self.bench_verdict()
+
+    def bench_verdict(self) -> str:
+        """Real time: the bench's own timing during the case so far (bench.timing.SelfTiming) onto its record
+        (`bench_timing`, worst first), and the line that makes it inconclusive ("" when every figure is within its
+        bound; always "" in virtual time, where the bench is never late). Records no step."""
+        timing = self.session.self_timing
+        if timing is None:
+            return ""
+        figures = timing.since(self.result.sim_start)
+        self.result.bench_timing = [f.text() for f in figures[:BENCH_FIGURES]]
+        return SelfTiming.verdict(figures)
 
     def _stop_timers(self) -> None:
         for timer in self._timers:
@@ -280,29 +296,31 @@ class Case:
 
     # -- checks ------------------------------------------------------------------------------------
     def expect(self, name: str, measured: float, expected: float, *, abs_tol: float = 0.0,
-               rel_tol: float = 0.0, unit: str = "", detail: str = "") -> bool:
+               rel_tol: float = 0.0, unit: str = "", detail: str = "", node: str = "") -> bool:
         """Check that `measured` is within max(`abs_tol`, `rel_tol`·|`expected`|) of `expected` (`unit`:
         the unit of all three, shown in the report). Records one step: measured, expected, the tolerance,
         pass/fail; a NaN on either side fails (a `value()` without frames is recorded as "no frames of
-        MESSAGE"). Returns the verdict."""
+        MESSAGE"). `node`: the node the check judges when it is not the case's DUT (e.g. the plant's model):
+        the step is reported as that node's and never fails the case. Returns the verdict."""
         if abs_tol < 0 or rel_tol < 0:
             raise BenchError(f"check {name!r}: tolerances must not be negative")
         ok = within(float(measured), float(expected), abs_tol, rel_tol)
         return self._steps.record(name, ok, _shown(measured), _shown(expected),
-                                  tolerance_text(abs_tol, rel_tol, unit), unit, detail)
+                                  tolerance_text(abs_tol, rel_tol, unit), unit, detail, node)
 
     def expect_true(self, name: str, condition: bool, *, measured: float | str | None = None,
-                    expected: float | str | None = None, detail: str = "") -> bool:
+                    expected: float | str | None = None, detail: str = "", node: str = "") -> bool:
         """Check a condition the case computed itself. Records one step, pass when `condition` is true,
-        with the `measured` and `expected` it is given (for the reader of the report). Returns the verdict."""
-        return self._steps.record(name, bool(condition), measured, expected, "", "", detail)
+        with the `measured` and `expected` it is given (for the reader of the report); `node` as `expect`.
+        Returns the verdict."""
+        return self._steps.record(name, bool(condition), measured, expected, "", "", detail, node)
 
     def expect_between(self, name: str, measured: float, low: float, high: float, *, unit: str = "",
-                       detail: str = "") -> bool:
+                       detail: str = "", node: str = "") -> bool:
         """Check that `low` ≤ `measured` ≤ `high` (bounds included, all in `unit`). Records one step with
-        expected "[low, high]" and tolerance "range"; a NaN fails. Returns the verdict."""
+        expected "[low, high]" and tolerance "range"; a NaN fails; `node` as `expect`. Returns the verdict."""
         ok = math.isfinite(float(measured)) and low <= float(measured) <= high
-        return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail)
+        return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail, node)
 
     def eventually(self, name: str, predicate: Callable[[], bool], within_s: float) -> bool:
         """Run until `predicate()` is true, at most `within_s` s of bench time. Records one step: pass
@@ -329,18 +347,23 @@ class Case:
         cycle (GenMsgCycleTime), p99 ≤ p99_max × cycle and max < max_max × cycle (the timeout bound), as
         fractions. Without `messages`: every periodic message seen on the bus since the case started.
         Records one step per message (measured p50 / p99 / max in ms); fewer than `min_frames` intervals
-        fail. Returns True when every message passed."""
+        fail. A message none of whose senders is among the case's DUTs (`dut` markers; e.g. a sensor the bench
+        simulates) is judged as its sender's: the step says so and never fails the case. Returns True when every
+        message passed."""
         ok_all = True
+        duts = self.result.duts
         names = list(messages) if messages is not None else [
             n for n, s in self._monitor.by_name.items()
             if s.codec.cycle_time and s.intervals_dropped + len(s.intervals) > self._interval_marks.get(n, 0)]
         for name in names:
             state = self._monitor.state(name)
             cycle = state.codec.cycle_time
+            senders = state.codec.senders
+            node = "" if not duts or set(senders) & set(duts) else ",".join(senders)
             intervals = state.intervals[max(0, self._interval_marks.get(name, 0) - state.intervals_dropped):]
             if cycle is None or len(intervals) < min_frames:
                 ok_all &= self._steps.record(f"cycle time {name}", False, f"{len(intervals)} intervals",
-                                             f"≥ {min_frames}", "", "s")
+                                             f"≥ {min_frames}", "", "s", node=node)
                 continue
             p50, p99, worst = percentile(intervals, 50), percentile(intervals, 99), max(intervals)
             ms = 1000.0
@@ -348,7 +371,7 @@ class Case:
             ok_all &= self._steps.record(
                 f"cycle time {name}", ok, f"p50 {p50 * ms:.2f} / p99 {p99 * ms:.2f} / max {worst * ms:.2f}",
                 f"{cycle * ms:g} ms", f"p50 ±{p50_band:.0%}, p99 ≤ {p99_max:g}×, max < {max_max:g}×", "ms",
-                detail=f"{len(intervals)} intervals")
+                detail=f"{len(intervals)} intervals", node=node)
         return ok_all
 
     # -- report ------------------------------------------------------------------------------------

@@ -160,10 +160,12 @@ class Failure:
 def failures(run: RunResult) -> list[Failure]:
     out = []
     for i, case in enumerate(run.cases, 1):
-        if case.outcome in FAILED:
+        if case.outcome in FAILED or case.outcome == "inconclusive":
             failed = case.failed_steps
             line = ""
-            if case.message and not case.message.startswith("failed steps:"):
+            if case.outcome == "inconclusive":
+                line = (case.inconclusive or case.message)[:300]
+            elif case.message and not case.message.startswith("failed steps:"):
                 line = next((ln for ln in reversed(case.message.splitlines()) if ln.strip()), "")[:300]
             out.append(Failure(i, case, failed[:FAILED_STEPS_SHOWN], max(0, len(failed) - FAILED_STEPS_SHOWN), line))
     return out
