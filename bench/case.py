@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from bisect import bisect_left
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from typing import Literal
@@ -22,7 +23,8 @@ from bench.faults import KINDS, Fault
 from bench.monitor import InvalidFrame
 from bench.results import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
-from bench.timing import SelfTiming
+from bench.station import LATE_CYCLES
+from bench.timing import LATE_FLOOR, Late, SelfTiming
 
 BENCH_FIGURES = 8            # figures of the bench's own timing on a case's record at most (the worst)
 GAP_CYCLES = 2.5             # a plotted signal's line breaks where frames are this many cycles apart
@@ -158,15 +160,44 @@ class Case:
         self.bench_verdict()
 
     def bench_verdict(self) -> str:
-        """Real time: the bench's own timing during the case so far (bench.timing.SelfTiming) onto its record
-        (`bench_timing`, worst first), and the line that makes it inconclusive ("" when every figure is within its
-        bound; always "" in virtual time, where the bench is never late). Records no step."""
+        """Real time: the bench's own timing during the case so far (bench.timing.SelfTiming) and the gaps of the
+        DUT's inputs from other processes (`_input_gaps`) onto its record (`bench_timing`, worst first), and the
+        line that makes it inconclusive ("" when every figure is within its bound; always "" in virtual time, where
+        the bench is never late). Records no step."""
         timing = self.session.self_timing
         if timing is None:
             return ""
-        figures = timing.since(self.result.sim_start)
+        figures = timing.since(self.result.sim_start) + self._input_gaps()
+        figures.sort(key=lambda e: (-(e.late / e.bound if e.bound else 0.0), -e.late))
         self.result.bench_timing = [f.text() for f in figures[:BENCH_FIGURES]]
         return SelfTiming.verdict(figures)
+
+    def _input_gaps(self) -> list[Late]:
+        """The worst gap since the scenario started of every periodic message from a node that is neither a DUT
+        of the case nor simulated in this process (`bench plant` in another process, another ECU): a frame later
+        than its cycle by more than LATE_CYCLES cycles leaves its receivers (the DUT among them) a timeout that
+        the DUT did not cause. Measured on the receive stamps of its valid frames (the runner's history)."""
+        duts = set(self.result.duts)
+        if not duts:
+            return []
+        session = self.session
+        own = set(session.codebook.nodes) - session.external   # simulated here: timed as they are sent
+        out = []
+        for name, state in self._monitor.by_name.items():
+            cycle, senders = state.codec.cycle_time, set(state.codec.senders)
+            if not cycle or not senders or senders & duts or senders & own:
+                continue
+            ts = state.history_t
+            times = np.asarray(ts[bisect_left(ts, self.start):], dtype=float)
+            if times.size < 2:
+                continue
+            gaps = np.diff(times)
+            i = int(np.argmax(gaps))
+            late = float(gaps[i]) - cycle
+            if late > LATE_FLOOR:
+                out.append(Late(f"input {name} from {'/'.join(sorted(senders))}", late, float(times[i]) + cycle,
+                                LATE_CYCLES * cycle))
+        return out
 
     def _stop_timers(self) -> None:
         for timer in self._timers:

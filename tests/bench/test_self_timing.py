@@ -183,6 +183,24 @@ def test_a_case_whose_stimulus_was_late_past_its_bound_is_inconclusive_with_the_
     case.close()
 
 
+def test_a_gap_in_an_input_from_another_process_is_no_failure_of_the_dut(
+        realtime_runner: tuple[BenchSession, TimingCollector]) -> None:
+    """`bench plant` in another process (here: frames given to the runner's monitor by hand) starved for 100 ms:
+    its WHL_Status_FL, which the DUT reads, came 90 ms late; a VCU case that failed under it is inconclusive."""
+    session, _ = realtime_runner
+    case = _case(session, duts=["VCU"])
+    restbus = Restbus(session.codebook, {"WHL_FL"})
+    slot = restbus.periodic["WHL_Status_FL"]
+    t0 = case.start
+    for t in [t0 + 0.01 * i for i in range(1, 11)] + [t0 + 0.2 + 0.01 * i for i in range(10)]:
+        session.monitor.on_frame(t, slot.codec.frame_id, restbus.build(slot), "rx")
+    line = case.bench_verdict()
+    assert "on input WHL_Status_FL from WHL_FL" in line and "late by 90.0 ms" in line, line
+    judged = _case(session, duts=["WHL_FL"])   # the same gap in a case that judges the wheel is the wheel's
+    judged.start = t0
+    assert "WHL_Status_FL" not in judged.bench_verdict()
+
+
 def test_the_bench_on_time_rules_nothing(realtime_runner: tuple[BenchSession, TimingCollector]) -> None:
     session, _ = realtime_runner
     case = _case(session)
