@@ -94,7 +94,7 @@ class CaseResult:
     invalid_frames: int = 0      # frames the monitor rejected during the case
     invalid: list[list[str]] = field(default_factory=list)    # [message, reason, count] of those frames
     # The bench's own timing during the case (real time only; bench.timing.SelfTiming): one line per figure,
-    # e.g. "stimulus DRV_Pedals: worst 146.0 ms late at 12.300 s (bound 20 ms)", and the one line that made the
+    # e.g. "stimulus MSG: late by 146.0 ms at 12.300 s, bound 20 ms", and the one line that made the
     # case inconclusive ("" when none did).
     bench_timing: list[str] = field(default_factory=list)
     inconclusive: str = ""

@@ -452,7 +452,7 @@ class SelfTiming:
     @staticmethod
     def verdict(figures: Sequence[Late]) -> str:
         """The line that makes a case inconclusive ("" when no figure is past its bound), e.g. "bench late by
-        146.0 ms on stimulus DRV_Pedals at 12.300 s (its receivers time it out after 20 ms of lateness)"."""
+        146.0 ms on stimulus MSG at 12.300 s (bound 20 ms)"."""
         over = [f for f in figures if f.late > f.bound]
         if not over:
             return ""
