@@ -154,6 +154,7 @@ class Station:
         # sent this tick: (id, data, error frame, the tick's time or the end of its injected delay, on the schedule)
         self._outbox: list[tuple[int, bytes, bool, float, bool]] = []
         self._due: dict[int, int] = {}
+        self._t_before = 0.0
 
     @property
     def stamped_batches(self) -> bool:
@@ -224,6 +225,7 @@ class Station:
             msg = bus.recv(0.0)
 
     def tick(self, tick: int, t: float, dt: float) -> None:
+        self._t_before = self.t   # the previous tick's time: a frame due before it was parked then (_flush)
         self.t = t
         if self.drained:   # the clock's wait just found the socket empty (bench.clock.WallClock.wait_until)
             self.drained = False
@@ -272,7 +274,10 @@ class Station:
             if timing is None or state is None or is_error:
                 continue
             tick = due_ticks.get(frame_id) if scheduled else None
-            due_t = due if tick is None else tick * dt   # a late station skipped ticks: when it was really due
+            # A late station skipped ticks: the frame was due at its schedule's tick. One due before the previous
+            # tick (which ran and took every frame due by then) was stopped then and resumed since (stop_sending,
+            # a scenario's stimulus): due from that tick, not from when it was stopped.
+            due_t = due if tick is None else max(tick * dt, self._t_before)
             cycle = state.codec.cycle_time
             timing.add(f"{label} {state.codec.name}", max(0.0, sent - due_t), due_t,
                        LATE_CYCLES * cycle if cycle else float("inf"))

@@ -132,6 +132,19 @@ def test_on_time_sending_is_timed_within_a_tick(realtime_runner: tuple[BenchSess
     assert stats.intervals >= 30 and abs(stats.p50 - 0.01) < 0.002, stats
 
 
+def test_a_message_stopped_and_resumed_is_not_late(realtime_runner: tuple[BenchSession, TimingCollector]) -> None:
+    """A stop on purpose (stop_sending, a scenario's stimulus) is no lateness: the resumed message is due from its
+    resumption, not from its schedule before the stop."""
+    session, _ = realtime_runner
+    case = _case(session)
+    case.stop_sending(STIMULUS)
+    case.run(0.3)
+    case.resume_sending(STIMULUS)
+    case.run(0.1)
+    worst = {e.what: e for e in session.self_timing.since(0.0)} if session.self_timing else {}
+    assert f"stimulus {STIMULUS}" not in worst or worst[f"stimulus {STIMULUS}"].late < 0.02, worst
+
+
 # -- the watchdog -------------------------------------------------------------------------------------------------
 class _Stall:
     """A behaviour that blocks its tick loop once, at bench time `at`, for `seconds`."""
