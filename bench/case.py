@@ -18,7 +18,7 @@ import numpy as np
 
 from bench.checks import StepLog, percentile, tolerance_text, within
 from bench.codec import SignalCodec
-from bench.errors import BenchError
+from bench.errors import BenchError, Inconclusive
 from bench.faults import KINDS, Fault
 from bench.monitor import InvalidFrame
 from bench.results import CaseResult, FaultRecord, Plot, Series, Table
@@ -228,8 +228,9 @@ class Case:
         2 s of bench time) for the plant to echo the id in `[scenario] ack`; `elapsed`, `history` and
         `invalid_log` count from then on. `stimulus`: the stimulus messages this scenario sends (besides the
         scenario message itself); the others stay off the bus until the next scenario (a vehicle whose network
-        reads none of them need not carry them). Default: every stimulus message. Raises BenchError when the
-        plant does not acknowledge or the project has no [scenario]. Records no step."""
+        reads none of them need not carry them). Default: every stimulus message. Raises Inconclusive (a
+        BenchError: the case's outcome is "inconclusive", never the DUT's failure) when the plant does not
+        acknowledge, BenchError when the project has no [scenario]. Records no step."""
         protocol = self.session.project.scenario
         if protocol is None:
             raise BenchError(f"start_scenario: {self.session.project.path} has no [scenario] table "
@@ -258,8 +259,9 @@ class Case:
             return latest is not None and int(latest[ack_signal]) == scenario
 
         if not self.wait_until(acknowledged, protocol.timeout):
-            raise BenchError(f"the plant did not acknowledge scenario {scenario} within "
-                             f"{protocol.timeout:g} s ({ack}.{ack_signal})")
+            # the bench's own plant could not set the case up (starved, or not running): no verdict on the DUT
+            raise Inconclusive(f"the plant did not acknowledge scenario {scenario} within "
+                               f"{protocol.timeout:g} s ({ack}.{ack_signal}): the case could not start")
         self.start = self.now
         self._mark_counts()
 
