@@ -275,6 +275,9 @@ def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None
     if case is None:
         return
     excinfo = outcome.excinfo
+    if excinfo is not None and (not isinstance(excinfo[1], Exception)
+                                or isinstance(excinfo[1], (pytest.skip.Exception, pytest.xfail.Exception))):
+        return   # a skip, an xfail, an interrupt: pytest's own
     failed = case.result.failed_steps
     lines = [f"{s.name}: measured {s.measured}, expected {s.expected} ({s.tolerance})" for s in failed]
     if excinfo is not None and isinstance(excinfo[1], Inconclusive):

@@ -301,6 +301,12 @@ def test_on_time(bench):
     bench.run(0.1)
     bench.expect_true("the DUT's", True)
     bench.expect("the plant's model", 1.0, 2.0, node="PLANT")   # judges the PLANT: never fails a VCU case
+
+
+def test_skipped_while_late(bench):
+    bench.every(0.2, lambda now: time.sleep(0.08))
+    bench.run(0.3)
+    pytest.skip("a skip stays a skip, however late the bench")
 '''
 
 
@@ -312,9 +318,9 @@ def test_bench_run_reports_an_inconclusive_case_apart_and_exits_3(tmp_path: Path
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == EXIT_INCONCLUSIVE, run.stdout + run.stderr
     assert "inconclusive test_user::test_late: bench late by " in run.stdout, run.stdout
-    assert "1 passed, 1 inconclusive" in run.stdout and "bench run: INCONCLUSIVE" in run.stdout, run.stdout
+    assert "1 passed, 1 inconclusive, 1 skipped" in run.stdout and "bench run: INCONCLUSIVE" in run.stdout, run.stdout
     suite = ET.parse(out / "junit.xml").getroot().find("testsuite")
-    assert suite is not None and suite.get("failures") == "0" and suite.get("skipped") == "1"
+    assert suite is not None and suite.get("failures") == "0" and suite.get("skipped") == "2"
     cases = {c.get("name"): c for c in suite.findall("testcase")}
     skipped = cases["test_late"].find("skipped")
     assert skipped is not None and skipped.get("type") == "inconclusive"
@@ -324,6 +330,7 @@ def test_bench_run_reports_an_inconclusive_case_apart_and_exits_3(tmp_path: Path
     record = {c["name"]: c for c in json.loads((out / "results.json").read_text())["cases"]}
     assert record["test_late"]["outcome"] == "inconclusive" and record["test_late"]["inconclusive"]
     assert record["test_on_time"]["outcome"] == "passed"
+    assert record["test_skipped_while_late"]["outcome"] == "skipped"
     assert [s["node"] for s in record["test_on_time"]["steps"] if s["verdict"] == "fail"] == ["PLANT"]
     html = (out / "report.html").read_text()
     assert "Inconclusive: bench late by" in html and "judges PLANT, not the DUT" in html
