@@ -76,6 +76,8 @@ class Case:
         self._runner = runner
         self._monitor = runner.monitor
         self._monitor.history_from = self.start   # the case's whole history is kept (bench.monitor)
+        if session.self_timing is not None:       # the bench's own timing counts from here (not the pause before)
+            session.self_timing.resume(self.start)
         self._timers: list[_Timer] = []
         self._mark_counts()
         self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
@@ -160,14 +162,15 @@ class Case:
         self.bench_verdict()
 
     def bench_verdict(self) -> str:
-        """Real time: the bench's own timing during the case so far (bench.timing.SelfTiming) and the gaps of the
-        DUT's inputs from other processes (`_input_gaps`) onto its record (`bench_timing`, worst first), and the
-        line that makes it inconclusive ("" when every figure is within its bound; always "" in virtual time, where
-        the bench is never late). Records no step."""
+        """Real time: the bench's own timing (bench.timing.SelfTiming) and the gaps of the DUT's inputs from other
+        processes (`_input_gaps`) since the case's latest scenario started (or the case, without one: before it the
+        bench was setting the case up, and an in-process plant replaying the pause between cases) onto its record
+        (`bench_timing`, worst first), and the line that makes it inconclusive ("" when every figure is within its
+        bound; always "" in virtual time, where the bench is never late). Records no step."""
         timing = self.session.self_timing
         if timing is None:
             return ""
-        figures = timing.since(self.result.sim_start) + self._input_gaps()
+        figures = timing.since(self.start) + self._input_gaps()
         figures.sort(key=lambda e: (-(e.late / e.bound if e.bound else 0.0), -e.late))
         self.result.bench_timing = [f.text() for f in figures[:BENCH_FIGURES]]
         return SelfTiming.verdict(figures)

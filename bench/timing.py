@@ -417,13 +417,22 @@ class SelfTiming:
       frame's receive stamp; a lower bound: that read may be up to a tick's work old).
 
     Every figure goes into a whole-run accumulator (the report's table `table`), and every lateness above
-    LATE_FLOOR into a bounded list of events, from which `since` gives a case its worst figures."""
+    LATE_FLOOR into a bounded list of events, from which `since` gives a case its worst figures. What was due
+    before the case in progress started (`resume`) is not counted: between cases the bench pauses on purpose."""
 
     def __init__(self) -> None:
         self.sources: dict[str, _LateAccumulator] = {}
         self.events: deque[Late] = deque(maxlen=LATE_EVENTS)
+        self.counted_from = -math.inf
+
+    def resume(self, t: float) -> None:
+        """A case starts at bench time t: what was due before it (while the bench paused between cases, by
+        design, or set itself up) is not counted."""
+        self.counted_from = t
 
     def add(self, what: str, late: float, t: float, bound: float = math.inf) -> None:
+        if t < self.counted_from:
+            return
         acc = self.sources.get(what)
         if acc is None:
             acc = self.sources[what] = _LateAccumulator()
@@ -472,8 +481,9 @@ class SelfTiming:
                          f"{worst.t:.3f}" if worst else "–",
                          "–" if worst is None or math.isinf(worst.bound) else f"{worst.bound * MS:g}", str(acc.over)])
         return Table(
-            "Timing: the bench's own lateness in real time (frames it sent: the clock after the driver took the frame "
-            "minus the tick it was due; tick loop: how far the wall clock had passed a tick; receive path: how long a "
-            f"frame waited in its socket, a lower bound; below {LATE_FLOOR * MS:g} ms counts as 0)",
+            "Timing: the bench's own lateness in real time, during the cases (frames it sent: the clock after the "
+            "driver took the frame minus the tick it was due; tick loop: how far the wall clock had passed a tick; "
+            f"receive path: how long a frame waited in its socket, a lower bound; below {LATE_FLOOR * MS:g} ms counts "
+            "as 0)",
             ["Source", "Count", "p50 [ms]", "p99 [ms]", "max [ms]", "max at [s]", "bound [ms]", "over the bound"],
             rows)
