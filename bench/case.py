@@ -78,6 +78,7 @@ class Case:
         self._monitor.history_from = self.start   # the case's whole history is kept (bench.monitor)
         if session.self_timing is not None:       # the bench's own timing counts from here (not the pause before)
             session.self_timing.resume(self.start)
+        session.scheduler.begin_case()            # and so does the watchdog's lag
         self._timers: list[_Timer] = []
         self._mark_counts()
         self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
