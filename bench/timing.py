@@ -468,7 +468,8 @@ class SelfTiming:
         first = over[0]
         more = f"; and {len(over) - 1} more: " + ", ".join(f"{f.what} {f.late * MS:.1f} ms" for f in over[1:4]) \
             if len(over) > 1 else ""
-        return (f"bench late by {first.late * MS:.1f} ms on {first.what} at {first.t:.3f} s "
+        who = "a sender other than the DUT" if first.what.startswith("input ") else "bench"   # Case._input_gaps
+        return (f"{who} late by {first.late * MS:.1f} ms on {first.what} at {first.t:.3f} s "
                 f"(bound {first.bound * MS:g} ms){more}")
 
     def table(self) -> Table:
