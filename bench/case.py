@@ -26,6 +26,7 @@ from bench.session import BenchSession
 from bench.station import LATE_CYCLES
 from bench.timing import LATE_FLOOR, Late, SelfTiming
 
+MAX_INPUT_GAPS = 500         # gaps past their bound looked at per message and case (they are compared pairwise)
 BENCH_FIGURES = 8            # figures of the bench's own timing on a case's record at most (the worst)
 GAP_CYCLES = 2.5             # a plotted signal's line breaks where frames are this many cycles apart
 _NUMBER = re.compile(r"(?<![A-Za-z0-9])\d+(?:\.\d+)?(?![A-Za-z])")   # 7, 0.5; not the 2 of "E2E"
@@ -177,31 +178,43 @@ class Case:
         return SelfTiming.verdict(figures)
 
     def _input_gaps(self) -> list[Late]:
-        """The worst gap since the scenario started of every periodic message from a node that is neither a DUT
-        of the case nor simulated in this process (`bench plant` in another process, another ECU): a frame later
-        than its cycle by more than LATE_CYCLES cycles leaves its receivers (the DUT among them) a timeout that
-        the DUT did not cause. Measured on the receive stamps of its valid frames (the runner's history)."""
+        """Gaps since the scenario started in the periodic messages from nodes that are neither a DUT of the case
+        nor simulated in this process (`bench plant` in another process, another ECU), on the receive stamps of
+        their valid frames (the runner's history): a frame later than its cycle by more than LATE_CYCLES cycles
+        leaves its receivers (the DUT among them) a timeout that the DUT did not cause. Such a gap counts against
+        its bound only when a message of another node gapped at the same time (a stalled process: `bench plant`
+        plays many nodes); one node silent alone is taken as meant (a sensor fault the case asked the plant for)
+        and shown as a figure only. The worst per message."""
         duts = set(self.result.duts)
         if not duts:
             return []
         session = self.session
         own = set(session.codebook.nodes) - session.external   # simulated here: timed as they are sent
-        out = []
+        worst: dict[str, Late] = {}
+        over: list[tuple[float, float, frozenset[str], Late]] = []   # gaps past their bound: (from, to, nodes, figure)
         for name, state in self._monitor.by_name.items():
-            cycle, senders = state.codec.cycle_time, set(state.codec.senders)
+            cycle, senders = state.codec.cycle_time, frozenset(state.codec.senders)
             if not cycle or not senders or senders & duts or senders & own:
                 continue
             ts = state.history_t
             times = np.asarray(ts[bisect_left(ts, self.start):], dtype=float)
             if times.size < 2:
                 continue
-            gaps = np.diff(times)
-            i = int(np.argmax(gaps))
-            late = float(gaps[i]) - cycle
-            if late > LATE_FLOOR:
-                out.append(Late(f"input {name} from {'/'.join(sorted(senders))}", late, float(times[i]) + cycle,
-                                LATE_CYCLES * cycle))
-        return out
+            lates = np.diff(times) - cycle
+            what, bound = f"input {name} from {'/'.join(sorted(senders))}", LATE_CYCLES * cycle
+            i = int(np.argmax(lates))
+            if lates[i] > LATE_FLOOR:
+                worst[name] = Late(what, float(lates[i]), float(times[i]) + cycle, math.inf)   # a figure, first
+            for j in np.nonzero(lates > bound)[0][:MAX_INPUT_GAPS]:
+                over.append((float(times[j]), float(times[j + 1]), senders,
+                             Late(what, float(lates[j]), float(times[j]) + cycle, bound)))
+        for t0, t1, nodes, late in over:
+            if any(u0 < t1 and t0 < u1 and not (nodes & others) for u0, u1, others, _ in over):
+                name = late.what.split(" ", 2)[1]
+                current = worst[name]
+                if math.isinf(current.bound) or late.late > current.late:
+                    worst[name] = late
+        return list(worst.values())
 
     def _stop_timers(self) -> None:
         for timer in self._timers:
