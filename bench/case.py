@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from bisect import bisect_left
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from typing import Literal
@@ -18,12 +19,16 @@ from pytest import fail
 
 from bench.checks import StepLog, percentile, tolerance_text, within
 from bench.codec import SignalCodec
-from bench.errors import BenchError
+from bench.errors import BenchError, Inconclusive
 from bench.faults import KINDS, Fault
 from bench.monitor import InvalidFrame
 from bench.results import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
+from bench.station import LATE_CYCLES
+from bench.timing import LATE_FLOOR, Late, SelfTiming
 
+MAX_INPUT_GAPS = 500         # gaps past their bound looked at per message and case (they are compared pairwise)
+BENCH_FIGURES = 8            # figures of the bench's own timing on a case's record at most (the worst)
 GAP_CYCLES = 2.5             # a plotted signal's line breaks where frames are this many cycles apart
 _NUMBER = re.compile(r"(?<![A-Za-z0-9])\d+(?:\.\d+)?(?![A-Za-z])")   # 7, 0.5; not the 2 of "E2E"
 
@@ -75,6 +80,10 @@ class Case:
             raise BenchError("a test case needs the runner station")
         self._runner = runner
         self._monitor = runner.monitor
+        self._monitor.history_from = self.start   # the case's whole history is kept (bench.monitor)
+        if session.self_timing is not None:       # the bench's own timing counts from here (not the pause before)
+            session.self_timing.resume(self.start)
+        session.scheduler.begin_case()            # and so does the watchdog's lag
         self._timers: list[_Timer] = []
         self._mark_counts()
         self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
@@ -173,6 +182,7 @@ class Case:
         if self._closed:
             return
         self._closed = True
+        self._monitor.history_from = math.inf   # between cases only the last HISTORY_CAP frames are kept
         now = self.now
         plan = self.session.faults
         plan.end_case(now)
@@ -190,6 +200,60 @@ class Case:
         seen = monitor.invalid_log[max(0, self._case_invalid_mark - monitor.invalid_dropped):]
         counts = Counter((f.message, _NUMBER.sub("N", f.reason)) for f in seen)
         self.result.invalid = [[m, r, str(n)] for (m, r), n in sorted(counts.items(), key=lambda x: -x[1])]
+        self.bench_verdict()
+
+    def bench_verdict(self) -> str:
+        """Real time: the bench's own timing (bench.timing.SelfTiming) and the gaps of the DUT's inputs from other
+        processes (`_input_gaps`) since the case's latest scenario started (or the case, without one: before it the
+        bench was setting the case up, and an in-process plant replaying the pause between cases) onto its record
+        (`bench_timing`, worst first), and the line that makes it inconclusive ("" when every figure is within its
+        bound; always "" in virtual time, where the bench is never late). Records no step."""
+        timing = self.session.self_timing
+        if timing is None:
+            return ""
+        figures = timing.since(self.start) + self._input_gaps()
+        figures.sort(key=lambda e: (-(e.late / e.bound if e.bound else 0.0), -e.late))
+        self.result.bench_timing = [f.text() for f in figures[:BENCH_FIGURES]]
+        return SelfTiming.verdict(figures)
+
+    def _input_gaps(self) -> list[Late]:
+        """Gaps since the scenario started in the periodic messages from nodes that are neither a DUT of the case
+        nor simulated in this process (`bench plant` in another process, another ECU), on the receive stamps of
+        their valid frames (the runner's history): a frame later than its cycle by more than LATE_CYCLES cycles
+        leaves its receivers (the DUT among them) a timeout that the DUT did not cause. Such a gap counts against
+        its bound only when a message of another node gapped at the same time (a stalled process: `bench plant`
+        plays many nodes); one node silent alone is taken as meant (a sensor fault the case asked the plant for)
+        and shown as a figure only. The worst per message."""
+        duts = set(self.result.duts)
+        if not duts:
+            return []
+        session = self.session
+        own = set(session.codebook.nodes) - session.external   # simulated here: timed as they are sent
+        worst: dict[str, Late] = {}
+        over: list[tuple[float, float, frozenset[str], Late]] = []   # gaps past their bound: (from, to, nodes, figure)
+        for name, state in self._monitor.by_name.items():
+            cycle, senders = state.codec.cycle_time, frozenset(state.codec.senders)
+            if not cycle or not senders or senders & duts or senders & own:
+                continue
+            ts = state.history_t
+            times = np.asarray(ts[bisect_left(ts, self.start):], dtype=float)
+            if times.size < 2:
+                continue
+            lates = np.diff(times) - cycle
+            what, bound = f"input {name} from {'/'.join(sorted(senders))}", LATE_CYCLES * cycle
+            i = int(np.argmax(lates))
+            if lates[i] > LATE_FLOOR:
+                worst[name] = Late(what, float(lates[i]), float(times[i]) + cycle, math.inf)   # a figure, first
+            for j in np.nonzero(lates > bound)[0][:MAX_INPUT_GAPS]:
+                over.append((float(times[j]), float(times[j + 1]), senders,
+                             Late(what, float(lates[j]), float(times[j]) + cycle, bound)))
+        for t0, t1, nodes, late in over:
+            if any(u0 < t1 and t0 < u1 and not (nodes & others) for u0, u1, others, _ in over):
+                name = late.what.split(" ", 2)[1]
+                current = worst[name]
+                if math.isinf(current.bound) or late.late > current.late:
+                    worst[name] = late
+        return list(worst.values())
 
     def _stop_timers(self) -> None:
         for timer in self._timers:
@@ -220,8 +284,9 @@ class Case:
         2 s of bench time) for the plant to echo the id in `[scenario] ack`; `elapsed`, `history` and
         `invalid_log` count from then on. `stimulus`: the stimulus messages this scenario sends (besides the
         scenario message itself); the others stay off the bus until the next scenario (a vehicle whose network
-        reads none of them need not carry them). Default: every stimulus message. Raises BenchError when the
-        plant does not acknowledge or the project has no [scenario]. Records no step."""
+        reads none of them need not carry them). Default: every stimulus message. Raises Inconclusive (a
+        BenchError: the case's outcome is "inconclusive", never the DUT's failure) when the plant does not
+        acknowledge, BenchError when the project has no [scenario]. Records no step."""
         protocol = self.session.project.scenario
         if protocol is None:
             raise BenchError(f"start_scenario: {self.session.project.path} has no [scenario] table "
@@ -252,8 +317,9 @@ class Case:
         # a setup wait, not a verdict: by the tick loop's time, as before wait_until looked at the clock (a late
         # bench reads the acknowledgement late, and the case has not started yet)
         if not (acknowledged() or self.session.run_until(self.now + protocol.timeout, acknowledged)):
-            raise BenchError(f"the plant did not acknowledge scenario {scenario} within "
-                             f"{protocol.timeout:g} s ({ack}.{ack_signal})")
+            # the bench's own plant could not set the case up (starved, or not running): no verdict on the DUT
+            raise Inconclusive(f"the plant did not acknowledge scenario {scenario} within "
+                               f"{protocol.timeout:g} s ({ack}.{ack_signal}): the case could not start")
         self.start = self.now
         self._mark_counts()
 
@@ -354,29 +420,31 @@ class Case:
 
     # -- checks ------------------------------------------------------------------------------------
     def expect(self, name: str, measured: float, expected: float, *, abs_tol: float = 0.0,
-               rel_tol: float = 0.0, unit: str = "", detail: str = "") -> bool:
+               rel_tol: float = 0.0, unit: str = "", detail: str = "", node: str = "") -> bool:
         """Check that `measured` is within max(`abs_tol`, `rel_tol`·|`expected`|) of `expected` (`unit`:
         the unit of all three, shown in the report). Records one step: measured, expected, the tolerance,
         pass/fail; a NaN on either side fails (a `value()` without frames is recorded as "no frames of
-        MESSAGE"). Returns the verdict."""
+        MESSAGE"). `node`: the node the check judges when it is not the case's DUT (e.g. the plant's model):
+        the step is reported as that node's and never fails the case. Returns the verdict."""
         if abs_tol < 0 or rel_tol < 0:
             raise BenchError(f"check {name!r}: tolerances must not be negative")
         ok = within(float(measured), float(expected), abs_tol, rel_tol)
         return self._steps.record(name, ok, _shown(measured), _shown(expected),
-                                  tolerance_text(abs_tol, rel_tol, unit), unit, detail)
+                                  tolerance_text(abs_tol, rel_tol, unit), unit, detail, node)
 
     def expect_true(self, name: str, condition: bool, *, measured: float | str | None = None,
-                    expected: float | str | None = None, detail: str = "") -> bool:
+                    expected: float | str | None = None, detail: str = "", node: str = "") -> bool:
         """Check a condition the case computed itself. Records one step, pass when `condition` is true,
-        with the `measured` and `expected` it is given (for the reader of the report). Returns the verdict."""
-        return self._steps.record(name, bool(condition), measured, expected, "", "", detail)
+        with the `measured` and `expected` it is given (for the reader of the report); `node` as `expect`.
+        Returns the verdict."""
+        return self._steps.record(name, bool(condition), measured, expected, "", "", detail, node)
 
     def expect_between(self, name: str, measured: float, low: float, high: float, *, unit: str = "",
-                       detail: str = "") -> bool:
+                       detail: str = "", node: str = "") -> bool:
         """Check that `low` ≤ `measured` ≤ `high` (bounds included, all in `unit`). Records one step with
-        expected "[low, high]" and tolerance "range"; a NaN fails. Returns the verdict."""
+        expected "[low, high]" and tolerance "range"; a NaN fails; `node` as `expect`. Returns the verdict."""
         ok = math.isfinite(float(measured)) and low <= float(measured) <= high
-        return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail)
+        return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail, node)
 
     def eventually(self, name: str, predicate: Callable[[], bool], seconds: float) -> bool:
         """Run until `predicate()` is true, at most `seconds` s of bench time. Records one step: measured =
@@ -406,8 +474,11 @@ class Case:
         fractions. Without `messages`: every periodic message seen on the bus since the case started, and
         every periodic message a node the bench simulates sends now (its restbus sends it), seen or not: one
         that never arrived fails. Records one step per message (measured p50 / p99 / max in ms); fewer than
-        `min_frames` intervals fail. Returns True when every message passed."""
+        `min_frames` intervals fail. A message none of whose senders is among the case's DUTs (`dut` markers;
+        e.g. a sensor the bench simulates) is judged as its sender's: the step says so and never fails the case.
+        Returns True when every message passed."""
         ok_all = True
+        duts = self.result.duts
         if messages is None:
             # A simulated node's periodic message the restbus sends now is due on the bus whether it came or
             # not (a fault may have dropped every frame); an external node's are known only by their frames.
@@ -420,12 +491,15 @@ class Case:
         for name in names:
             state = self._monitor.state(name)
             cycle = state.codec.cycle_time
+            senders = state.codec.senders
+            node = "" if not duts or set(senders) & set(duts) else ",".join(senders)
             intervals = state.intervals[max(0, self._interval_marks.get(name, 0) - state.intervals_dropped):]
             if cycle is None or len(intervals) < min_frames:
                 arrived = state.last_valid is not None and state.last_valid >= self.start
                 ok_all &= self._steps.record(f"cycle time {name}", False,
                                              f"{len(intervals)} intervals" if arrived or intervals
-                                             else "no frames since the case started", f"≥ {min_frames}", "", "s")
+                                             else "no frames since the case started", f"≥ {min_frames}", "", "s",
+                                             node=node)
                 continue
             p50, p99, worst = percentile(intervals, 50), percentile(intervals, 99), max(intervals)
             ms = 1000.0
@@ -433,7 +507,7 @@ class Case:
             ok_all &= self._steps.record(
                 f"cycle time {name}", ok, f"p50 {p50 * ms:.2f} / p99 {p99 * ms:.2f} / max {worst * ms:.2f}",
                 f"{cycle * ms:g} ms", f"p50 ±{p50_band:.0%}, p99 ≤ {p99_max:g}×, max < {max_max:g}×", "ms",
-                detail=f"{len(intervals)} intervals")
+                detail=f"{len(intervals)} intervals", node=node)
         return ok_all
 
     # -- report ------------------------------------------------------------------------------------

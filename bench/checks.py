@@ -95,9 +95,9 @@ class StepLog:
         self._listener = listener
 
     def record(self, name: str, passed: bool, measured: float | str | None, expected: float | str | None,
-               tolerance: str = "", unit: str = "", detail: str = "") -> bool:
+               tolerance: str = "", unit: str = "", detail: str = "", node: str = "") -> bool:
         step = Step(name=name, measured=measured, expected=expected, tolerance=tolerance,
-                    verdict="pass" if passed else "fail", time=self._now(), unit=unit, detail=detail)
+                    verdict="pass" if passed else "fail", time=self._now(), unit=unit, detail=detail, node=node)
         self.steps.append(step)
         if self._listener is not None:
             self._listener(step)

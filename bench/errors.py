@@ -10,6 +10,18 @@ class BenchError(Exception):
     """Base of every error the bench reports to a user as a one-line message."""
 
 
+class Inconclusive(BenchError):
+    """The bench cannot stand behind the verdict of the case in progress, through no fault of the DUT: the case
+    ends with the outcome "inconclusive" and this message, never "failed" (bench.pytest_plugin). Raised by the
+    watchdog (bench time fell behind wall time, bench.clock.Scheduler) and by a limit of the bench itself
+    (BenchLimit)."""
+
+
+class BenchLimit(Inconclusive):
+    """A limit of the bench itself was reached (e.g. the history a case asked for outgrew what the monitor keeps):
+    the bench's error, named as such, never the DUT's."""
+
+
 class ConfigError(BenchError):
     """A bad command-line value or configuration file."""
 

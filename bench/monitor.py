@@ -26,13 +26,15 @@ from typing import Any
 
 from bench import e2e
 from bench.codec import Codebook, DecodeError, MessageCodec
-from bench.errors import BenchError
+from bench.errors import BenchError, BenchLimit
 
 TIMEOUT_CYCLES = 3   # docs/spec/k-matrix.md: a message not seen for 3 x its cycle time is timed out
 TIME_EPS = 1e-9      # s: bench times are sums of ticks; equal times must compare equal
 # Memory stays flat in long runs: each list keeps at most its cap (trimmed in halves, amortised), and
 # counts what it dropped so that queries reaching before the retained data fail loudly, never silently.
-HISTORY_CAP = 3000       # frames of decoded history per message (30 s at a 10 ms cycle)
+HISTORY_CAP = 3000       # frames of decoded history per message kept from before the case in progress
+HISTORY_MAX = 200_000    # frames per message kept at most even within a case (2000 s at 10 ms, 200 s at 1 ms): a
+                         # history asked beyond it is a limit of the bench (BenchLimit), never the DUT's failure
 INTERVALS_CAP = 5000     # frame intervals per message for cycle-time checks (50 s at 10 ms; the report's
                          # timing section keeps its own whole-run histogram, bench/timing.py)
 INVALID_CAP = 20000      # invalid-frame records
@@ -68,6 +70,7 @@ class MessageState:
     history_v: list[tuple[float, ...]] = field(default_factory=list)
     intervals_dropped: int = 0
     history_dropped: int = 0
+    history_limit: int = 0                   # and beyond 2 x HISTORY_CAP, length at which the history is trimmed next
     last_data: bytes = b""                   # E2E messages: the previous frame's payload (a re-sent frame is no
                                              # second sender; its counter starts the first counter stream)
     last_tx: float | None = None             # bench time this station last sent the message itself
@@ -129,6 +132,9 @@ class Monitor:
         self.invalid_dropped = 0
         self.frames = 0
         self.duplicates: dict[int, DuplicateSender] = {}   # identifier -> finding (docs/spec/e2e.md)
+        # The history from this bench time on is kept whole (up to HISTORY_MAX frames per message): the case in
+        # progress sets it at its start (bench.case.Case), so that it keeps what it asks for over its whole length.
+        self.history_from = math.inf
 
     # -- frames ------------------------------------------------------------------------------
     def on_frame(self, t: float, arbitration_id: int, data: bytes, direction: str,
@@ -219,12 +225,23 @@ class Monitor:
         if self.keep_history:
             state.history_t.append(t)
             state.history_v.append(tuple(values.values()))
-            if len(state.history_t) > 2 * HISTORY_CAP:
-                _trim(state.history_v, HISTORY_CAP)
-                state.history_dropped += _trim(state.history_t, HISTORY_CAP)
+            length = len(state.history_t)
+            if length > 2 * HISTORY_CAP and length > state.history_limit:
+                self._trim_history(state)
         if sink:
             sink(t, arbitration_id, data, direction, True, "", codec, values)
         return True
+
+    def _trim_history(self, state: MessageState) -> None:
+        """Drop the frames before `history_from` beyond the last HISTORY_CAP, and beyond HISTORY_MAX any frame;
+        trimmed again at twice what is left (amortised)."""
+        ts = state.history_t
+        keep = max(HISTORY_CAP, len(ts) - bisect_left(ts, self.history_from))
+        if keep > HISTORY_MAX:
+            keep = HISTORY_MAX // 2
+        _trim(state.history_v, keep)
+        state.history_dropped += _trim(ts, keep)
+        state.history_limit = 2 * len(ts)
 
     def _follow_counters(self, state: MessageState, t: float, frame_id: int, data: bytes, kind: str,
                          prev_seen: float | None) -> None:
@@ -327,8 +344,12 @@ class Monitor:
             raise
         ts, vs = state.history_t, state.history_v
         if state.history_dropped and ts and since < ts[0]:
-            raise BenchError(f"history of {message} since {since:.3f} s was asked, but only the last "
-                             f"{HISTORY_CAP}-{2 * HISTORY_CAP} frames are kept (from {ts[0]:.3f} s): ask for less")
+            if since >= self.history_from:   # within the case: the bench's own limit
+                raise BenchLimit(f"bench limit: history of {message} since {since:.3f} s was asked, but the bench "
+                                 f"keeps at most {HISTORY_MAX} frames of a message within a case (from {ts[0]:.3f} s)")
+            raise BenchError(f"history of {message} since {since:.3f} s was asked, before the case started "
+                             f"({self.history_from:.3f} s); from before it only the last {HISTORY_CAP}-"
+                             f"{2 * HISTORY_CAP} frames are kept (from {ts[0]:.3f} s): ask for less")
         start = _first_at_or_after(ts, since)
         return ts[start:], [v[index] for v in vs[start:]]
 

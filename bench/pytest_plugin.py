@@ -30,7 +30,7 @@ from bench.checks import step_values
 from bench.clock import settle_heap
 from bench.codec import load_codebook
 from bench.config import ProjectConfig, RunSettings, load_config
-from bench.errors import BenchError
+from bench.errors import BenchError, Inconclusive
 from bench.faults import parse_fault
 from bench.marks import MARKER_HELP, CaseMarks, check_marks, read_marks, skip_reason, split_names
 from bench.options import add_pytest_options
@@ -295,11 +295,31 @@ class FailedSteps(AssertionError):
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None]:
+    """A case fails when a step judging its DUT failed (steps of other nodes are theirs: CaseResult.failed_steps)
+    or its code raised; it is inconclusive instead when the bench raised Inconclusive (the watchdog, a limit of
+    the bench) or its own timing during the case was past what the checks tolerate (Case.bench_verdict)."""
     outcome = yield
     case = item.stash.get(_CASE_KEY, None)
-    if case is not None and outcome.excinfo is None and case.result.failed_steps:
-        lines = [f"{s.name}: measured {m}, expected {e}" + (f" ({s.tolerance})" if s.tolerance else "")
-                 for s in case.result.failed_steps for m, e in [step_values(s)]]
+    if case is None:
+        return
+    excinfo = outcome.excinfo
+    if excinfo is not None and (not isinstance(excinfo[1], Exception)
+                                or isinstance(excinfo[1], (pytest.skip.Exception, pytest.xfail.Exception))):
+        return   # a skip, an xfail, an interrupt: pytest's own
+    failed = case.result.failed_steps
+    lines = [f"{s.name}: measured {m}, expected {e}" + (f" ({s.tolerance})" if s.tolerance else "")
+             for s in failed for m, e in [step_values(s)]]
+    if excinfo is not None and isinstance(excinfo[1], Inconclusive):
+        case.bench_verdict()
+        case.result.inconclusive = str(excinfo[1])
+        return
+    late = case.bench_verdict()
+    if late and (excinfo is not None or failed):
+        case.result.inconclusive = late
+        what = "\n".join(lines) if excinfo is None else f"{excinfo[0].__name__}: {excinfo[1]}".splitlines()[0]
+        outcome.force_exception(Inconclusive(f"inconclusive: {late}\nwhat failed under it (not the DUT's fault "
+                                             f"until shown otherwise):\n{what}"))
+    elif excinfo is None and failed:
         outcome.force_exception(FailedSteps("failed steps:\n" + "\n".join(lines)))
 
 
@@ -308,8 +328,12 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
                               ) -> Generator[None, Result[pytest.TestReport], None]:
     outcome = yield
     report: pytest.TestReport = outcome.get_result()
-    if call.excinfo is not None and call.excinfo.errisinstance(FailedSteps):
+    if call.excinfo is not None and call.excinfo.errisinstance((FailedSteps, Inconclusive)):
         report.longrepr = str(call.excinfo.value)   # the steps say it all: no traceback through pytest's hooks
+        if call.excinfo.errisinstance(Inconclusive):
+            # pytest's own outcome stays "failed" (a plain pytest run must not pass it); the bench's records and
+            # `bench run` say "inconclusive"
+            report.user_properties.append(("bench_outcome", "inconclusive"))
     elif call.excinfo is not None and call.excinfo.errisinstance(BenchError) and getattr(
             item.config.option, "tbstyle", "auto") in ("auto", "short", "line"):   # --tb=long shows it all
         report.longrepr = call_site_error(call.excinfo)

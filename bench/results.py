@@ -10,7 +10,10 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 Verdict = Literal["pass", "fail"]
-Outcome = Literal["passed", "failed", "skipped", "error", "aborted"]
+#: "inconclusive": the bench's own timing during the case was worse than its checks tolerate (a stimulus frame
+#: late past its receivers' timeout, the watchdog, a history limit of the bench): its verdict cannot be
+#: stood behind, and the DUT is not blamed (docs/reliability.md "The bench's own timing").
+Outcome = Literal["passed", "failed", "skipped", "error", "aborted", "inconclusive"]
 
 
 @dataclass
@@ -25,6 +28,8 @@ class Step:
     time: float  # bench time of the check, s
     unit: str = ""
     detail: str = ""
+    node: str = ""   # the node this step judges when it is not the case's DUT ("": the DUT): its failure is that
+                     # node's, shown with its name, and never fails the case (CaseResult.failed_steps)
 
 
 @dataclass
@@ -88,10 +93,21 @@ class CaseResult:
     faults: list[FaultRecord] = field(default_factory=list)   # faults active during the case (windows clipped)
     invalid_frames: int = 0      # frames the monitor rejected during the case
     invalid: list[list[str]] = field(default_factory=list)    # [message, reason, count] of those frames
+    # The bench's own timing during the case (real time only; bench.timing.SelfTiming): one line per figure,
+    # e.g. "stimulus MSG: late by 146.0 ms at 12.300 s, bound 20 ms", and the one line that made the
+    # case inconclusive ("" when none did).
+    bench_timing: list[str] = field(default_factory=list)
+    inconclusive: str = ""
 
     @property
     def failed_steps(self) -> list[Step]:
-        return [s for s in self.steps if s.verdict == "fail"]
+        """The failed steps that judge the case's DUT (every failed step of a case without `dut` markers)."""
+        return [s for s in self.steps if s.verdict == "fail" and (not s.node or not self.duts or s.node in self.duts)]
+
+    @property
+    def other_failed_steps(self) -> list[Step]:
+        """Failed steps that judge another node than the case's DUT: that node's, not the case's."""
+        return [s for s in self.steps if s.verdict == "fail" and s not in self.failed_steps]
 
 
 @dataclass
@@ -150,14 +166,18 @@ class RunResult:
 
     @property
     def counts(self) -> dict[str, int]:
-        out = {"passed": 0, "failed": 0, "skipped": 0, "error": 0, "aborted": 0}
+        out = {"passed": 0, "failed": 0, "inconclusive": 0, "skipped": 0, "error": 0, "aborted": 0}
         for case in self.cases:
             out[case.outcome] += 1
         return out
 
     @property
-    def verdict(self) -> Literal["PASS", "FAIL", "ABORTED"]:
+    def verdict(self) -> Literal["PASS", "FAIL", "INCONCLUSIVE", "ABORTED"]:
+        """FAIL when a case failed or errored; else INCONCLUSIVE when a case was (the bench could not stand behind
+        its verdict); else PASS."""
         if self.aborted:
             return "ABORTED"
         c = self.counts
-        return "FAIL" if (c["failed"] or c["error"] or not self.cases) else "PASS"
+        if c["failed"] or c["error"] or not self.cases:
+            return "FAIL"
+        return "INCONCLUSIVE" if c["inconclusive"] else "PASS"

@@ -16,7 +16,7 @@ from bench.case import Case
 from bench.checks import LOG_ERROR, LOG_INFO, StepLog, step_values
 from bench.codec import Codebook, MessageCodec
 from bench.config import ProjectConfig, RunSettings
-from bench.errors import BenchError
+from bench.errors import BenchError, Inconclusive
 from bench.faults import Fault
 from bench.findings import FindingCollector
 from bench.logproc import LogProcess
@@ -124,6 +124,11 @@ class BenchRun:
         elif report.skipped:
             result.outcome = "skipped"
             result.message = _longrepr(report)
+        elif report.failed and report.when == "call" and call.excinfo is not None \
+                and call.excinfo.errisinstance(Inconclusive):
+            result.outcome = "inconclusive"   # the bench's own timing or limit: not a failure of the DUT
+            result.message = _longrepr(report)
+            result.inconclusive = result.inconclusive or result.message.splitlines()[0]
         elif report.failed:
             result.outcome = "failed" if report.when == "call" else "error"
             result.message = _longrepr(report)
@@ -166,6 +171,8 @@ class BenchRun:
             faults=session.faults.records() if session else [])
         if session is not None:   # the report's timing section (bench.timing); never raises
             run.tables.extend(self.timing.tables(session.codebook))
+            if session.self_timing is not None:   # real time: the bench's own lateness (what it really sent)
+                run.tables.append(session.self_timing.table())
             if session.runner is not None:
                 run.tables.append(e2e_table(session.runner.monitor))
             run.tables.append(database_table(session.codebook))

@@ -22,6 +22,7 @@ from bench.node import Behaviour
 from bench.plugins import load_plant
 from bench.restbus import Restbus
 from bench.station import Station
+from bench.timing import SelfTiming
 
 ALL = "all"
 _virtual_channels = itertools.count(1)
@@ -92,6 +93,16 @@ class BenchSession:
             station.faults = self.faults
         self.stations[-1].babbles = True
         self.scheduler = Scheduler(self.stations, self.clock)
+        # Real time: the bench's own timing (bench.timing.SelfTiming): frames it sends stamped when they went out and
+        # timed against their schedule, the tick loop's lateness, the receive path's waiting.
+        self.self_timing: SelfTiming | None = None
+        if self.clock.realtime:
+            self.self_timing = self.scheduler.self_timing = SelfTiming()
+            for station in self.stations:
+                station.self_timing = self.self_timing
+                station.send_clock = self.clock.now
+                station.recent = self.clock.recent
+                station.timing_label = "stimulus" if station is self.runner else "simulated"
 
     def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence[Behaviour], *,
                  every_tick: bool = True) -> Station:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import can
 
@@ -21,6 +22,10 @@ from bench.periodic import KernelPeriodic
 from bench.restbus import Restbus
 from bench.socketcan_rx import FastReceiver, RawFrame
 
+if TYPE_CHECKING:
+    from bench.restbus import _Periodic
+    from bench.timing import SelfTiming
+
 log = logging.getLogger(__name__)
 
 ECHO_WINDOW = 4
@@ -28,6 +33,24 @@ BABBLE_ECHO_WINDOW = 256   # a babbling node sends many identical frames per tic
 #: Frames one poll takes from the socket at most: a station slower than the bus still gets back to its
 #: tick (and the clock to its deadline) instead of draining for ever; the rest waits in the socket.
 POLL_BATCH = 64
+#: A frame the bench sends late by more than this many cycles of its message leaves its receivers a gap of more
+#: than 3 cycles (their timeout, docs/spec/k-matrix.md): the bound of bench.timing.SelfTiming for a sent frame.
+LATE_CYCLES = 2
+
+
+def _due_ticks(schedule: Sequence[tuple[int, int, _Periodic]], tick: int) -> dict[int, int]:
+    """{frame id: the tick it was due at} of the restbus' schedule entries due by `tick` (a heap: only the entries
+    that are due and their children are looked at)."""
+    out: dict[int, int] = {}
+    stack, n = [0], len(schedule)
+    while stack:
+        i = stack.pop()
+        if i < n and schedule[i][0] <= tick:
+            due, _, slot = schedule[i]
+            out[slot.codec.frame_id] = due
+            stack.append(2 * i + 1)
+            stack.append(2 * i + 2)
+    return out
 
 
 class _StationIO:
@@ -119,6 +142,19 @@ class Station:
         # its pending frames (a deque with `closed`): an empty one costs a tick no poll (most ticks of a plant)
         self._raw_inbox = getattr(bus, "queue", None) if self._raw_frames is not None else None
         self._schedule = restbus.schedule   # the restbus' heap: a tick with nothing due does not call `due`
+        # Real time (set by the session): the bench's own timing (bench.timing.SelfTiming). A frame it sends is
+        # logged with the clock read after the tick's frames went to the driver (`send_clock`), not the tick's
+        # time, so that the monitor, the log and the report's timing section see when it went out; its lateness
+        # against its schedule goes to `self_timing` under "<timing_label> <message>". `recent`: the clock's latest
+        # read, to time how long a received frame waited in its socket.
+        self.self_timing: SelfTiming | None = None
+        self.send_clock: Callable[[], float] | None = None
+        self.recent: Callable[[], float] | None = None
+        self.timing_label = name
+        # sent this tick: (id, data, error frame, the tick's time or the end of its injected delay, on the schedule)
+        self._outbox: list[tuple[int, bytes, bool, float, bool]] = []
+        self._due: dict[int, int] = {}
+        self._t_before = 0.0
 
     @property
     def stamped_batches(self) -> bool:
@@ -151,6 +187,7 @@ class Station:
         count = 0
         frozen = self.frozen_now
         t_poll: float | None = None
+        t_first: float | None = None
         for msg in frames:
             count += 1
             data = bytes(msg.data)
@@ -168,6 +205,11 @@ class Station:
                 else:   # one socket delivers in order: a stamp never goes back (one of another base could)
                     t = self._last_rx = max(self._last_rx, stamp(msg.timestamp))
                 monitor.on_frame(t, msg.arbitration_id, data, "rx", msg.is_extended_id, msg.is_error_frame)
+                if t_first is None:
+                    t_first = t
+        if t_first is not None and self.self_timing is not None and self.recent is not None and stamp is not None:
+            # how long the oldest frame of this poll waited in its socket (at least: `recent` may be a tick old)
+            self.self_timing.add("receive path", max(0.0, self.recent() - t_first), t_first)
         return count
 
     def _recv(self, timeout: float, limit: int) -> Iterator[can.Message]:
@@ -183,6 +225,7 @@ class Station:
             msg = bus.recv(0.0)
 
     def tick(self, tick: int, t: float, dt: float) -> None:
+        self._t_before = self.t   # the previous tick's time: a frame due before it was parked then (_flush)
         self.t = t
         if self.drained:   # the clock's wait just found the socket empty (bench.clock.WallClock.wait_until)
             self.drained = False
@@ -202,14 +245,42 @@ class Station:
                 self.monitor.on_frame(self.now() if stamp is None else stamp(timestamp), frame_id, data, "tx")
             faulty = faults is not None and faults.any
             kernel.check(faulty)
+            if self.send_clock is not None and self._schedule and self._schedule[0][0] <= tick:
+                self._due = _due_ticks(self._schedule, tick)
             for frame_id, data in self.restbus.due(tick):
                 if not kernel.offer(frame_id, data, faulty):
                     self.send(t, frame_id, data)
-            return
-        schedule = self._schedule
-        if schedule and schedule[0][0] <= tick:   # Restbus.due's own first test, without its generator
-            for frame_id, data in self.restbus.due(tick):
-                self.send(t, frame_id, data)
+        else:
+            schedule = self._schedule
+            if schedule and schedule[0][0] <= tick:   # Restbus.due's own first test, without its generator
+                if self.send_clock is not None:
+                    self._due = _due_ticks(schedule, tick)
+                for frame_id, data in self.restbus.due(tick):
+                    self.send(t, frame_id, data)
+        if self._outbox:
+            self._flush(dt)
+
+    def _flush(self, dt: float) -> None:
+        """Real time: the frames this tick handed to the driver, into the monitor with the clock read now (after
+        they went out), and each one's lateness against the tick it was due into the bench's own timing."""
+        assert self.send_clock is not None
+        sent = self.send_clock()
+        outbox, self._outbox = self._outbox, []
+        due_ticks, self._due = self._due, {}
+        timing, monitor, label = self.self_timing, self.monitor, self.timing_label
+        for frame_id, data, is_error, due, scheduled in outbox:
+            monitor.on_frame(sent, frame_id, data, "tx", False, is_error)
+            state = monitor.states.get(frame_id)
+            if timing is None or state is None or is_error:
+                continue
+            tick = due_ticks.get(frame_id) if scheduled else None
+            # A late station skipped ticks: the frame was due at its schedule's tick. One due before the previous
+            # tick (which ran and took every frame due by then) was stopped then and resumed since (stop_sending,
+            # a scenario's stimulus): due from that tick, not from when it was stopped.
+            due_t = due if tick is None else max(tick * dt, self._t_before)
+            cycle = state.codec.cycle_time
+            timing.add(f"{label} {state.codec.name}", max(0.0, sent - due_t), due_t,
+                       LATE_CYCLES * cycle if cycle else float("inf"))
 
     def send(self, t: float, frame_id: int, data: bytes) -> None:
         """Send one frame of the restbus, through the fault plan when there is one."""
@@ -227,13 +298,13 @@ class Station:
         if self._delayed:
             ready = [d for d in self._delayed if d[0] <= t + 1e-9]
             self._delayed = [d for d in self._delayed if d[0] > t + 1e-9]
-            for _, frame_id, frame in ready:
-                self._transmit(t, frame_id, frame)
+            for due, frame_id, frame in ready:
+                self._transmit(t, frame_id, frame, due=due)   # due when its (injected) delay ended
         if self.babbles:
             for frame_id, data, is_error in faults.babble(t, dt):
                 self._transmit(t, frame_id, data, is_error)
 
-    def _transmit(self, t: float, frame_id: int, data: bytes, is_error: bool = False) -> None:
+    def _transmit(self, t: float, frame_id: int, data: bytes, is_error: bool = False, due: float | None = None) -> None:
         try:
             if self._send_fast and not is_error and self._fast is not None:
                 self._fast.send_frame(frame_id, data)     # one send(): no can.Message, no select, no clock read
@@ -255,4 +326,7 @@ class Station:
             if echoes is None:
                 echoes = self._echoes[frame_id] = deque(maxlen=BABBLE_ECHO_WINDOW)
             echoes.append(data)
+        if self.send_clock is not None:   # real time: logged when the tick's frames are out (_flush)
+            self._outbox.append((frame_id, data, is_error, t if due is None else due, due is None))
+            return
         self.monitor.on_frame(t, frame_id, data, "tx", False, is_error)

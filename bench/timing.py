@@ -368,3 +368,123 @@ def latency_table(stats: Sequence[LatencyStats]) -> Table:
         "way; includes up to one status cycle; definition in bench/timing.py)",
         ["Pair", "Command → status", "Threshold", "Timed changes", "Followed", "min [ms]", "p50 [ms]", "p99 [ms]",
          "max [ms]", "Not followed", "Window [s]", "Status moving (not timed)", "Note"], rows)
+
+
+# -- the bench's own timing (real time) ------------------------------------------------------------------------
+#: Lateness below this is the bench on time (a tick is 1 ms): not kept as an event of its own.
+LATE_FLOOR = 0.002
+#: Late events kept for the per-case figures (the whole-run figures are kept apart, in constant memory).
+LATE_EVENTS = 200_000
+#: A frame the bench sends late by more than (TIMEOUT_CYCLES - 1) cycles of its message leaves a gap of more
+#: than TIMEOUT_CYCLES cycles: its receivers may time it out (docs/spec/k-matrix.md), through no fault of theirs.
+TIMEOUT_CYCLES = 3
+
+
+@dataclass(slots=True)
+class Late:
+    """One figure of the bench's own lateness: what was late, by how much (s), when it was due (bench time,
+    s), and the bound past which a case's checks cannot stand on it (s; inf: a figure only)."""
+
+    what: str
+    late: float
+    t: float
+    bound: float = math.inf
+
+    def text(self) -> str:
+        bound = "" if math.isinf(self.bound) else f", bound {self.bound * MS:g} ms"
+        return f"{self.what}: late by {self.late * MS:.1f} ms at {self.t:.3f} s{bound}"
+
+
+class _LateAccumulator:
+    """Whole-run figures of one source of lateness: count, the late ones, binned lateness, the worst."""
+
+    __slots__ = ("count", "over", "bins", "worst")
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.over = 0
+        self.bins: Counter[int] = Counter()
+        self.worst: Late | None = None
+
+
+class SelfTiming:
+    """The bench's own timing in real time, from the stamps of what really happened (bench.station, bench.clock):
+
+    - a frame it sends (stimulus, simulated node): its lateness = the clock read after the driver took it minus the
+      tick it was due at on its schedule (the restbus's next due tick, before a late station skipped it);
+    - the tick loop: how far the wall clock had passed a tick when the loop got to it;
+    - the receive path: how long a received frame waited in its socket (the clock's read at the poll minus the
+      frame's receive stamp; a lower bound: that read may be up to a tick's work old).
+
+    Every figure goes into a whole-run accumulator (the report's table `table`), and every lateness above
+    LATE_FLOOR into a bounded list of events, from which `since` gives a case its worst figures. What was due
+    before the case in progress started (`resume`) is not counted: between cases the bench pauses on purpose."""
+
+    def __init__(self) -> None:
+        self.sources: dict[str, _LateAccumulator] = {}
+        self.events: deque[Late] = deque(maxlen=LATE_EVENTS)
+        self.counted_from = -math.inf
+
+    def resume(self, t: float) -> None:
+        """A case starts at bench time t: what was due before it (while the bench paused between cases, by
+        design, or set itself up) is not counted."""
+        self.counted_from = t
+
+    def add(self, what: str, late: float, t: float, bound: float = math.inf) -> None:
+        if t < self.counted_from:
+            return
+        acc = self.sources.get(what)
+        if acc is None:
+            acc = self.sources[what] = _LateAccumulator()
+        acc.count += 1
+        if late <= LATE_FLOOR:
+            acc.bins[0] += 1
+            return
+        acc.bins[round(late / BIN)] += 1
+        event = Late(what, late, t, bound)
+        if late > bound:
+            acc.over += 1
+        if acc.worst is None or late > acc.worst.late:
+            acc.worst = event
+        self.events.append(event)
+
+    def since(self, t0: float) -> list[Late]:
+        """The worst lateness of each source from bench time t0 on, worst against its bound first."""
+        worst: dict[str, Late] = {}
+        for event in reversed(self.events):
+            if event.t < t0:
+                break
+            if event.what not in worst or event.late > worst[event.what].late:
+                worst[event.what] = event
+        return sorted(worst.values(), key=lambda e: (-(e.late / e.bound if e.bound else 0.0), -e.late))
+
+    @staticmethod
+    def verdict(figures: Sequence[Late]) -> str:
+        """The line that makes a case inconclusive ("" when no figure is past its bound), e.g. "bench late by
+        146.0 ms on stimulus MSG at 12.300 s (bound 20 ms)"."""
+        over = [f for f in figures if f.late > f.bound]
+        if not over:
+            return ""
+        first = over[0]
+        more = f"; and {len(over) - 1} more: " + ", ".join(f"{f.what} {f.late * MS:.1f} ms" for f in over[1:4]) \
+            if len(over) > 1 else ""
+        who = "a sender other than the DUT" if first.what.startswith("input ") else "bench"   # Case._input_gaps
+        return (f"{who} late by {first.late * MS:.1f} ms on {first.what} at {first.t:.3f} s "
+                f"(bound {first.bound * MS:g} ms){more}")
+
+    def table(self) -> Table:
+        rows = []
+        for what in sorted(self.sources):
+            acc = self.sources[what]
+            p50, p99 = _percentiles(acc.bins, acc.count, (50.0, 99.0)) if acc.count else (math.nan, math.nan)
+            worst = acc.worst
+            rows.append([what, str(acc.count), _ms(p50), _ms(p99), _ms(worst.late) if worst else "–",
+                         f"{worst.t:.3f}" if worst else "–",
+                         "–" if worst is None or math.isinf(worst.bound) else f"{worst.bound * MS:g}", str(acc.over)])
+        return Table(
+            "Timing: the bench's own lateness in real time, during the cases (frames it sent: the clock after the "
+            "driver took the frame minus the tick it was due; tick loop: how far the wall clock had passed a tick; "
+            f"receive path: how long a frame waited in its socket, a lower bound; below {LATE_FLOOR * MS:g} ms counts "
+            "as 0)",
+            ["Source", "Count", "p50 [ms]", "p99 [ms]", "max [ms]", "max at [s]", "bound [ms]", "over the bound"],
+            rows)

@@ -15,7 +15,7 @@ from rich.console import Console
 
 from bench.cli.common import add_bus_options, add_node_options, given_bus_options, reject_virtual
 from bench.config import RunSettings, load_config
-from bench.errors import ConfigError
+from bench.errors import ConfigError, Inconclusive
 from bench.faults import parse_fault
 from bench.monitor import Monitor
 from bench.session import BenchSession
@@ -89,9 +89,15 @@ def run(args: argparse.Namespace) -> int:
     next_status = STATUS_PERIOD
     shown = 0   # invalid frames of the plant's monitor already reported (monitor.invalid_frames)
     duplicates: set[int] = set()   # identifiers with two senders already reported
+    behind = 0   # times the watchdog found the plant's ticks behind the wall clock (bench.clock.Scheduler)
     try:
         while not stop["now"] and session.now() < end:
-            session.run_until(min(end, session.scheduler.now + 0.1), lambda: stop["now"])
+            try:
+                session.run_until(min(end, session.scheduler.now + 0.1), lambda: stop["now"])
+            except Inconclusive as exc:   # the watchdog: the plant went on from the wall clock's tick
+                behind += 1
+                console.print(f"bench plant: {exc}; went on from the wall clock's tick ({behind} times)",
+                              highlight=False)
             if session.now() >= next_status:
                 next_status += STATUS_PERIOD
                 console.print(f"t={session.now():7.1f} s  sent {plant.sent}  received "

@@ -51,7 +51,7 @@ def merge_handler(args: argparse.Namespace) -> int:
     counts = ", ".join(f"{n} {k}" for k, n in result.counts.items() if n)
     Console().print(f"bench report merge: {len(args.folders)} shards, {len(result.cases)} cases ({counts}): "
                     f"{result.verdict}; report: {args.out}", highlight=False)
-    return 0 if result.verdict == "PASS" else 1
+    return {"PASS": 0, "INCONCLUSIVE": 3}.get(result.verdict, 1)   # as `bench run` (bench.cli.run.EXIT_INCONCLUSIVE)
 
 
 def durations_handler(args: argparse.Namespace) -> int:

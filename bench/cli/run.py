@@ -41,7 +41,10 @@ from bench.session import resolve_bus_options, resolve_external
 from bench.stop import STOP
 
 OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "skipped": "yellow",
-                 "aborted": "bold magenta"}
+                 "aborted": "bold magenta", "inconclusive": "bold yellow"}
+#: `bench run`'s exit code when no case failed but one or more were inconclusive (the bench's own timing or a
+#: limit of the bench: bench.errors.Inconclusive); 0: every case passed, 1: a case failed, 2: bad input, 130: aborted.
+EXIT_INCONCLUSIVE = 3
 
 
 #: `bench run`'s own options beyond the bus and node groups (declared in bench.options, like those).
@@ -124,7 +127,8 @@ class _Progress:
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         if report.when == "call" or (report.when == "setup" and not report.passed):
             self.done += 1
-            outcome = "error" if (report.when == "setup" and report.failed) else report.outcome
+            outcome = "error" if (report.when == "setup" and report.failed) else str(
+                dict(report.user_properties).get("bench_outcome", report.outcome))   # "inconclusive" (the plugin)
             style = OUTCOME_STYLE.get(outcome, "")
             self.console.print(f"\\[{self.done:>3}/{self.total}] [{style}]{outcome:<7}[/] "
                                f"{escape(report.nodeid)} [dim]({report.duration:.2f} s)[/]", highlight=False)
@@ -310,7 +314,13 @@ def run(args: argparse.Namespace) -> int:
                   f"; bench time {result.sim_time:.1f} s in {result.wall_time:.1f} s wall "
                   f"({result.sim_time / max(result.wall_time, 1e-9):.1f}× real time); "
                   f"{result.frames} frames, {result.invalid_frames} invalid", highlight=False)
+    for case in result.cases:   # what made each inconclusive case so, with its figures
+        if case.outcome == "inconclusive":
+            console.print(f"[bold yellow]inconclusive[/] {escape(_short(case.nodeid))}: "
+                          f"{escape(case.inconclusive or case.message.splitlines()[0])}", highlight=False)
     console.print(f"report: {out_dir}")
     if result.aborted:
         return 130
-    return 0 if (int(code) == 0 and result.verdict == "PASS") else 1
+    if int(code) not in (pytest.ExitCode.OK, pytest.ExitCode.TESTS_FAILED):
+        return 1
+    return {"PASS": 0, "INCONCLUSIVE": EXIT_INCONCLUSIVE}.get(result.verdict, 1)

@@ -7,7 +7,7 @@ with those cases. Requirements in no table are listed at the end. Verdicts:
 
 - pass: no case that checks it failed, and at least one passed (the cell says how many of them ran);
 - fail: a case that checks it failed or errored;
-- not run: every case that checks it was skipped, deselected or cut short;
+- not run: every case that checks it was skipped, deselected, cut short or inconclusive (the bench's own timing);
 - uncovered: no case of the campaign checks it.
 """
 

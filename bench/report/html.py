@@ -35,6 +35,7 @@ from bench.report.plots import Plotter, RenderedPlot
 from bench.results import CaseResult, Plot, RunResult, Step
 
 FAILED = ("failed", "error", "aborted")
+OPEN = (*FAILED, "inconclusive")   # the cases a reader must look at: open at the top of the report
 FAILED_STEPS_SHOWN = 3
 
 #: The page's only script: search and outcome filters, and opening a collapsed case that a link
@@ -167,9 +168,10 @@ class Failure:
 def failures(run: RunResult) -> list[Failure]:
     out = []
     for i, case in enumerate(run.cases, 1):
-        if case.outcome in FAILED:
+        if case.outcome in OPEN:
             failed = case.failed_steps
-            line = error_line(case.message)[:300]
+            line = (case.inconclusive or case.message)[:300] if case.outcome == "inconclusive" \
+                else error_line(case.message)[:300]
             out.append(Failure(i, case, failed[:FAILED_STEPS_SHOWN], max(0, len(failed) - FAILED_STEPS_SHOWN), line))
     return out
 
@@ -236,9 +238,9 @@ def render_html(run: RunResult, report_dir: Path = Path("."), keep_drawing: Call
         counts=run.counts,
         plots=plots,
         plots_left_out=left_out,
-        failed_outcomes=FAILED,   # these cases open at the top, before the tables; the others follow them, collapsed
-        failed_index=[i for i, c in enumerate(run.cases) if c.outcome in FAILED],
-        case_index=[i for i, c in enumerate(run.cases) if c.outcome not in FAILED],
+        failed_outcomes=OPEN,   # these cases open at the top, before the tables; the others follow them, collapsed
+        failed_index=[i for i, c in enumerate(run.cases) if c.outcome in OPEN],
+        case_index=[i for i, c in enumerate(run.cases) if c.outcome not in OPEN],
         conformance=build_conformance(run),
         mcap_href=_mcap_href(run.mcap_path, report_dir),
         failures=failures(run),

@@ -80,9 +80,10 @@ def _testcase(parent: ET.Element, case: CaseResult) -> None:
     classname, name = split_nodeid(case.nodeid, case.name)
     tc = ET.SubElement(parent, "testcase", classname=xml_safe(classname), name=xml_safe(name),
                        time=f"{case.wall_time:.3f}")
-    if case.duts or case.reqs or case.faults:   # what the case judges, checks and suffered, for CI tools
+    if case.duts or case.reqs or case.faults or case.bench_timing:   # what it judges, checks and suffered
         props = ET.SubElement(tc, "properties")
-        for key, values in (("dut", case.duts), ("req", case.reqs), ("fault", [fault_text(f) for f in case.faults])):
+        for key, values in (("dut", case.duts), ("req", case.reqs), ("fault", [fault_text(f) for f in case.faults]),
+                            ("bench_timing", case.bench_timing)):
             for value in values:
                 ET.SubElement(props, "property", name=key, value=xml_safe(value))
     failed = case.failed_steps
@@ -94,6 +95,10 @@ def _testcase(parent: ET.Element, case: CaseResult) -> None:
         el.text = xml_safe(body)
     elif case.outcome == "skipped":
         ET.SubElement(tc, "skipped", message=xml_safe(case.message or "skipped"), type="skip")
+    elif case.outcome == "inconclusive":   # not the DUT's failure: <skipped type="inconclusive"> with the figures
+        el = ET.SubElement(tc, "skipped", message=xml_safe(f"inconclusive: {case.inconclusive or case.message}"),
+                           type="inconclusive")
+        el.text = xml_safe("\n".join([*case.bench_timing, *(step_line(s) for s in failed), case.message]))
     elif case.outcome in ("error", "aborted"):
         prefix = "aborted" if case.outcome == "aborted" else "error"
         first = error_line(case.message)
@@ -114,7 +119,7 @@ def build_junit(run: RunResult) -> ET.ElementTree:
         "tests": str(len(run.cases) + (1 if run.aborted else 0)),
         "failures": str(counts["failed"]),
         "errors": str(errors),
-        "skipped": str(counts["skipped"]),
+        "skipped": str(counts["skipped"] + counts["inconclusive"]),   # an inconclusive case is a <skipped>
         "time": f"{run.wall_time:.3f}",
     }
     root = ET.Element("testsuites", attrs)
@@ -124,7 +129,7 @@ def build_junit(run: RunResult) -> ET.ElementTree:
                        ("time_mode", run.time_mode), ("external", ",".join(run.external)),
                        ("mcap", run.mcap_path), ("bench_time", f"{run.sim_time:.3f}"),
                        ("frames", str(run.frames)), ("invalid_frames", str(run.invalid_frames)),
-                       ("aborted", str(run.aborted).lower())):
+                       ("aborted", str(run.aborted).lower()), ("inconclusive", str(counts["inconclusive"]))):
         ET.SubElement(props, "property", name=key, value=xml_safe(value))
     for fault in run.faults:
         ET.SubElement(props, "property", name="fault", value=xml_safe(fault_text(fault)))
