@@ -102,7 +102,9 @@ BENCH_ENUMS = {
 VEHICLE_ENUMS = (("BENCH_Control", "Vehicle"), ("PLANT_Status", "Vehicle"))
 
 E2E = {"AliveCounter", "Checksum"}
-PAYLOAD_BITS = frozenset(range(0, 48)) | frozenset(range(52, 56))
+#: docs/spec/e2e.md: AUTOSAR Profile 11 with its header at bit 48 (the CRC in byte 6, the counter in the low
+#: nibble of byte 7); the upper nibble of byte 7 and bytes 0-5 carry the signals.
+PAYLOAD_BITS = frozenset(range(0, 48)) | frozenset(range(60, 64))
 
 
 def _load(path: object) -> Database:
@@ -250,7 +252,7 @@ def test_structure(db_name: str, message: Message) -> None:
     assert message.comment, f"{message.name}: no comment"
     counter = message.get_signal_by_name("AliveCounter")
     checksum = message.get_signal_by_name("Checksum")
-    for signal, start, length in ((counter, 48, 4), (checksum, 56, 8)):
+    for signal, start, length in ((counter, 56, 4), (checksum, 48, 8)):
         assert (signal.start, signal.length, signal.byte_order, signal.is_signed) == \
             (start, length, "little_endian", False), signal.name
     used: set[int] = set()
@@ -259,7 +261,23 @@ def test_structure(db_name: str, message: Message) -> None:
         assert not bits & used, f"{message.name}.{signal.name} overlaps"
         used |= bits
         if signal.name not in E2E:
-            assert bits <= PAYLOAD_BITS, f"{message.name}.{signal.name} outside bits 0-47, 52-55"
+            assert bits <= PAYLOAD_BITS, f"{message.name}.{signal.name} outside bits 0-47, 60-63"
+
+
+def test_every_message_declares_profile_11_with_a_data_id_of_its_own() -> None:
+    """docs/spec/e2e.md: every message of both databases is protected by Profile 11, DataIDMode BOTH, its
+    header at bit 48, with its own Data ID (the CAN identifier), written in the database."""
+    data_ids: dict[int, str] = {}
+    for db in (CHASSIS, BENCH_DB):
+        definitions = db.dbc.attribute_definitions
+        assert definitions["E2E_Offset"].default_value == 48 and definitions["E2E_DataIDMode"].default_value == "BOTH"
+        for message in db.messages:
+            attributes = message.dbc.attributes
+            profile = definitions["E2E_Profile"].choices[attributes["E2E_Profile"].value]
+            data_id = attributes["E2E_DataID"].value
+            assert profile == "P11" and data_id == message.frame_id, message.name
+            assert data_id not in data_ids, f"{message.name} shares Data ID {data_id:#x} with {data_ids.get(data_id)}"
+            data_ids[data_id] = message.name
 
 
 @pytest.mark.parametrize("db_name, message", ALL_MESSAGES, ids=[f"{d}:{m.name}" for d, m in ALL_MESSAGES])
