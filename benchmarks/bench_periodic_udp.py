@@ -61,7 +61,7 @@ def open_receiver(group: str, port: int = 43113):
 
 
 def receive(bus, seconds: float, warmup: float) -> dict[int, list[tuple[float, int]]]:
-    """(kernel receive time, data[6] & 0x0F) per identifier, for `seconds` after `warmup` from the first frame."""
+    """(kernel receive time, E2E counter) per identifier, for `seconds` after `warmup` from the first frame."""
     frames: dict[int, list[tuple[float, int]]] = {}
     first = None
     deadline = time.monotonic() + warmup + seconds + 30.0     # never hang on a sender that does not come
@@ -75,7 +75,8 @@ def receive(bus, seconds: float, warmup: float) -> dict[int, list[tuple[float, i
             deadline = time.monotonic() + warmup + seconds
         if ts - first < warmup:
             continue
-        frames.setdefault(msg.arbitration_id, []).append((ts, msg.data[6] & 0x0F if len(msg.data) > 6 else 0))
+        counter = common.protection_of(msg.arbitration_id).counter_of(msg.data) if len(msg.data) == 8 else 0
+        frames.setdefault(msg.arbitration_id, []).append((ts, counter))
     return frames
 
 
@@ -100,7 +101,8 @@ def period_errors(frames: dict[int, list[tuple[float, int]]], messages: dict[int
             missing.append(name)
             continue
         errors = [abs((b[0] - a[0]) - cycle) for a, b in zip(got, got[1:])]
-        lost = sum((b[1] - a[1] - 1) % 16 for a, b in zip(got, got[1:])) if counters else 0
+        protection = common.protection_of(frame_id)
+        lost = sum(common.counter_gap(protection, a[1], b[1]) for a, b in zip(got, got[1:])) if counters else 0
         lost_total += lost
         pooled.extend(errors)
         s = common.summary(errors, 1000.0)

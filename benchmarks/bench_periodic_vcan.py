@@ -103,9 +103,7 @@ def _cpu() -> float:
 
 
 def _protect(frame_id: int, data: bytearray, counter: int) -> None:
-    from bench import e2e
-
-    e2e.protect(frame_id, data, counter)
+    common.protection_of(frame_id).protect(data, counter)
 
 
 def run_raw_bcm(seconds: float) -> None:
@@ -114,7 +112,8 @@ def run_raw_bcm(seconds: float) -> None:
     from bench.periodic import counter_cycle
 
     bus = can.Bus(interface="socketcan", channel=CHANNEL)
-    tasks = [bus.send_periodic(counter_cycle(i, bytes(8), 0), period) for i, period in RAW_BCM.items()]
+    tasks = [bus.send_periodic(counter_cycle(common.protection_of(i), i, bytes(8), 0), period)
+             for i, period in RAW_BCM.items()]
     time.sleep(seconds)
     for task in tasks:
         task.stop()
@@ -133,7 +132,8 @@ def run_thread(seconds: float) -> None:
     def e2e(msg: can.Message) -> None:            # runs before every send: next AliveCounter and its Checksum
         data = bytearray(msg.data)
         _protect(msg.arbitration_id, data, counters[msg.arbitration_id])
-        counters[msg.arbitration_id] = (counters[msg.arbitration_id] + 1) % 16
+        counters[msg.arbitration_id] = common.protection_of(msg.arbitration_id).next_counter(
+            counters[msg.arbitration_id])
         msg.data = data
 
     tasks = [ThreadBasedCyclicSendTask(bus, lock, can.Message(arbitration_id=i, data=bytes(8), is_extended_id=False),
@@ -157,7 +157,8 @@ def run_receiver(ids: list[int], seconds: float, out: Path) -> None:
     while time.monotonic() < end:
         msg = bus.recv(0.2)
         if msg is not None:
-            frames.setdefault(msg.arbitration_id, []).append((msg.timestamp, msg.data[6] & 0x0F))
+            frames.setdefault(msg.arbitration_id, []).append(
+                (msg.timestamp, common.protection_of(msg.arbitration_id).counter_of(msg.data)))
     bus.shutdown()
     out.write_text(json.dumps({str(k): v for k, v in frames.items()}))
 
@@ -176,7 +177,8 @@ def analyse(frames: dict[int, list[tuple[float, int]]], cycles: dict[int, float]
     for frame_id, cycle in cycles.items():
         got = [f for f in frames.get(frame_id, []) if f[0] >= t_start]
         e = [abs((b[0] - a[0]) - cycle) for a, b in zip(got, got[1:])]
-        gaps = sum((b[1] - a[1] - 1) % 16 for a, b in zip(got, got[1:]))
+        protection = common.protection_of(int(frame_id))
+        gaps = sum(common.counter_gap(protection, a[1], b[1]) for a, b in zip(got, got[1:]))
         lost += gaps
         errors.extend(e)
         per_id[hex(frame_id)] = {**common.summary(e, 1000.0), "cycle_ms": cycle * 1000, "lost": gaps}

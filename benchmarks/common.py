@@ -31,6 +31,30 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from bench.checks import percentile  # noqa: E402 - the bench's own, after the repository is on sys.path
+from bench.e2e import Protection  # noqa: E402
+
+
+def protection_of(frame_id: int) -> Protection:
+    """The E2E protection of an identifier: the project databases' declaration, else the contract's for a raw
+    identifier of a benchmark (docs/spec/e2e.md: Profile 11, the identifier as its Data ID, the header at bit 48)."""
+    from bench.codec import load_codebook
+    from bench.config import load_config
+
+    global _CODEBOOK
+    if _CODEBOOK is None:
+        _CODEBOOK = load_codebook(load_config(ROOT / "bench.toml").databases)
+    codec = _CODEBOOK.by_id.get(frame_id)
+    if codec is not None and codec.protection is not None:
+        return codec.protection
+    return Protection("P11", data_id=frame_id, offset=48)
+
+
+def counter_gap(protection: Protection, previous: int, counter: int) -> int:
+    """Frames lost between two received counters of one message (0: in sequence)."""
+    return (counter - previous - 1) % protection.counter_modulo
+
+
+_CODEBOOK: Any = None
 
 PACKAGES = ("chassis-hil-bench", "python-can", "cantools", "mcap", "zstandard", "msgpack", "numpy", "pytest",
             "pytest-xdist", "matplotlib", "jinja2", "rich")

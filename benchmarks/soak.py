@@ -23,6 +23,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import common  # noqa: E402
 
 from bench.logread import read_frames  # noqa: E402
 
@@ -46,9 +49,10 @@ def counter_gaps(path: Path) -> tuple[int, int, dict[int, int]]:
         if frame.direction != "rx":
             continue
         received += 1
-        counter = frame.data[6] & 0x0F
+        protection = common.protection_of(frame.arbitration_id)
+        counter = protection.counter_of(frame.data)
         if frame.arbitration_id in last:
-            gap = (counter - last[frame.arbitration_id] - 1) % 16
+            gap = common.counter_gap(protection, last[frame.arbitration_id], counter)
             if gap:
                 lost[frame.arbitration_id] = lost.get(frame.arbitration_id, 0) + gap
         last[frame.arbitration_id] = counter

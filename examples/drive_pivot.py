@@ -1,8 +1,9 @@
-"""A stand-alone driver: only python-can, cantools and the contract DBC.
+"""A stand-alone driver: only python-can, cantools, autosar-e2e and the contract DBC.
 
 It plays the DRIVER node towards a plant or a real vehicle: sends DRV_Steering, DRV_Pedals and
-DRV_MotionRequest every cycle with AliveCounter and CRC-8/SAE-J1850 Checksum per docs/spec/k-matrix.md,
-requests a rotation about a pivot, and prints the last WHL_Status_* of each wheel as JSON.
+DRV_MotionRequest every cycle protected by AUTOSAR E2E Profile 11 (the `autosar-e2e` package, parameters from
+the DBC's E2E_* attributes, docs/spec/e2e.md), requests a rotation about a pivot, and prints the last
+WHL_Status_* of each wheel as JSON.
 
     python examples/drive_pivot.py --interface udp_multicast --channel 239.74.163.2 --pivot 5 -2 --speed 1
 """
@@ -18,23 +19,33 @@ from pathlib import Path
 
 import can
 import cantools
+from e2e import p11
 
 DBC = Path(__file__).resolve().parent.parent / "dbc" / "chassis.dbc"
 
 
-def crc8_sae_j1850(data: bytes) -> int:
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
+def e2e_parameters(db: cantools.database.can.Database, message: cantools.database.can.Message) -> tuple[int, int]:
+    """(DataID, header byte) of a message from the DBC's E2E attributes (docs/spec/e2e.md): the message's own value,
+    else the database's default; this driver speaks the contract's profile, AUTOSAR Profile 11 with DataIDMode
+    BOTH, and refuses any other."""
+    definitions = db.dbc.attribute_definitions
+
+    def attribute(name: str) -> object:
+        found = message.dbc.attributes.get(name)
+        definition = definitions[name]
+        value = definition.default_value if found is None else found.value
+        return definition.choices[value] if definition.choices and isinstance(value, int) else value
+
+    if attribute("E2E_Profile") != "P11" or attribute("E2E_DataIDMode") != "BOTH":
+        raise SystemExit(f"{message.name}: this example speaks E2E Profile 11, DataIDMode BOTH only")
+    return int(attribute("E2E_DataID")), int(attribute("E2E_Offset")) // 8
 
 
-def protect(frame_id: int, payload: bytes, counter: int) -> bytes:
+def protect(payload: bytes, counter: int, data_id: int, offset: int) -> bytes:
+    """COM-E2E-01/02: the counter (0-14) in the low nibble after the CRC byte, then the CRC by autosar-e2e."""
     data = bytearray(payload)
-    data[6] = (data[6] & 0xF0) | (counter & 0x0F)
-    data[7] = crc8_sae_j1850(bytes([frame_id & 0xFF, frame_id >> 8]) + bytes(data[:7]))
+    data[offset + 1] = (data[offset + 1] & 0xF0) | counter
+    p11.e2e_p11_protect(data, data_id, offset=offset, increment_counter=False)
     return bytes(data)
 
 
@@ -77,6 +88,7 @@ def main() -> None:
                               "TargetSpeed": args.speed},
     }
     messages = {name: db.get_message_by_name(name) for name in stimulus}
+    protection = {name: e2e_parameters(db, message) for name, message in messages.items()}
     counters = dict.fromkeys(stimulus, 0)
     next_due = dict.fromkeys(stimulus, 0.0)
     status: dict[str, dict[str, float]] = {}
@@ -87,8 +99,8 @@ def main() -> None:
                 if now >= next_due[name]:
                     next_due[name] += message.cycle_time / 1000.0
                     values = dict(stimulus[name], AliveCounter=0, Checksum=0)
-                    data = protect(message.frame_id, message.encode(values), counters[name])
-                    counters[name] = (counters[name] + 1) % 16
+                    data = protect(message.encode(values), counters[name], *protection[name])
+                    counters[name] = (counters[name] + 1) % 15     # Profile 11 counts 0 ... 14
                     bus.send(can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=False))
             received = bus.recv(0.001)
             while received is not None:
