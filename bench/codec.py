@@ -61,6 +61,9 @@ _EXACT_LIMIT = 1 << 52
 #: A decoded value may exceed the DBC range by this fraction of the scale (rounding) and still be valid.
 RANGE_SLACK = 0.5
 
+#: Raw values of the E2E fields as floats (raw * 1.0): a counter or CRC of up to 8 bits; wider fields convert.
+_FLOATS: tuple[float, ...] = tuple(float(raw) for raw in range(256))
+
 #: Frames whose E2E check a message's codec remembers (two payloads' worth of counters, and then some).
 INTACT_CACHE = 64
 
@@ -340,7 +343,8 @@ class MessageCodec:
             entry = self._decode_word(word)
         values = entry[1].copy()
         for name, shift, mask in self._e2e_fields:
-            values[name] = float((word >> shift) & mask)
+            raw = (word >> shift) & mask
+            values[name] = _FLOATS[raw] if raw < 256 else float(raw)
         return entry, values
 
     def _decode_word(self, word: int) -> tuple[int, dict[str, float], tuple[str, ...] | None]:

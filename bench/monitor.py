@@ -58,7 +58,7 @@ class MessageState:
     last_valid: float | None = None          # bench time of the last valid frame
     last_seen: float | None = None           # bench time of the last frame, valid or not
     rx: e2e.Receiver | None = field(init=False)   # the E2E receiver (check and state machine); None: unprotected
-    e2e_status: dict[str, int] = field(default_factory=dict)   # AUTOSAR check status -> frames
+    e2e_status: dict[str, int] = field(default_factory=dict)   # AUTOSAR check status (a str) -> frames
     starting: int = 0                        # valid frames not applied while the E2E state machine was INIT
     last_invalid: bool = False
     frames: int = 0
@@ -183,10 +183,10 @@ class Monitor:
         rx = state.rx
         if rx is not None:
             found = codec.counter_if_intact(data) if length_ok else None
-            expected = rx.expected()
+            expected = rx.next
             status, accepted = rx.receive(found)
             counts = state.e2e_status
-            counts[status.value] = counts.get(status.value, 0) + 1
+            counts[status] = counts.get(status, 0) + 1   # (a Status is its name as a str)
             if not accepted:   # (a damaged frame's counter is not read: the receiver ignores it)
                 if rx.state is e2e.SMState.INIT and (status is e2e.Status.OK or status is e2e.Status.OKSOMELOST):
                     starting = True   # intact and in sequence, the state machine not VALID yet: no fault of the

@@ -13,8 +13,8 @@ from enum import Enum
 from bench.e2e.profiles import SMConfig
 
 
-class Status(Enum):
-    """The profile check's status of one frame (E2E_PXXCheckStatusType)."""
+class Status(str, Enum):
+    """The profile check's status of one frame (E2E_PXXCheckStatusType); equal to its name as a string."""
 
     OK = "OK"                        # CRC right, counter = previous + 1
     OKSOMELOST = "OKSOMELOST"        # CRC right, counter = previous + 2 ... previous + MaxDeltaCounter
@@ -23,8 +23,8 @@ class Status(Enum):
     ERROR = "ERROR"                  # CRC wrong (or wrong length): the counter is not read
 
 
-class SMState(Enum):
-    """E2E_SMStateType."""
+class SMState(str, Enum):
+    """E2E_SMStateType; equal to its name as a string."""
 
     NODATA = "NODATA"
     INIT = "INIT"
