@@ -58,7 +58,6 @@ class MessageState:
     last_valid: float | None = None          # bench time of the last valid frame
     last_seen: float | None = None           # bench time of the last frame, valid or not
     rx: e2e.Receiver | None = field(init=False)   # the E2E receiver (check and state machine); None: unprotected
-    e2e_status: dict[str, int] = field(default_factory=dict)   # AUTOSAR check status (a str) -> frames
     starting: int = 0                        # valid frames not applied while the E2E state machine was INIT
     last_invalid: bool = False
     frames: int = 0
@@ -82,6 +81,11 @@ class MessageState:
     timeout_s: float = field(init=False)     # a consumer's timeout: TIMEOUT_CYCLES cycles after the last valid
     gap_s: float = field(init=False)         # a reception gap that ends the counter streams (two senders)
     foreign_s: float = field(init=False)     # a received frame this soon after the station's own is another's
+
+    @property
+    def e2e_status(self) -> dict[str, int]:
+        """Frames per AUTOSAR check status (its name); empty for an unprotected message."""
+        return {} if self.rx is None else {status.value: n for status, n in self.rx.status_counts().items()}
 
     def __post_init__(self) -> None:
         cycle = self.codec.cycle_time
@@ -185,8 +189,6 @@ class Monitor:
             found = codec.counter_if_intact(data) if length_ok else None
             expected = rx.next
             status, accepted = rx.receive(found)
-            counts = state.e2e_status
-            counts[status] = counts.get(status, 0) + 1   # (a Status is its name as a str)
             if not accepted:   # (a damaged frame's counter is not read: the receiver ignores it)
                 if rx.state is e2e.SMState.INIT and (status is e2e.Status.OK or status is e2e.Status.OKSOMELOST):
                     starting = True   # intact and in sequence, the state machine not VALID yet: no fault of the

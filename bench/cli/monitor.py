@@ -182,8 +182,7 @@ def e2e_text(state: MessageState) -> Text:
     check statuses other than OK and the other reasons frames were rejected (unprotected messages say so)."""
     protection = state.codec.protection
     head = "unprotected" if state.rx is None or protection is None else f"{protection.profile} {state.rx.state.value}"
-    statuses = [f"{getattr(name, 'value', name)} {count}" for name, count in state.e2e_status.items()
-                if name != "OK" and count]
+    statuses = [f"{name} {count}" for name, count in state.e2e_status.items() if name != "OK" and count]
     if not state.invalid and not statuses:
         return Text(head, style="dim" if state.rx is None else "green")
     order = {kind: i for i, kind in enumerate(E2E_KINDS)}          # known kinds first, any other after them

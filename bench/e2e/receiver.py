@@ -90,13 +90,14 @@ class StateMachine:
 
 
 _VALID = SMState.VALID
+_OK_APPLIED = (_OK, True)
 
 
 class Receiver:
     """The check and the state machine of one message, and the consumer's rule: a frame is applied when its
     status is OK or OKSOMELOST and the state machine is VALID after it."""
 
-    __slots__ = ("modulo", "max_delta", "last", "next", "sm")
+    __slots__ = ("modulo", "max_delta", "last", "next", "sm", "counts", "steady_ok")
 
     def __init__(self, counter_modulo: int, max_delta_counter: int, sm: SMConfig) -> None:
         self.modulo = counter_modulo
@@ -104,6 +105,8 @@ class Receiver:
         self.last = counter_modulo - 1   # E2E_PXXCheckInit: a first counter 0 is in sequence
         self.next = 0                    # the counter an in-sequence frame carries next
         self.sm = StateMachine(sm)
+        self.counts: dict[Status, int] = {}   # frames per status, but for ...
+        self.steady_ok = 0                    # ... the OK frames of the steady path, counted here
 
     @property
     def state(self) -> SMState:
@@ -124,16 +127,25 @@ class Receiver:
 
     def receive(self, counter: int | None) -> tuple[Status, bool]:
         """One frame: its status and whether the consumer may apply it (the signal checks still follow)."""
-        sm = self.sm
-        if counter == self.next and sm.steady:   # VALID with a window of OK statuses: one more OK keeps it so
+        if counter == self.next and self.sm.steady:
+            # VALID with a window of OK statuses only: one more OK changes neither the counts nor the state (the
+            # window stays all OK, so which of its places the status takes does not matter)
             self.last = counter
             self.next = counter + 1 if counter + 1 < self.modulo else 0
-            sm.window[sm.top] = _OK
-            sm.top = sm.top + 1 if sm.top + 1 < sm.size else 0
-            return _OK, True
+            self.steady_ok += 1
+            return _OK_APPLIED
         status = self.check(counter)
+        counts = self.counts
+        counts[status] = counts.get(status, 0) + 1
         state = self.sm.step(status)
         return status, state is SMState.VALID and (status is Status.OK or status is Status.OKSOMELOST)
+
+    def status_counts(self) -> dict[Status, int]:
+        """Frames received per check status (a Status equals its name as a str)."""
+        counts = dict(self.counts)
+        if self.steady_ok:
+            counts[_OK] = counts.get(_OK, 0) + self.steady_ok
+        return counts
 
     def expected(self) -> int:
         """The counter an in-sequence frame carries next."""
