@@ -9,6 +9,10 @@ ROOT = Path(__file__).resolve().parent.parent
 DBC_DIR = ROOT / "dbc"
 CHASSIS_DBC = DBC_DIR / "chassis.dbc"
 BENCH_DBC = DBC_DIR / "bench.dbc"
+#: The E2E_* attribute definitions as the contract's database defines them (BA_DEF_ lines), for test databases of
+#: their own that declare protection with the same attributes (docs/spec/e2e.md).
+E2E_ATTRIBUTE_DEFINITIONS = "\n".join(line for line in CHASSIS_DBC.read_text(encoding="utf-8").splitlines()
+                                      if line.startswith('BA_DEF_ BO_  "E2E_'))
 
 #: bench.toml of a minimal project outside this repository: the two databases copied into its db/ folder, its
 #: cases in cases/ (tests/integration/test_toy_vehicle.py, tests/integration/test_wheel_install.py)

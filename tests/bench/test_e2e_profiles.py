@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from bench import e2e as bench_e2e
 from bench.codec import Codebook, load_codebook
 from tests.reference import crc8_j1850_p11, p11_crc
+from tests.repo import E2E_ATTRIBUTE_DEFINITIONS
 
 FRAMES = 3000          # per profile: 200 wraps of a 15-value counter, 11 of P05's 256
 DATA_ID_LIST = "11 22 33 44 55 66 77 88 99 AA BB CC DD EE F0 0F"
@@ -59,13 +60,7 @@ BO_ 294 Msg_P05: 8 ECU
  SG_ Crc : 16|16@1+ (1,0) [0|65535] "" Vector__XXX
  SG_ Counter : 32|8@1+ (1,0) [0|255] "" Vector__XXX
 
-BA_DEF_ BO_  "E2E_Profile" ENUM  "None","P01","P02","P05","P11";
-BA_DEF_ BO_  "E2E_DataID" INT 0 65535;
-BA_DEF_ BO_  "E2E_DataIDMode" ENUM  "BOTH","ALT","LOW","NIBBLE";
-BA_DEF_ BO_  "E2E_DataIDList" STRING ;
-BA_DEF_ BO_  "E2E_Offset" INT 0 504;
-BA_DEF_ BO_  "E2E_DataLength" INT 0 512;
-BA_DEF_ BO_  "E2E_MaxDeltaCounter" INT 1 255;
+{E2E_ATTRIBUTE_DEFINITIONS}
 BA_DEF_DEF_  "E2E_Profile" "None";
 BA_DEF_DEF_  "E2E_DataID" 0;
 BA_DEF_DEF_  "E2E_DataIDMode" "BOTH";

@@ -26,7 +26,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from tests.child import Child
-from tests.repo import ROOT
+from tests.repo import E2E_ATTRIBUTE_DEFINITIONS, ROOT
 
 EXAMPLE = ROOT / "examples" / "vcu_ecu.py"
 BENCH = [sys.executable, "-m", "bench"]
@@ -275,7 +275,7 @@ def test_example_runs_on_the_benchs_frames() -> None:
 
 #: A database of its own with a message per profile (P01 ALT, P02, P05 at byte 2, P11 NIBBLE), one without
 #: protection, and state machine parameters other than the contract's (WindowSize 3).
-PROFILES_DBC = """\
+PROFILES_DBC = f"""\
 VERSION ""
 
 NS_ :
@@ -310,20 +310,7 @@ BO_ 5 Plain: 8 A
  SG_ Val : 0|16@1+ (1,0) [0|65535] "" B
 
 BA_DEF_ BO_  "GenMsgCycleTime" INT 0 65535;
-BA_DEF_ BO_  "E2E_Profile" ENUM  "None","P01","P02","P05","P11";
-BA_DEF_ BO_  "E2E_DataID" INT 0 65535;
-BA_DEF_ BO_  "E2E_DataIDMode" ENUM  "BOTH","ALT","LOW","NIBBLE";
-BA_DEF_ BO_  "E2E_DataIDList" STRING ;
-BA_DEF_ BO_  "E2E_Offset" INT 0 504;
-BA_DEF_ BO_  "E2E_DataLength" INT 0 512;
-BA_DEF_ BO_  "E2E_MaxDeltaCounter" INT 1 255;
-BA_DEF_ BO_  "E2E_WindowSize" INT 1 255;
-BA_DEF_ BO_  "E2E_MinOkStateInit" INT 0 255;
-BA_DEF_ BO_  "E2E_MaxErrorStateInit" INT 0 255;
-BA_DEF_ BO_  "E2E_MinOkStateValid" INT 0 255;
-BA_DEF_ BO_  "E2E_MaxErrorStateValid" INT 0 255;
-BA_DEF_ BO_  "E2E_MinOkStateInvalid" INT 0 255;
-BA_DEF_ BO_  "E2E_MaxErrorStateInvalid" INT 0 255;
+{E2E_ATTRIBUTE_DEFINITIONS}
 BA_DEF_DEF_  "GenMsgCycleTime" 10;
 BA_DEF_DEF_  "E2E_Profile" "None";
 BA_DEF_DEF_  "E2E_DataID" 0;
