@@ -8,12 +8,12 @@ that a message stopped arriving is the consumer's deadline monitoring (the timeo
 
 from __future__ import annotations
 
-from enum import Enum
+from enum import StrEnum
 
 from bench.e2e.profiles import SMConfig
 
 
-class Status(str, Enum):
+class Status(StrEnum):
     """The profile check's status of one frame (E2E_PXXCheckStatusType); equal to its name as a string."""
 
     OK = "OK"                        # CRC right, counter = previous + 1
@@ -23,7 +23,7 @@ class Status(str, Enum):
     ERROR = "ERROR"                  # CRC wrong (or wrong length): the counter is not read
 
 
-class SMState(str, Enum):
+class SMState(StrEnum):
     """E2E_SMStateType; equal to its name as a string."""
 
     NODATA = "NODATA"
