@@ -490,7 +490,7 @@ def test_delayed_stale_frame_is_never_applied(codebook: Codebook) -> None:
     assert verdicts == _model_verdicts(frames) == [False, True, True, True, False, False, False, True, True]
     _, x = monitor.history(MESSAGE, "PivotX")
     assert [round(v / 0.02) for v in x] == [1, 2, 3, 7, 8]          # frame 4 (the stale one) never applied
-    assert monitor.invalid_log[1].reason == "E2E WRONGSEQUENCE: counter 9, expected 14, state INVALID"
+    assert monitor.invalid_log[0].reason == "E2E WRONGSEQUENCE: counter 9, expected 14, state INVALID"
 
 
 def test_a_bad_crc_costs_two_frames_and_no_timeout(codebook: Codebook) -> None:
@@ -500,7 +500,7 @@ def test_a_bad_crc_costs_two_frames_and_no_timeout(codebook: Codebook) -> None:
     frames[2] = Frame(frames[2].t_ms, 4, "bad")
     monitor, verdicts = _feed(codebook, frames)
     assert verdicts == _model_verdicts(frames) == [False, True, False, False, True]
-    assert [r.reason for r in monitor.invalid_log[1:]] == [
+    assert [r.reason for r in monitor.invalid_log] == [
         "E2E ERROR: CRC wrong, state INVALID", "E2E OKSOMELOST: counter 5 in sequence, state INVALID (not VALID yet)"]
     assert monitor.state(MESSAGE).timeouts == []
 
@@ -524,7 +524,7 @@ def test_a_wrong_length_is_an_error_of_the_message(codebook: Codebook) -> None:
     assert verdicts == [False, True, False, False, True]
     state = monitor.state(MESSAGE)
     assert state.e2e_status["ERROR"] == 1 and state.invalid["length"] == 1
-    assert monitor.invalid_log[1].reason == "length 7, DBC says 8"
+    assert monitor.invalid_log[0].reason == "length 7, DBC says 8"
 
 
 def test_timeout_then_resume(codebook: Codebook) -> None:
