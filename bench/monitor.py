@@ -39,8 +39,6 @@ INTERVALS_CAP = 5000     # frame intervals per message for cycle-time checks (50
                          # timing section keeps its own whole-run histogram, bench/timing.py)
 INVALID_CAP = 20000      # invalid-frame records
 # Two senders of one identifier (a finding of its own, not thousands of counter errors):
-_NODATA, _INIT, _ERROR = e2e.SMState.NODATA, e2e.SMState.INIT, e2e.Status.ERROR
-_COUNTS_OK = (e2e.Status.OK, e2e.Status.OKSOMELOST)
 SENDERS_GAP_CYCLES = 3   # a reception gap (no frame at all) longer than this many cycles ends the counter streams
 SENDERS_CALM = 32        # accepted frames in a row after which the counter streams are no longer followed
 OWN_ECHO_FRAMES = 16     # a received copy of one of the station's last 16 frames of an identifier (one counter
@@ -190,13 +188,9 @@ class Monitor:
         if rx is not None:
             found = codec.counter_if_intact(data) if length_ok else None
             expected = rx.next
-            first = rx.sm.state is _NODATA
             status, accepted = rx.receive(found)
             if not accepted:   # (a damaged frame's counter is not read: the receiver ignores it)
-                if status is not _ERROR and (first or (rx.sm.state is _INIT and status in _COUNTS_OK)):
-                    # intact, and either the first frame this receiver judges (it only moves the state machine
-                    # from NODATA to INIT, whatever its counter: a sender that started earlier is no fault) or in
-                    # sequence while the state machine is not VALID yet: logged as valid, its values not applied
+                if rx.held_back:   # no fault of its sender (the receiver's start): logged as valid, not applied
                     starting = True
                 else:
                     kind, reason = _e2e_rejection(rx, status, found, expected, length_ok)

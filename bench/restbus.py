@@ -160,5 +160,5 @@ class Restbus:
             data = bytearray(slot.payload)
             protection.protect(data, counter)
             frame = slot.frames[counter] = bytes(data)
-        slot.counter = counter + 1 if counter + 1 < slot.modulo else 0   # protection.next_counter, written out
+        slot.counter = protection.next_counter(counter)
         return frame

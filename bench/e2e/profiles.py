@@ -95,7 +95,6 @@ class Protection:
     counter: Field = field(init=False)
     counter_modulo: int = field(init=False)
     _protect: Callable[[bytearray, int], None] = field(init=False, repr=False, compare=False)
-    _check: Callable[[bytes | bytearray], bool] = field(init=False, repr=False, compare=False)
     _intact: Callable[[bytes | bytearray], int | None] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -136,18 +135,15 @@ class Protection:
                 counter_field.write(data, counter % modulo)
                 module_protect(data, data_id, increment_counter=False, **kw)
 
-            set_(self, "_protect", protect_slow)
             # (the library's check wants a writable buffer: it is given a copy, the frame stays as received)
-            def check(data: bytes | bytearray) -> bool:
-                return module_check(bytearray(data), data_id, **kw)
+            def intact_slow(data: bytes | bytearray) -> int | None:
+                return counter_field.read(data) if module_check(bytearray(data), data_id, **kw) else None
 
-            set_(self, "_check", check)
-            set_(self, "_intact", lambda data: counter_field.read(data) if check(data) else None)
+            set_(self, "_protect", protect_slow)
+            set_(self, "_intact", intact_slow)
         else:
-            crc, intact, protect = fast
-            set_(self, "_protect", protect)
-            set_(self, "_check", lambda data: intact(data) is not None)
-            set_(self, "_intact", intact)
+            set_(self, "_intact", fast[0])
+            set_(self, "_protect", fast[1])
 
     # -- sending ---------------------------------------------------------------------------------
     def protect(self, data: bytearray, counter: int) -> None:
@@ -158,10 +154,6 @@ class Protection:
         return (counter + 1) % self.counter_modulo
 
     # -- receiving -------------------------------------------------------------------------------
-    def intact(self, data: bytes | bytearray) -> bool:
-        """Whether the frame's CRC is right for this message's parameters (the library's check)."""
-        return self._check(data)
-
     def counter_if_intact(self, data: bytes | bytearray) -> int | None:
         """The counter of a frame whose CRC is right; None when it is wrong (a damaged counter is not read)."""
         return self._intact(data)
@@ -208,8 +200,7 @@ class Protection:
 
 
 def _fast_crc(profile: str, mode: str, data_id: int, crc_byte: int, length: int
-              ) -> tuple[Callable[[bytes | bytearray], int], Callable[[bytes | bytearray], int | None],
-                         Callable[[bytearray, int], None]] | None:
+              ) -> tuple[Callable[[bytes | bytearray], int | None], Callable[[bytearray, int], None]] | None:
     """Profiles 1 and 11 with DataIDMode BOTH (the contract's protection) through the library's CRC-8 alone:
     AUTOSAR's chained Crc_CalculateCRC8 calls over the Data ID's low and high byte, then every byte but the CRC's,
     in one library call per frame. The profile functions of `autosar-e2e` take keyword arguments, which that
@@ -225,9 +216,6 @@ def _fast_crc(profile: str, mode: str, data_id: int, crc_byte: int, length: int
     after = crc_byte + 1
     counter_byte = after
 
-    def crc(data: bytes | bytearray) -> int:
-        return calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF
-
     def intact(data: bytes | bytearray) -> int | None:
         counter = data[counter_byte] & 0x0F
         if counter == 15 or calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF != data[crc_byte]:
@@ -238,4 +226,4 @@ def _fast_crc(profile: str, mode: str, data_id: int, crc_byte: int, length: int
         data[counter_byte] = (data[counter_byte] & 0xF0) | (counter % 15)
         data[crc_byte] = calculate_crc8(prefix + data[:crc_byte] + data[after:end]) ^ 0xFF
 
-    return crc, intact, protect
+    return intact, protect

@@ -97,14 +97,16 @@ class Receiver:
     """The check and the state machine of one message, and the consumer's rule: a frame is applied when its
     status is OK or OKSOMELOST and the state machine is VALID after it."""
 
-    __slots__ = ("modulo", "max_delta", "last", "next", "sm", "counts", "steady_ok")
+    __slots__ = ("modulo", "max_delta", "next", "sm", "counts", "steady_ok", "held_back")
 
     def __init__(self, counter_modulo: int, max_delta_counter: int, sm: SMConfig) -> None:
         self.modulo = counter_modulo
         self.max_delta = max_delta_counter
-        self.last = counter_modulo - 1   # E2E_PXXCheckInit: a first counter 0 is in sequence
-        self.next = 0                    # the counter an in-sequence frame carries next
+        self.next = 0   # the counter an in-sequence frame carries next (E2E_PXXCheckInit: a first 0 is in sequence)
         self.sm = StateMachine(sm)
+        #: After a frame that was not applied: whether it says nothing against its sender (intact, and the first
+        #: frame this receiver judges, or in sequence while the state machine is INIT) rather than failing.
+        self.held_back = False
         self.counts: dict[Status, int] = {}   # frames per status, but for ...
         self.steady_ok = 0                    # ... the OK frames of the steady path, counted here
 
@@ -116,8 +118,7 @@ class Receiver:
         """The profile's check of one frame: `counter` is its counter when the CRC is right, None when not."""
         if counter is None or counter >= self.modulo:
             return Status.ERROR
-        delta = (counter - self.last) % self.modulo
-        self.last = counter
+        delta = (counter - self.next + 1) % self.modulo
         self.next = (counter + 1) % self.modulo
         if delta == 1:
             return Status.OK
@@ -130,15 +131,18 @@ class Receiver:
         if counter == self.next and self.sm.steady:
             # VALID with a window of OK statuses only: one more OK changes neither the counts nor the state (the
             # window stays all OK, so which of its places the status takes does not matter)
-            self.last = counter
             self.next = counter + 1 if counter + 1 < self.modulo else 0
             self.steady_ok += 1
             return _OK_APPLIED
+        first = self.sm.state is SMState.NODATA
         status = self.check(counter)
         counts = self.counts
         counts[status] = counts.get(status, 0) + 1
         state = self.sm.step(status)
-        return status, state is SMState.VALID and (status is Status.OK or status is Status.OKSOMELOST)
+        ok = status in _COUNTS_OK
+        applied = state is _VALID and ok
+        self.held_back = not applied and status is not Status.ERROR and (first or (state is SMState.INIT and ok))
+        return status, applied
 
     def status_counts(self) -> dict[Status, int]:
         """Frames received per check status (a Status equals its name as a str)."""
@@ -146,7 +150,3 @@ class Receiver:
         if self.steady_ok:
             counts[_OK] = counts.get(_OK, 0) + self.steady_ok
         return counts
-
-    def expected(self) -> int:
-        """The counter an in-sequence frame carries next."""
-        return self.next

@@ -263,7 +263,7 @@ def test_the_consumer_rule(state: str, status: str) -> None:
 def test_the_check_starts_at_the_counters_largest_value() -> None:
     for modulo in (15, 16, 256):
         rx = e2e.Receiver(modulo, 2, _config(CONTRACT))
-        assert rx.expected() == 0 and rx.check(0) is e2e.Status.OK
+        assert rx.next == 0 and rx.check(0) is e2e.Status.OK
         assert e2e.Receiver(modulo, 2, _config(CONTRACT)).check(modulo) is e2e.Status.ERROR
 
 
