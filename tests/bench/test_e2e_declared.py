@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import cantools
 import pytest
@@ -191,21 +192,21 @@ def test_the_log_process_and_the_mcap_writer_load_with_the_override(tmp_path: Pa
         LogProcess(tmp_path / "run.mcap", [FIXTURE], "test", bad)
     log = LogProcess(tmp_path / "good.mcap", [FIXTURE], "test", {"P11_Status": {"DataID": 0x0222}})
     log.close()
-    writer = MCAPWriter(tmp_path / "w.mcap", dbc=str(FIXTURE), e2e={"P11_Status": {"MaxDeltaCounter": 4}})
-    try:
-        assert writer.monitor is not None
-        protection = writer.monitor.codebook["P11_Status"].protection
-        assert protection is not None and protection.max_delta_counter == 4
-    finally:
-        writer.stop()
+    assert _max_delta_counter(MCAPWriter(tmp_path / "w.mcap", dbc=str(FIXTURE),
+                                         e2e={"P11_Status": {"MaxDeltaCounter": 4}})) == 4
     config = tmp_path / "bench.toml"
     config.write_text(f'[bench]\ndatabases = ["{FIXTURE}"]\nstimulus = ["TESTER"]\nplant = "p"\ntestcases = "t"\n'
                       'reports = "r"\n\n[e2e.P11_Status]\nMaxDeltaCounter = 5\n', encoding="utf-8")
-    writer = MCAPWriter(tmp_path / "c.mcap", dbc=str(FIXTURE), config=str(config))   # --config=bench.toml
+    assert _max_delta_counter(MCAPWriter(tmp_path / "c.mcap", dbc=str(FIXTURE), config=str(config))) == 5
+
+
+def _max_delta_counter(writer: Any) -> int:
+    """The MaxDeltaCounter the writer's monitor applies to P11_Status (the writer is stopped)."""
     try:
         assert writer.monitor is not None
         protection = writer.monitor.codebook["P11_Status"].protection
-        assert protection is not None and protection.max_delta_counter == 5
+        assert protection is not None
+        return protection.max_delta_counter
     finally:
         writer.stop()
 
