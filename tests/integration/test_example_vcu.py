@@ -14,59 +14,24 @@ from __future__ import annotations
 import importlib.util
 import math
 import random
-import re
-import subprocess
 import sys
 import time
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from tests.child import Child
+from tests.external_ecu import judge_example
 from tests.repo import E2E_ATTRIBUTE_DEFINITIONS, ROOT
 
 EXAMPLE = ROOT / "examples" / "vcu_ecu.py"
-BENCH = [sys.executable, "-m", "bench"]
 
 
 @pytest.mark.realtime
 def test_campaign_passes_against_the_example_vcu(tmp_path: Path) -> None:
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
-    bus = ["--interface", "udp_multicast", "--channel", group]
-    plant = Child([*BENCH, "plant", *bus, "--external", "VCU", "--duration", "900"], ROOT)
-    vcu = None
-    try:
-        started = plant.wait_for("simulating", 60)
-        simulated = started.split("simulating", 1)[1].split(" on ", 1)[0]
-        assert "VCU" not in simulated.replace(",", " ").split(), started   # the bench leaves the VCU alone
-        vcu = Child([sys.executable, str(EXAMPLE), *bus], ROOT)
-        vcu.wait_for("running", 60)
-        run = subprocess.run([*BENCH, "run", *bus, "--external", "all", "--dut", "VCU", "--out", str(tmp_path)],
-                             cwd=ROOT, capture_output=True, text=True, timeout=1200)
-        assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-3000:]
-        suite = ET.parse(tmp_path / "junit.xml").getroot()
-        suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
-        assert suite is not None
-        cases = suite.findall("testcase")
-        assert int(suite.get("failures", "1")) == 0 and int(suite.get("errors", "1")) == 0
-        ran = [c for c in cases if c.find("skipped") is None]
-        assert len(ran) >= 110, f"only {len(ran)} cases ran"
-        for case in cases:
-            duts = [p.get("value") for p in case.iter("property") if p.get("name") == "dut"]
-            assert "VCU" in duts, (case.get("name"), duts)              # --dut VCU: only the VCU's cases
-            skipped = case.find("skipped")
-            if skipped is not None:                                      # only reference-only cases are skipped
-                reason = (skipped.get("message") or "") + (skipped.text or "")
-                assert re.search(r"reference_only: .+ \(.+ (is|are) external\)", reason), (case.get("name"), reason)
-        report = (tmp_path / "report.html").read_text()           # the VCU's conformance table, as the real ECU
-        assert re.search(r'<h2 id="node-VCU">VCU <span class="node-kind">external \(the real ECU\)', report)
-    finally:
-        outputs = {"vcu": vcu.stop() if vcu is not None else "", "plant": plant.stop()}
-    assert vcu.returncode == 0 and "stopped" in outputs["vcu"], outputs["vcu"]
-    assert plant.returncode == 0, outputs["plant"]
+    """Every case that judges the VCU (the 4WIS campaign, the 4WS cases at speed, the fault cases) passes."""
+    judge_example(EXAMPLE, "VCU", tmp_path, min_ran=110)
 
 
 def _load_example():

@@ -1,0 +1,86 @@
+"""An example ECU of examples/ (written from the contract documents alone) judged as an external node, the way
+docs/contract/README.md tells a supplier to judge a real one: three processes on one host over udp_multicast (hop
+limit 0: nothing leaves the host): `bench plant --external NODE` simulates every node but NODE, the example plays
+NODE, and `bench run --external all --dut NODE` runs every case that judges NODE.
+
+What a passing example must show: `bench run` exits 0 with no failure, error or inconclusive case; at least
+`min_ran` cases ran; every case names NODE as its DUT; only reference-only cases are skipped, each with its
+reason; the report's conformance table shows NODE as the real ECU; no invalid frame outside the cases that inject
+a fault (results.json, the monitor's count per case); the example and the plant end cleanly on Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+from tests.child import Child
+from tests.repo import ROOT
+
+BENCH = [sys.executable, "-m", "bench"]
+
+
+@dataclass
+class Campaign:
+    """What `bench run` left: its JUnit cases (ran and skipped) and results.json's cases."""
+
+    ran: list[str]
+    skipped: list[str]
+    results: list[dict]
+
+
+def judge_example(example: Path, node: str, out: Path, *, min_ran: int, seconds: float = 1200.0) -> Campaign:
+    """Run the campaign of `node` against `example` (module docstring) and check what a passing example shows."""
+    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    bus = ["--interface", "udp_multicast", "--channel", group]
+    plant = Child([*BENCH, "plant", *bus, "--external", node, "--duration", str(int(seconds) + 60)], ROOT)
+    ecu = None
+    try:
+        started = plant.wait_for("simulating", 60)
+        simulated = started.split("simulating", 1)[1].split(" on ", 1)[0]
+        assert node not in simulated.replace(",", " ").split(), started     # the bench leaves the node alone
+        ecu = Child([sys.executable, str(example), *bus], ROOT)
+        ecu.wait_for("running", 60)
+        run = subprocess.run([*BENCH, "run", *bus, "--external", "all", "--dut", node, "--out", str(out)],
+                             cwd=ROOT, capture_output=True, text=True, timeout=seconds)
+        assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-3000:]
+        campaign = _check_report(out, node, min_ran)
+    finally:
+        outputs = {"ecu": ecu.stop() if ecu is not None else "", "plant": plant.stop()}
+    assert ecu is not None and ecu.process.returncode == 0 and "stopped" in outputs["ecu"], outputs["ecu"]
+    assert plant.process.returncode == 0, outputs["plant"]
+    return campaign
+
+
+def _check_report(out: Path, node: str, min_ran: int) -> Campaign:
+    suite = ET.parse(out / "junit.xml").getroot()
+    suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
+    assert suite is not None
+    assert int(suite.get("failures", "1")) == 0 and int(suite.get("errors", "1")) == 0
+    ran, skipped = [], []
+    for case in suite.findall("testcase"):
+        name = case.get("name", "")
+        duts = [p.get("value") for p in case.iter("property") if p.get("name") == "dut"]
+        assert node in duts, (name, duts)                              # --dut NODE: only NODE's cases
+        skip = case.find("skipped")
+        if skip is None:
+            ran.append(name)
+            continue
+        reason = (skip.get("message") or "") + (skip.text or "")       # only reference-only cases are skipped
+        assert re.search(r"reference_only: .+ \(.+ (is|are) external\)", reason), (name, reason)
+        skipped.append(name)
+    assert len(ran) >= min_ran, f"only {len(ran)} cases ran: {ran}"
+    report = (out / "report.html").read_text()                  # NODE's conformance table, as the real ECU
+    assert re.search(rf'<h2 id="node-{node}">{node} <span class="node-kind">external \(the real ECU\)', report)
+    results = json.loads((out / "results.json").read_text())["cases"]
+    invalid = {c["nodeid"]: (c["invalid_frames"], c["invalid"][:3]) for c in results
+               if c.get("invalid_frames") and not c.get("faults")}
+    assert not invalid, f"invalid frames outside the fault cases: {invalid}"
+    assert not [c["nodeid"] for c in results if c.get("inconclusive")], "inconclusive cases: the bench was late"
+    return Campaign(ran, skipped, results)
