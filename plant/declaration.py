@@ -8,8 +8,8 @@ PLANT_Status.Vehicle (tests/integration/test_dbc_contract.py checks that the dec
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 
 from bench.node import Behaviour
 from plant.vehicles import ParameterFile
@@ -26,6 +26,9 @@ class Vehicle:
     messages: its network: every message the plant side of this vehicle sends; the factory stops the others.
     stimulus: the stimulus messages its behaviours read, i.e. what a scenario of it sends besides
         BENCH_Control (the bench's public `bench.plugins.plant_stimulus` answers from it).
+    io: its bench I/O (docs/contract/plant.md, "Bench I/O"): per ECU node, the IO_* messages the plant sends to it
+        or reads from it, on the bus only while that node is external (the factory stops them otherwise, so a
+        simulated ECU, which keeps its direct wires, sends none either). Not part of `messages`.
     """
 
     name: str
@@ -34,6 +37,7 @@ class Vehicle:
     parameters: tuple[ParameterFile, ...]
     messages: frozenset[str]
     stimulus: tuple[str, ...]
+    io: Mapping[str, frozenset[str]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.name.isidentifier() or self.name != self.name.upper():

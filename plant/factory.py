@@ -30,6 +30,11 @@ def messages_of(vehicle: str) -> frozenset[str]:
     return registry.vehicle(vehicle).messages
 
 
+def io_of(vehicle: str) -> dict[str, frozenset[str]]:
+    """The vehicle's bench I/O: {ECU node: its IO_* messages}, on the bus only while that node is external."""
+    return dict(registry.vehicle(vehicle).io)
+
+
 def stimulus(vehicle: str) -> tuple[str, ...]:
     """The stimulus messages the vehicle's behaviours read: what a scenario of it sends besides BENCH_Control."""
     return registry.vehicle(vehicle).stimulus
@@ -78,10 +83,16 @@ class PlantHost:
 
     def _set_network(self, io: NodeIO) -> None:
         """Send the messages of this vehicle's network, and none of the other vehicles' (a 4WIS EV has no
-        SBW ECU: its bus carries no SBW frames). Messages no vehicle claims are left as they are."""
-        mine = messages_of(self.vehicle)
-        others = frozenset().union(*(v.messages for v in registry.vehicles().values())) - mine
-        for message in others:
+        SBW ECU: its bus carries no SBW frames). A bench I/O message (`Vehicle.io`) is sent only while its ECU is
+        external: stopped otherwise (a simulated ECU keeps its direct wires), and on every other vehicle.
+        Messages no vehicle claims are left as they are."""
+        mine = set(messages_of(self.vehicle))
+        for node, messages in io_of(self.vehicle).items():
+            if node in self.external:
+                mine.update(messages)
+        declared = registry.vehicles().values()
+        claimed = frozenset().union(*(v.messages for v in declared), *(m for v in declared for m in v.io.values()))
+        for message in claimed - mine:
             io.stop_sending(message)
         for message in mine:
             io.resume_sending(message)

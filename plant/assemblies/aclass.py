@@ -56,6 +56,9 @@ MESSAGES = frozenset({
     "PLANT_SbwAngles", "PLANT_SbwTorques", "PLANT_SbwSensors",
 })
 
+#: Its bench I/O (docs/contract/plant.md PLANT-IO-SBW-01): on the bus only while the SBW is external.
+IO = {"SBW": frozenset({"IO_SbwHandWheel", "IO_SbwPinion", "IO_SbwCurrents", "IO_SbwActuators"})}
+
 #: What its behaviours read of the stimulus: the steering robot, the SBW ECU's configuration, the sensor faults.
 STIMULUS = ("BENCH_SteeringRobot", "BENCH_SbwConfig", "BENCH_SbwSensorFault")
 
@@ -281,4 +284,5 @@ def build(external: Collection[str]) -> list[Behaviour]:
     return behaviours
 
 
-VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=PARAMETERS, messages=MESSAGES, stimulus=STIMULUS)
+VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=PARAMETERS, messages=MESSAGES, stimulus=STIMULUS,
+                  io=IO)

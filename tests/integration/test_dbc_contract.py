@@ -95,6 +95,19 @@ BENCH: list[tuple[int, str, str, int, dict[str, str | None]]] = [
     (0x692, "PLANT_Motion", "PLANT", 10, {"Heading": "deg", "Speed": "m/s", "YawRate": "deg/s"}),
     (0x693, "PLANT_Dynamics", "PLANT", 10, {"Sideslip": "deg", "LatAccel": "m/s^2", "LongAccel": "m/s^2"}),
 ]
+# The SBW's bench I/O (docs/spec/k-matrix.md, "The bench's own messages"; docs/contract/plant.md PLANT-IO-SBW-02..04):
+# id, name, sender, receiver, cycle ms, {signal: (unit, scale, minimum, maximum)}
+BENCH_IO_SBW: list[tuple[int, str, str, str, int, dict[str, tuple[str, float, float, float]]]] = [
+    (0x6E0, "IO_SbwHandWheel", "PLANT", "SBW", 5,
+     {"HandWheelSensor": ("deg", 0.1, -3000, 3000), "ColumnAngle": ("deg", 0.1, -3000, 3000),
+      "TorsionBarTorque": ("Nm", 0.002, -65, 65)}),
+    (0x6E1, "IO_SbwPinion", "PLANT", "SBW", 5,
+     {"PinionSensor": ("deg", 0.1, -3000, 3000), "ActuatorAngle": ("deg", 0.1, -3000, 3000)}),
+    (0x6E2, "IO_SbwCurrents", "PLANT", "SBW", 5,
+     {"RoadFeelMotorCurrent": ("A", 0.01, -50, 50), "SteerMotorCurrent": ("A", 0.01, -60, 60)}),
+    (0x6E8, "IO_SbwActuators", "SBW", "PLANT", 5,
+     {"PinionAngleRequest": ("deg", 0.1, -900, 900), "RoadFeelTorqueRequest": ("Nm", 0.002, -20, 20)}),
+]
 BENCH_ENUMS = {
     ("BENCH_SteeringRobot", "RobotMode"): {0: "OFF", 1: "ANGLE", 2: "TORQUE"},
 }
@@ -221,6 +234,25 @@ def test_bench_message(frame_id: int, name: str, sender: str, cycle: int, signal
         signal = message.get_signal_by_name(signal_name)
         if unit is not None:
             assert signal.unit == unit, signal_name
+
+
+@pytest.mark.parametrize("frame_id, name, sender, receiver, cycle, signals", BENCH_IO_SBW,
+                         ids=[row[1] for row in BENCH_IO_SBW])
+def test_bench_io_sbw(frame_id: int, name: str, sender: str, receiver: str, cycle: int,
+                      signals: dict[str, tuple[str, float, float, float]]) -> None:
+    message = BENCH_DB.get_message_by_name(name)
+    assert message.frame_id == frame_id
+    assert message.senders == [sender]
+    assert _attr(message, "GenMsgCycleTime") == cycle
+    assert _attr(message, "GenMsgSendType") == "Cyclic"
+    assert _attr(message, "E2E_Profile") == "P11" and _attr(message, "E2E_DataID") == frame_id
+    for signal in message.signals:
+        assert signal.receivers == [receiver], signal.name
+    for signal_name, (unit, scale, minimum, maximum) in signals.items():
+        signal = message.get_signal_by_name(signal_name)
+        assert (signal.unit, signal.scale, signal.minimum, signal.maximum) == (unit, scale, minimum, maximum)
+        assert signal.is_signed and signal.length == 16
+    assert {s.name for s in message.signals} == {*signals, "AliveCounter", "Checksum"}
 
 
 @pytest.mark.parametrize("key", sorted(BENCH_ENUMS), ids=lambda k: ".".join(k))
