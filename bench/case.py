@@ -62,8 +62,10 @@ class Case:
     `wait_until`), reads what the monitor accepted (`value`, `history`, `received`, `detections`) and checks
     it (`expect`, `expect_between`, `eventually`, `always`, `check_cycle_times`). Every check records one
     *step* in the report: name, measured, expected, tolerance, verdict and the bench time of the check.
-    Checks never raise: the case runs to its end and fails when any step failed; only `received` ends a
-    case, in one line, when a message it cannot be judged without never came. Times are bench time in
+    Checks never raise: the case runs to its end and fails when any step of its DUT failed; only `received` ends
+    a case, in one line, when a message it cannot be judged without never came. A check that judges another node
+    than the case's DUT (the plant, a simulated sensor) names it (`node="PLANT"`): its step is that node's, shown
+    under it in the report's conformance section, and never fails the case. Times are bench time in
     seconds (virtual on the embedded default, wall-clock on a real bus); signal values are physical values
     in the DBC's units. Every time limit ("for how long") is the argument `seconds`: `run(seconds)`,
     `wait_until(predicate, seconds)`, `eventually(name, predicate, seconds)`, `always(name, predicate,
@@ -424,48 +426,66 @@ class Case:
         """Check that `measured` is within max(`abs_tol`, `rel_tol`·|`expected`|) of `expected` (`unit`:
         the unit of all three, shown in the report). Records one step: measured, expected, the tolerance,
         pass/fail; a NaN on either side fails (a `value()` without frames is recorded as "no frames of
-        MESSAGE"). `node`: the node the check judges when it is not the case's DUT (e.g. the plant's model):
-        the step is reported as that node's and never fails the case. Returns the verdict."""
+        MESSAGE"). `node`: the node the check judges when it is not the case's DUT (e.g. `node="PLANT"` for the
+        plant against its model), a node of the databases: the step is that node's, shown under it in the
+        conformance section and JUnit, and never fails the case; a failure of a node the bench simulates makes a
+        case whose DUT failed too inconclusive (docs/contract/README.md). Returns the verdict."""
         if abs_tol < 0 or rel_tol < 0:
             raise BenchError(f"check {name!r}: tolerances must not be negative")
+        self._check_node(name, node)
         ok = within(float(measured), float(expected), abs_tol, rel_tol)
         return self._steps.record(name, ok, _shown(measured), _shown(expected),
                                   tolerance_text(abs_tol, rel_tol, unit), unit, detail, node)
+
+    def _check_node(self, name: str, node: str) -> None:
+        """A check's `node` must name nodes of the databases (a typo would be a node of its own in the report)."""
+        if not node:
+            return
+        known = self.session.codebook.nodes
+        unknown = [n for n in node.split(",") if n and n not in known]
+        if unknown or not node.strip(","):
+            raise BenchError(f"check {name!r}: node {node!r} is not a node of the databases (nodes: "
+                             f"{', '.join(known)})")
 
     def expect_true(self, name: str, condition: bool, *, measured: float | str | None = None,
                     expected: float | str | None = None, detail: str = "", node: str = "") -> bool:
         """Check a condition the case computed itself. Records one step, pass when `condition` is true,
         with the `measured` and `expected` it is given (for the reader of the report); `node` as `expect`.
         Returns the verdict."""
+        self._check_node(name, node)
         return self._steps.record(name, bool(condition), measured, expected, "", "", detail, node)
 
     def expect_between(self, name: str, measured: float, low: float, high: float, *, unit: str = "",
                        detail: str = "", node: str = "") -> bool:
         """Check that `low` ≤ `measured` ≤ `high` (bounds included, all in `unit`). Records one step with
         expected "[low, high]" and tolerance "range"; a NaN fails; `node` as `expect`. Returns the verdict."""
+        self._check_node(name, node)
         ok = math.isfinite(float(measured)) and low <= float(measured) <= high
         return self._steps.record(name, ok, _shown(measured), f"[{low:g}, {high:g}]", "range", unit, detail, node)
 
-    def eventually(self, name: str, predicate: Callable[[], bool], seconds: float) -> bool:
+    def eventually(self, name: str, predicate: Callable[[], bool], seconds: float, *, node: str = "") -> bool:
         """Run until `predicate()` is true, at most `seconds` s of bench time. Records one step: measured =
         the time it took (s) or "not within N", expected "≤ N", unit s; pass exactly when the measured time is
-        ≤ `seconds` (the figure is the verdict's number; in real time the clock's, see `wait_until`). Returns
-        the verdict."""
+        ≤ `seconds` (the figure is the verdict's number; in real time the clock's, see `wait_until`); `node` as
+        `expect`. Returns the verdict."""
+        self._check_node(name, node)
         took = self._watch(predicate, seconds, until=True, check_first=True)
         ok = took is not None and took <= seconds
         measured: float | str = f"not within {seconds:g}" if took is None else took
-        return self._steps.record(name, ok, measured, f"≤ {seconds:g}", "eventually", "s")
+        return self._steps.record(name, ok, measured, f"≤ {seconds:g}", "eventually", "s", node=node)
 
-    def always(self, name: str, predicate: Callable[[], bool], seconds: float) -> bool:
+    def always(self, name: str, predicate: Callable[[], bool], seconds: float, *, node: str = "") -> bool:
         """Run for `seconds` s of bench time and check `predicate()` at every 1 ms tick; stops at the first
         tick where it is false. Records one step: "held N s", or "violated at +t s" (since the call); fail
         exactly when it was found false at t ≤ `seconds` (in real time, a check that finds it false only after
-        the limit, because the bench ran late, is outside the window: it held; see `wait_until`). Returns the
-        verdict."""
+        the limit, because the bench ran late, is outside the window: it held; see `wait_until`); `node` as
+        `expect`. Returns the verdict."""
+        self._check_node(name, node)
         violated = self._watch(predicate, seconds, until=False, check_first=False)
         if violated is not None and violated <= seconds:
-            return self._steps.record(name, False, f"violated at +{violated:g} s", f"for {seconds:g} s", "always")
-        return self._steps.record(name, True, f"held {seconds:g} s", f"for {seconds:g} s", "always")
+            return self._steps.record(name, False, f"violated at +{violated:g} s", f"for {seconds:g} s", "always",
+                                      node=node)
+        return self._steps.record(name, True, f"held {seconds:g} s", f"for {seconds:g} s", "always", node=node)
 
     def check_cycle_times(self, messages: Iterable[str] | None = None, *, p50_band: float = 0.05,
                           p99_max: float = 1.5, max_max: float = 3.0, min_frames: int = 10) -> bool:
@@ -475,8 +495,8 @@ class Case:
         every periodic message a node the bench simulates sends now (its restbus sends it), seen or not: one
         that never arrived fails. Records one step per message (measured p50 / p99 / max in ms); fewer than
         `min_frames` intervals fail. A message none of whose senders is among the case's DUTs (`dut` markers;
-        e.g. a sensor the bench simulates) is judged as its sender's: the step says so and never fails the case.
-        Returns True when every message passed."""
+        e.g. a sensor the bench simulates) is judged as its sender's (the step's `node`, as `expect`'s): shown
+        under that node and never fails the case. Returns True when every message passed."""
         ok_all = True
         duts = self.result.duts
         if messages is None:

@@ -13,6 +13,7 @@ error, so nothing runs); reference-only cases are skipped at collection when the
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Generator, Iterator
 from datetime import datetime
@@ -34,7 +35,8 @@ from bench.errors import BenchError, Inconclusive
 from bench.faults import parse_fault
 from bench.marks import MARKER_HELP, CaseMarks, check_marks, read_marks, skip_reason, split_names
 from bench.options import add_pytest_options
-from bench.results import CaseRef, RequirementInfo, RunResult, Table
+from bench.report.junit import step_summary
+from bench.results import SIMULATION_FAILED, CaseRef, RequirementInfo, RunResult, Step, Table
 from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 from bench.session import resolve_external
 from bench.shard import apply_shard
@@ -48,6 +50,7 @@ _DESELECTED_KEY = pytest.StashKey[list[CaseRef]]()
 _PENDING_KEY = pytest.StashKey[list[tuple[pytest.Item, pytest.TestReport, pytest.CallInfo[None]]]]()
 _SELECTED_KEY = pytest.StashKey[list[str]]()   # the case ids this process (or its workers) was given
 _last_finished: list[RunResult] = []
+_LOG = logging.getLogger("bench.steps")   # failed steps of the bench's own simulation: findings (bench.findings)
 PARTS_DIR = "parts"   # where pytest-xdist workers leave their part of the run for the controller
 
 
@@ -297,7 +300,9 @@ class FailedSteps(AssertionError):
 def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None]:
     """A case fails when a step judging its DUT failed (steps of other nodes are theirs: CaseResult.failed_steps)
     or its code raised; it is inconclusive instead when the bench raised Inconclusive (the watchdog, a limit of
-    the bench) or its own timing during the case was past what the checks tolerate (Case.bench_verdict)."""
+    the bench), when its own timing during the case was past what the checks tolerate (Case.bench_verdict), or when
+    its DUT failed while a step of a node the bench simulates (the plant) failed too. A failed step of a node the
+    bench simulates is a finding of the run (a warning of the bench) whatever the case's outcome."""
     outcome = yield
     case = item.stash.get(_CASE_KEY, None)
     if case is None:
@@ -314,13 +319,30 @@ def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None
         case.result.inconclusive = str(excinfo[1])
         return
     late = case.bench_verdict()
+    simulated = _simulation_failures(case)
     if late and (excinfo is not None or failed):
         case.result.inconclusive = late
         what = "\n".join(lines) if excinfo is None else f"{excinfo[0].__name__}: {excinfo[1]}".splitlines()[0]
         outcome.force_exception(Inconclusive(f"inconclusive: {late}\nwhat failed under it (not the DUT's fault "
                                              f"until shown otherwise):\n{what}"))
+    elif excinfo is None and failed and simulated:
+        # the DUT failed in a case where the bench's own simulation failed its check too: the DUT's failure may be the
+        # simulation's doing, so the bench cannot stand behind it (as with its own lateness)
+        nodes = ", ".join(dict.fromkeys(n for s in simulated for n in s.judges))
+        case.result.inconclusive = f"{SIMULATION_FAILED} ({nodes}: {step_summary(simulated[0])})"
+        outcome.force_exception(Inconclusive(f"inconclusive: {case.result.inconclusive}\nwhat failed under it (not "
+                                             f"the DUT's fault until shown otherwise):\n" + "\n".join(lines)))
     elif excinfo is None and failed:
         outcome.force_exception(FailedSteps("failed steps:\n" + "\n".join(lines)))
+    for step in simulated:   # a problem of the bench (its plant, a node it simulates): a finding of the run
+        _LOG.warning("%s failed a step of %s (the bench's own simulation, not the DUT): %s", step.node,
+                     item.nodeid, step_summary(step))
+
+
+def _simulation_failures(case: Case) -> list[Step]:
+    """The failed steps of other nodes than the case's DUT that the bench itself simulates (none of them external)."""
+    external = case.session.external
+    return [s for s in case.result.other_failed_steps if not set(s.judges) & external]
 
 
 @pytest.hookimpl(hookwrapper=True)

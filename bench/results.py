@@ -14,6 +14,10 @@ Verdict = Literal["pass", "fail"]
 #: late past its receivers' timeout, the watchdog, a history limit of the bench): its verdict cannot be
 #: stood behind, and the DUT is not blamed (docs/reliability.md "The bench's own timing").
 Outcome = Literal["passed", "failed", "skipped", "error", "aborted", "inconclusive"]
+#: How CaseResult.inconclusive begins when a DUT's failure coincided with a failed step of a node the bench itself
+#: simulates (the plant, a simulated ECU): the bench cannot stand behind that failure (docs/contract/README.md, "Steps
+#: judge the node they name").
+SIMULATION_FAILED = "the bench's own simulation failed a check in this case"
 
 
 @dataclass
@@ -29,7 +33,13 @@ class Step:
     unit: str = ""
     detail: str = ""
     node: str = ""   # the node this step judges when it is not the case's DUT ("": the DUT): its failure is that
-                     # node's, shown with its name, and never fails the case (CaseResult.failed_steps)
+                     # node's, shown with its name, and never fails the case (CaseResult.failed_steps); several
+                     # nodes comma-separated (a message with several senders, Case.check_cycle_times)
+
+    @property
+    def judges(self) -> tuple[str, ...]:
+        """The nodes this step names (`node` split at its commas); () for a step of the case's DUT."""
+        return tuple(n for n in self.node.split(",") if n)
 
 
 @dataclass
@@ -108,6 +118,32 @@ class CaseResult:
     def other_failed_steps(self) -> list[Step]:
         """Failed steps that judge another node than the case's DUT: that node's, not the case's."""
         return [s for s in self.steps if s.verdict == "fail" and s not in self.failed_steps]
+
+    @property
+    def other_nodes(self) -> list[str]:
+        """The nodes the case's steps name that are not its DUTs, in the order the steps first name them (the case
+        judges them too, each by its own steps; their verdicts are `outcome_of`)."""
+        out: list[str] = []
+        for step in self.steps:
+            out.extend(n for n in step.judges if n not in self.duts and n not in out)
+        return out
+
+    def outcome_of(self, node: str) -> str:
+        """The case's outcome for one node it judges. A DUT's (and every node's, in a case without `dut` markers): the
+        case's outcome, made of the DUT's steps only. Another node named by steps (`other_nodes`): "failed" when one
+        of its steps failed, else "passed"; a case that was skipped, errored or was aborted is so for every node, and
+        one made inconclusive by the bench's timing or limits is inconclusive for every node (one made inconclusive
+        by this node's failure, SIMULATION_FAILED, is "failed" for it). A node neither a DUT nor named by a step (a
+        requirement the case names, owned by a node it has no step of): the case's outcome."""
+        if not self.duts or node in self.duts or self.outcome not in ("passed", "failed", "inconclusive"):
+            return self.outcome
+        steps = [s for s in self.steps if node in s.judges]
+        if not steps:
+            return self.outcome
+        failed = any(s.verdict == "fail" for s in steps)
+        if self.outcome == "inconclusive" and not self.inconclusive.startswith(SIMULATION_FAILED):
+            return "inconclusive"
+        return "failed" if failed else "passed"
 
 
 @dataclass

@@ -36,6 +36,7 @@ from bench.faults import validate as validate_faults
 from bench.marks import split_names
 from bench.options import add_cli_options
 from bench.plugins import load_plant
+from bench.report.junit import step_summary
 from bench.run import default_out_dir
 from bench.session import resolve_bus_options, resolve_external
 from bench.stop import STOP
@@ -318,6 +319,13 @@ def run(args: argparse.Namespace) -> int:
         if case.outcome == "inconclusive":
             console.print(f"[bold yellow]inconclusive[/] {escape(_short(case.nodeid))}: "
                           f"{escape(case.inconclusive or case.message.splitlines()[0])}", highlight=False)
+    for case in result.cases:   # failed steps of other nodes than the DUT: theirs, never the case's (results.Step.node)
+        for node in case.other_nodes:
+            steps = [s for s in case.other_failed_steps if node in s.judges]
+            if steps:
+                more = f" (and {len(steps) - 1} more)" if len(steps) > 1 else ""
+                console.print(f"[bold yellow]{escape(node)} failed[/] in {escape(_short(case.nodeid))}, not the DUT's "
+                              f"verdict: {escape(step_summary(steps[0]))}{more}", highlight=False)
     console.print(f"report: {out_dir}")
     if result.aborted:
         return 130

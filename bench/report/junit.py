@@ -1,5 +1,9 @@
 """JUnit XML of a run, for CI systems that show test results (GitLab, Jenkins, GitHub).
 
+A case's <failure> is made of its DUT's failed steps only; a step that judges another node (`node="PLANT"`) is that
+node's: its verdict and failures are the properties `node_verdict` and `node_failure`, and its lines in
+<system-out> carry the node ("FAIL [PLANT] ...").
+
 Names follow pytest's own junitxml convention (classname from the module path) so the
 bench's results line up with plain pytest runs. Strings pass through :func:`xml_safe`
 because ECU texts and DBC comments may carry control characters that are illegal in
@@ -64,7 +68,8 @@ def step_line(step: Step) -> str:
     unit = f" {step.unit}" if step.unit else ""
     tol = f" ({step.tolerance})" if step.tolerance else ""
     measured, expected = step_values(step)
-    line = (f"{step.verdict.upper():4} {step.name}: measured {measured}{unit}, "
+    judges = f"[{step.node}] " if step.node else ""   # a step of another node than the DUT names it
+    line = (f"{step.verdict.upper():4} {judges}{step.name}: measured {measured}{unit}, "
             f"expected {expected}{unit}{tol} at t={step.time:.3f} s")
     return line + (f" – {step.detail}" if step.detail else "")
 
@@ -80,10 +85,16 @@ def _testcase(parent: ET.Element, case: CaseResult) -> None:
     classname, name = split_nodeid(case.nodeid, case.name)
     tc = ET.SubElement(parent, "testcase", classname=xml_safe(classname), name=xml_safe(name),
                        time=f"{case.wall_time:.3f}")
-    if case.duts or case.reqs or case.faults or case.bench_timing:   # what it judges, checks and suffered
+    others = case.other_nodes
+    if case.duts or case.reqs or case.faults or case.bench_timing or others:   # what it judges, checks and suffered
         props = ET.SubElement(tc, "properties")
+        # node_verdict: "PLANT: failed", the case's outcome for a node its steps judge besides its DUTs
+        # (CaseResult.outcome_of); node_failure: "PLANT: <step>", each failed step of such a node
+        node_verdicts = [f"{n}: {case.outcome_of(n)}" for n in others]
+        node_failures = [f"{s.node}: {step_summary(s)}" for s in case.other_failed_steps]
         for key, values in (("dut", case.duts), ("req", case.reqs), ("fault", [fault_text(f) for f in case.faults]),
-                            ("bench_timing", case.bench_timing)):
+                            ("bench_timing", case.bench_timing), ("node_verdict", node_verdicts),
+                            ("node_failure", node_failures)):
             for value in values:
                 ET.SubElement(props, "property", name=key, value=xml_safe(value))
     failed = case.failed_steps

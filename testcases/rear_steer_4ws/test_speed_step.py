@@ -10,7 +10,8 @@ Measured: the commanded and reached axle angles (VCU_WheelCmd_xx, WHL_Status_xx;
 axle) and the vehicle's true speed (PLANT_Motion.Speed) throughout the deceleration. Expected: the phase and the
 value of k(u) (docs/spec/formulas.md §5, [P3] §2) at the measured speed, from testcases/rear_steer_4ws/oracle.py;
 phase only where |k| ≥ PHASE_BAND (near u_0 the sign is within the speed estimate's tolerance). Also the plant's ground
-truth: the deceleration stays within what the tyres can give (docs/contract/plant.md PLANT-DYN-03).
+truth: the deceleration stays within what the tyres can give (docs/contract/plant.md PLANT-DYN-03), a step that
+names PLANT: the plant's verdict, never the VCU's.
 """
 
 from __future__ import annotations
@@ -94,7 +95,8 @@ def test_speed_step_100_to_30_kmh_rear_phase_follows_the_vehicle_speed(bench):
     _, long_accel = bench.history("PLANT_Dynamics", "LongAccel", t_step)
     bench.expect_between("deceleration within the tyres' limit (PLANT_Dynamics.LongAccel)", float(long_accel.min()),
                          -MU * G * (1.0 + DECEL_MARGIN), 0.5, unit="m/s²",
-                         detail=f"μ g = {MU * G:.2f} m/s² + {DECEL_MARGIN:.0%} (PLANT-DYN-03)")
+                         detail=f"μ g = {MU * G:.2f} m/s² + {DECEL_MARGIN:.0%} (PLANT-DYN-03)",
+                         node="PLANT")   # the plant's physics, never the VCU's verdict
     bench.table("frames judged (|k(u)| beyond the band around u_0)", ["source", "judged", "wrong phase"], rows)
     bench.plot("speed: request and vehicle", [("DRV_MotionRequest", "TargetSpeed"), ("PLANT_Motion", "Speed"),
                                               ("VCU_VehicleState", "VehicleSpeed")], ylabel="m/s")

@@ -51,14 +51,14 @@ class Limits:
                           "pass" if ok else "FAIL"])
         return ok
 
-    def at_most(self, what: str, name: str, measured: float, *, detail: str = "") -> bool:
-        """measured ≤ limit `name`."""
+    def at_most(self, what: str, name: str, measured: float, *, detail: str = "", node: str = "") -> bool:
+        """measured ≤ limit `name`; `node`: the node the check judges when it is not the case's DUT (bench.expect)."""
         value, unit, source = self.table[name]
         ok = math.isfinite(measured) and measured <= value
         shown = "" if unit == "1" else f" {unit}"
         self.bench.expect_true(f"{what} ≤ {name}", ok, measured=round(measured, 6), expected=f"≤ {value:g}{shown}",
-                               detail=f"{source}{'; ' + detail if detail else ''}")
-        return self._row(name, f"≤ {value:g}{shown}", measured, unit, ok, what)
+                               detail=f"{source}{'; ' + detail if detail else ''}", node=node)
+        return self._row(name, f"≤ {value:g}{shown}", measured, unit, ok, f"{what} ({node}'s)" if node else what)
 
     def within(self, what: str, target: str, tol: str, measured: float, *, detail: str = "") -> bool:
         """|measured − limit `target`| ≤ limit `tol` (absolute, same unit)."""

@@ -436,3 +436,148 @@ def test_parts_keep_the_catalogue_and_old_parts_still_load(tmp_path: Path) -> No
     other.cases = []
     merged = results_io.merge([("gw0", run), ("gw1", other)], 1.0)
     assert [d.nodeid for d in merged.deselected] == ["testcases/test_m.py::t_abs"]
+
+
+# -- steps judge the node they name (issue 26) ----------------------------------------------------------------
+CONTRACT_STEPS = ("### SBW-CTL-01 — Follows\n### SBW-CTL-02 — Steps\n### SBW-CTL-03 — Holds\n"
+                  "### PLANT-DYN-02 — Single-track model\n")
+STEP_CASES = '''import pytest
+
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-CTL-01", "PLANT-DYN-02")
+def test_plant_fails(bench):
+    bench.expect("pinion tracks", 0.2, 0.0, abs_tol=0.5, unit="deg")
+    bench.expect("plant vs model", 0.3, 0.0, abs_tol=0.1, unit="deg/s", node="PLANT")
+
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-CTL-02", "PLANT-DYN-02")
+def test_sbw_fails(bench):
+    bench.expect("pinion tracks", 0.9, 0.0, abs_tol=0.5, unit="deg")
+    bench.expect("plant vs model", 0.05, 0.0, abs_tol=0.1, unit="deg/s", node="PLANT")
+
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-CTL-03")
+def test_both_fail(bench):
+    bench.expect("pinion tracks", 0.9, 0.0, abs_tol=0.5, unit="deg")
+    bench.expect_true("the plant's sensor model", False, node="PLANT")
+
+@pytest.mark.dut("SBW")
+def test_typo(bench):
+    bench.expect("x", 1.0, 1.0, node="PLANTT")
+'''
+
+
+@pytest.fixture(scope="module")
+def step_nodes_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[subprocess.CompletedProcess, Path]:
+    """`bench run` (virtual time) of four SBW cases whose steps name the PLANT or not; (the process, its out dir)."""
+    root = tmp_path_factory.mktemp("step_nodes")
+    (root / "contract").mkdir()
+    (root / "contract" / "c.md").write_text(CONTRACT_STEPS)
+    (root / "cases").mkdir()
+    (root / "cases" / "test_s.py").write_text(STEP_CASES)
+    project(root, '[contract]\ndocuments = ["contract/*.md"]\n')
+    out = root / "out"
+    result = subprocess.run([*BENCH, "run", str(root / "cases"), "--config", str(root / "bench.toml"), "--out",
+                             str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    return result, out
+
+
+def conformance_rows(html: str) -> dict[str, dict[str, str]]:
+    """Per node table of the report's conformance section: requirement id -> verdict."""
+    section = html[html.index('<section id="conformance">'):]
+    section = section[:section.index("</section>")]
+    tables = {}
+    for part in section.split('<h2 id="node-')[1:]:
+        node = part[:part.index('"')]
+        tables[node] = dict(re.findall(r'<span class="mono rid">([A-Z0-9-]+)</span>.*?<span class="badge ([a-z-]+)">',
+                                       part, re.S))
+    return tables
+
+
+def test_a_failing_plant_step_never_fails_the_sbw(step_nodes_run: tuple[subprocess.CompletedProcess, Path]) -> None:
+    result, out = step_nodes_run
+    assert result.returncode == 1, result.stdout + result.stderr        # test_sbw_fails and the typo fail
+    record = {c["name"]: c for c in json.loads((out / "results.json").read_text())["cases"]}
+    assert {n: c["outcome"] for n, c in record.items()} == {
+        "test_plant_fails": "passed", "test_sbw_fails": "failed", "test_both_fail": "inconclusive",
+        "test_typo": "failed"}
+    assert [(s["name"], s["node"], s["verdict"]) for s in record["test_plant_fails"]["steps"]] == [
+        ("pinion tracks", "", "pass"), ("plant vs model", "PLANT", "fail")]
+    # the console says whose failure it is
+    assert re.search(r"PLANT failed in \S*test_plant_fails, not the DUT's verdict: plant vs model: measured 0\.3",
+                     result.stdout), result.stdout
+    # a problem of the bench's own simulation: a finding of the run
+    findings = json.loads((out / "results.json").read_text())["findings"]
+    assert any(f["source"] == "bench.steps" and "PLANT failed a step of" in f["message"]
+               and "test_plant_fails" in f["message"] for f in findings), findings
+
+    cases = junit_cases(out)
+    plant = cases["test_plant_fails"]
+    assert plant.find("failure") is None and plant.find("skipped") is None
+    props = properties(plant)
+    assert ("node_verdict", "PLANT: failed") in props and ("dut", "SBW") in props
+    assert [v for k, v in props if k == "node_failure"] == [
+        "PLANT: plant vs model: measured 0.30, expected 0.00 (±0.1 deg/s)"]   # 0.01 below the tolerance (checks)
+    assert "FAIL [PLANT] plant vs model" in (plant.findtext("system-out") or "")
+    failure = cases["test_sbw_fails"].find("failure")
+    assert failure is not None and "pinion tracks" in failure.get("message", "")
+    assert "plant vs model" not in failure.get("message", "")
+    assert ("node_verdict", "PLANT: passed") in properties(cases["test_sbw_fails"])
+    skipped = cases["test_both_fail"].find("skipped")
+    assert skipped is not None and skipped.get("type") == "inconclusive"
+    assert "the bench's own simulation failed a check in this case (PLANT: the plant's sensor model" in \
+        skipped.get("message", "")
+    typo = cases["test_typo"].find("failure")
+    assert typo is not None and "node 'PLANTT' is not a node of the databases" in (typo.get("message") or "")
+
+    tables = conformance_rows((out / "report.html").read_text())
+    # the SBW's verdicts are made of its own steps; the PLANT's of the steps that name it
+    assert tables["SBW"] == {"SBW-CTL-01": "pass", "SBW-CTL-02": "fail", "SBW-CTL-03": "not-run"}
+    assert tables["PLANT"] == {"PLANT-DYN-02": "fail"}
+
+
+def test_the_plant_table_lists_each_case_with_the_plants_outcome() -> None:
+    run = sample_run()
+    run.requirements = [*catalogue(), RequirementInfo("PLANT-DYN-02", "model", "contract/plant.md", 1)]
+    sbw = case("t_sbw", "passed", ["VCU"], ["VCU-A-05", "PLANT-DYN-02"])
+    sbw.steps = [Step("own", 1.0, 1.0, "±0.1", "pass", 0.0),
+                 Step("plant vs model", 0.3, 0.0, "±0.1", "fail", 0.1, node="PLANT"),
+                 Step("cycle time IMU_Motion", "p50 12", "10 ms", "", "fail", 0.2, node="IMU")]
+    late = case("t_late", "inconclusive", ["VCU"], ["PLANT-DYN-02"])
+    late.steps = [Step("plant vs model", 0.3, 0.0, "±0.1", "fail", 0.1, node="PLANT")]
+    late.inconclusive = "bench late by 80.3 ms on stimulus DRV_Pedals at 0.251 s (bound 20 ms)"
+    run.cases = [sbw, late]
+    section = build_conformance(run)
+    assert section is not None
+    tables = {t.node: t for t in section.nodes}
+    assert list(tables) == ["IMU", "PLANT", "VCU"] and tables["VCU"].dut and not tables["PLANT"].dut
+    vcu = next(r for r in tables["VCU"].rows if r.requirement.id == "VCU-A-05")
+    assert (vcu.verdict, [c.outcome for c in vcu.cases]) == ("pass", ["passed"])
+    plant = next(r for r in tables["PLANT"].rows if r.requirement.id == "PLANT-DYN-02")
+    # the bench's lateness makes every verdict of its case inconclusive, the plant's too
+    assert [(c.name, c.outcome) for c in plant.cases] == [("t_sbw", "failed"), ("t_late", "inconclusive")]
+    assert plant.verdict == "fail" and tables["PLANT"].steps is None
+    # IMU: no requirement of its own in the case: the case is listed in the row of steps under the table
+    imu = tables["IMU"].steps
+    assert imu is not None and [(c.name, c.outcome) for c in imu.cases] == [("t_sbw", "failed")]
+    assert imu.verdict == "fail" and tables["IMU"].counts == {}
+    html = render_html(run)
+    assert "steps that judge IMU in cases of other nodes" in html and "judged only by steps of other nodes" in html
+    assert re.search(r'class="node-step failed"[^>]*>PLANT: failed</span>', html)
+
+
+def test_outcome_of_a_node_follows_its_own_steps() -> None:
+    c = case("t", "failed", ["SBW"], [])
+    c.steps = [Step("own", 1.0, 0.0, "±0.1", "fail", 0.0), Step("plant", 0.0, 0.0, "±0.1", "pass", 0.0, node="PLANT"),
+               Step("both", 0.0, 0.0, "", "pass", 0.0, node="IMU,PLANT"), Step("dut named", 0.0, 0.0, "", "pass", 0.0,
+                                                                            node="SBW")]
+    assert c.other_nodes == ["PLANT", "IMU"] and [s.name for s in c.failed_steps] == ["own"]
+    assert (c.outcome_of("SBW"), c.outcome_of("PLANT"), c.outcome_of("VCU")) == ("failed", "passed", "failed")
+    c.steps[1].verdict = "fail"
+    c.outcome, c.inconclusive = "inconclusive", "the bench's own simulation failed a check in this case (PLANT: ...)"
+    assert (c.outcome_of("SBW"), c.outcome_of("PLANT"), c.outcome_of("IMU")) == ("inconclusive", "failed", "passed")
+    c.outcome = "error"
+    assert c.outcome_of("PLANT") == "error"
+    nodut = case("n", "failed", [], [])
+    nodut.steps = [Step("plant", 1.0, 0.0, "", "fail", 0.0, node="PLANT")]
+    assert nodut.failed_steps == nodut.steps and nodut.outcome_of("PLANT") == "failed"   # no DUT: every step its
