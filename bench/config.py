@@ -90,6 +90,8 @@ class ProjectConfig:
     scenario: ScenarioProtocol | None = None     # [scenario]; None: the project's plant takes no scenarios
     #: [e2e.MESSAGE]: AUTOSAR E2E parameters by name (no `E2E_` prefix) over the databases' own, per message
     e2e: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: [calibration.NODE]: a real ECU's calibration the cases need to judge it (node -> name -> (value, unit))
+    calibration: dict[str, dict[str, tuple[float, str]]] = field(default_factory=dict)
 
     @cached_property
     def requirement_ids(self) -> frozenset[str]:
@@ -103,6 +105,9 @@ class ProjectConfig:
                  for node in self.stimulus if node not in codebook.nodes]
         if self.scenario is not None and not found:
             found += self.scenario.problems(self.path, codebook, self.stimulus)
+        found += [f"{self.path}: [calibration.{node}]: node {node!r}{did_you_mean(node, codebook.nodes)} is in none "
+                  f"of the databases (nodes: {', '.join(codebook.nodes)})"
+                  for node in self.calibration if node not in codebook.nodes]
         for pair in self.latency:
             for key in ("command", "status"):
                 message, signal = getattr(pair, key)
@@ -172,6 +177,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         bus=_bus_table(path, data.get("bus", {})),
         scenario=_scenario(path, data.get("scenario")),
         e2e=_e2e_table(path, data.get("e2e", {})),
+        calibration=_calibration(path, data.get("calibration", {})),
         **_contract(path, text, data.get("contract", {})),
     )
 
@@ -206,7 +212,8 @@ def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
 _BUS_CLI_ONLY = ("interface", "channel")
 
 
-TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e")   # bench.toml's tables; any other is a typo
+#: bench.toml's tables; any other is a typo
+TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e", "calibration")
 
 
 #: [e2e.MESSAGE] keys whose value is a name; DataIDList is hex text or a list of bytes; every other key a number.
@@ -244,6 +251,33 @@ def _e2e_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
                 raise ConfigError(f"{where} {key} must be a whole number, got {value!r}")
             parameters[key] = value
         out[message] = parameters
+    return out
+
+
+def _calibration(path: Path, table: Any) -> dict[str, dict[str, tuple[float, str]]]:
+    """[calibration.NODE] name = { value = <number>, unit = "<unit>" }: the calibration of a real (external) ECU
+    that its cases need to judge it (e.g. a controller's thresholds); which names a node needs is its campaign's to say.
+    The form is checked here, the node names with the databases (`ProjectConfig.problems`)."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [calibration] must be a table of [calibration.NODE] tables")
+    out: dict[str, dict[str, tuple[float, str]]] = {}
+    for node, values in table.items():
+        where = f"{path}: [calibration.{node}]"
+        if not isinstance(values, dict):
+            raise ConfigError(f"{path}: [calibration] {node} = {values!r}: give a node's calibration as a table "
+                              f"[calibration.{node}] of name = {{ value = <number>, unit = \"<unit>\" }}")
+        entries: dict[str, tuple[float, str]] = {}
+        for name, item in values.items():
+            if not isinstance(item, dict):
+                raise ConfigError(f"{where} {name} must be {{ value = <number>, unit = \"<unit>\" }}, got {item!r}")
+            _known_keys(f"{where} {name}:", item, ("value", "unit"))
+            value, unit = item.get("value"), item.get("unit")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"{where} {name}: value must be a finite number, got {value!r}")
+            if not isinstance(unit, str) or not unit:
+                raise ConfigError(f"{where} {name}: unit must be a non-empty string, got {unit!r}")
+            entries[name] = (float(value), unit)
+        out[node] = entries
     return out
 
 

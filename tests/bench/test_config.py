@@ -207,6 +207,39 @@ def test_scenario_names_are_checked_against_the_databases(tmp_path: Path, scenar
     assert str(path) in str(error.value) and words in str(error.value)
 
 
+# -- [calibration]: a real ECU's calibration the cases need --------------------------------------------------------
+def test_calibration_table_is_read(tmp_path: Path) -> None:
+    body = '[calibration.ABS]\nv_l0 = { value = 0.8, unit = "km/h" }\nv_l1 = { value = 7, unit = "km/h" }\n'
+    project = load_config(write(tmp_path, toml({"bench": GOOD}) + body))
+    assert project.calibration == {"ABS": {"v_l0": (0.8, "km/h"), "v_l1": (7.0, "km/h")}}
+    assert load_config(write(tmp_path, toml({"bench": GOOD}))).calibration == {}
+
+
+@pytest.mark.parametrize("body, words", [
+    ('[calibration.ABS]\nv_l0 = 0.6\n', "[calibration.ABS] v_l0 must be { value = <number>"),
+    ('[calibration.ABS]\nv_l0 = { value = "0.6", unit = "km/h" }\n', "[calibration.ABS] v_l0: value must be a finite"),
+    ('[calibration.ABS]\nv_l0 = { value = nan, unit = "km/h" }\n', "[calibration.ABS] v_l0: value must be a finite"),
+    ('[calibration.ABS]\nv_l0 = { value = 0.6 }\n', "[calibration.ABS] v_l0: unit must be a non-empty string"),
+    ('[calibration.ABS]\nv_l0 = { value = 0.6, unit = "km/h", units = "x" }\n', "unknown key(s) units"),
+    ('[calibration]\nABS = 3\n', "give a node's calibration as a table [calibration.ABS]"),
+    ('[calibraton.ABS]\n', "unknown table(s) calibraton (did you mean calibration?)"),
+], ids=["bare-number", "text", "nan", "no-unit", "extra-key", "not-a-table", "typo"])
+def test_calibration_errors_are_one_line(tmp_path: Path, body: str, words: str) -> None:
+    path = write(tmp_path, toml({"bench": GOOD}) + body)
+    with pytest.raises(ConfigError) as error:
+        load_config(path)
+    text = str(error.value)
+    assert text.startswith(f"{path}") and words in text and "\n" not in text, text
+
+
+def test_calibration_of_an_unknown_node_is_a_problem(tmp_path: Path) -> None:
+    from bench.codec import load_codebook
+
+    project = load_config(write(tmp_path, toml({"bench": GOOD}) + '[calibration.ABX]\nx = { value = 1, unit = "-" }\n'))
+    problems = project.problems(load_codebook(project.databases))
+    assert len(problems) == 1 and "[calibration.ABX]: node 'ABX' (did you mean ABS?)" in problems[0], problems
+
+
 # -- [e2e]: a message's AUTOSAR E2E parameters over its database's own ------------------------------------------
 def test_e2e_table_is_read_by_autosar_names(tmp_path: Path) -> None:
     project = load_config(write(tmp_path, toml({"bench": GOOD}) + "[e2e.DRV_Steering]\nMaxDeltaCounter = 3\n"
