@@ -26,6 +26,10 @@ NAME, CODE = "ACLASS_ABS", 2     # BENCH_Control.Vehicle value table
 PARAMETERS = (PARAMETER_FILES["ACLASS"], PARAMETER_FILES["ABS"])
 
 
+#: The bench I/O of an external ABS (docs/contract/plant.md PLANT-IO-ABS-*): its wheel-speed sensors and its valves;
+#: on the bus only while the ABS is external (plant/factory.py).
+IO = {"ABS": frozenset({"IO_AbsSensors", "IO_AbsValves"})}
+
 #: What this vehicle's network carries from the plant's side (plant/factory.py stops the rest): the ABS ECU
 #: and the ground truth of the body and of the braking wheels.
 MESSAGES = frozenset({
@@ -51,4 +55,5 @@ def build(external: Collection[str]) -> list[Behaviour]:
     return behaviours
 
 
-VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=PARAMETERS, messages=MESSAGES, stimulus=STIMULUS)
+VEHICLE = Vehicle(name=NAME, code=CODE, build=build, parameters=PARAMETERS, messages=MESSAGES, stimulus=STIMULUS,
+                  io=IO)

@@ -52,6 +52,8 @@ def test_a_vehicle_sends_what_its_ecus_set_and_nothing_of_the_others(vehicle: st
     others = CLAIMED - messages_of(vehicle)
     assert not (seen & others), f"{vehicle} sends messages of other vehicles: {sorted(seen & others)}"
     assert (plant_sent & messages_of(vehicle)) <= seen
+    io = frozenset().union(*declared(vehicle).io.values())
+    assert not (seen & io), f"bench I/O on the bus while its node is simulated: {sorted(seen & io)}"
 
 
 @pytest.mark.parametrize("vehicle", sorted(vehicles()))
