@@ -660,36 +660,64 @@ def signed_vehicle_speed(v_x: float, v_y: float, forward: tuple[float, float]) -
 class SpeedEstimator:
     """VCU-4WS-01: the vehicle's forward speed from the wheels while they roll, LongAccel while they slide.
 
-    Every task it predicts u + u_dot dt (u_dot = LongAccel + omega v_x: the body-frame term of IMU-OUT-01
-    removed) and takes the wheels' forward speed when it lies within 0.3 m/s of the prediction (the rule
-    vcu-4ws.md gives as the reference's). Otherwise it keeps the prediction only while the wheels slide the way
-    the IMU says the car is pushed (PLANT-DYN-03): braked wheels slower than the car while it decelerates, driven
-    wheels faster while it accelerates. Any other disagreement means the prediction lost its reference (the car
-    was restarted at another speed, a scenario start): the wheels are taken.
+    The informative estimator of vcu-4ws.md VCU-4WS-01, rules 1-6 as written. Each task (period dt) reads w,
+    the forward component of the wheels' rigid fit (VCU-OUT-05), and a, the latest valid LongAccel plus the
+    body-frame term YawRate * v_x of the fit (which VCU-4WS-01 allows; u_dot of IMU-OUT-01's body frame):
+      1. u undefined, no valid IMU_Motion, or more than 50 ms since the previous task: u = w.
+      2. predict p = u + a dt, e = w - p.
+      3. |e| <= B: u = p + clamp(e, -D, D) (the wheels, at most D per task away from the prediction).
+      4. the wheels slide the way the IMU pushes (e < -B with a <= -A, or e > +B with a >= +A): u = p.
+      5. the wheels lie on the side the IMU excludes (e > +B with a <= -A, or e < -B with a >= +A): u = w.
+      6. otherwise (|e| > B, |a| < A): u = p until the disagreement has lasted T_c, then u = w.
+    Rules 1 and 3-5 clear the disagreement's start t_d; rule 6 sets it at its first task. Time is the sum of
+    the tasks' dt (the caller's clock), so "now - t_d" is the time since the task that began the disagreement
+    (with 10 ms tasks rule 6 takes the wheels at the 4th task of a disagreement: 30 ms after the 1st).
+    Not in the rule (the estimate is not judged then, VCU-FLT-07): while a WHL_Status_xx is timed out there is
+    no w; the estimate is then predicted from a valid IMU_Motion, else held, and t_d cleared.
     """
 
-    WINDOW = 0.3  # m/s, VCU-4WS-01 (informative)
-    SLIDE_ACCEL = 1.5  # m/s^2: a longitudinal acceleration that can make the wheels slide
+    BAND = 0.3  # B, m/s
+    SLIDE_ACCEL = 1.5  # A, m/s^2
+    CONFIRM_S = 0.030  # T_c, s
+    STEP = 0.05  # D, m/s per task
+    MAX_GAP_S = 0.050  # rule 1: more than 50 ms since the previous task
 
     u: float | None = None
+    t_d: float | None = None  # when an unconfirmed disagreement began (rule 6), None: none
+    now: float = 0.0  # the estimator's clock: the sum of the tasks' dt
 
     def update(self, dt: float, wheels: tuple[float, float, float] | None,
                imu: dict[str, float] | None) -> float | None:
-        """One task: the new estimate (None until the four wheels have been received)."""
-        if wheels is None:  # wheels timed out: keep predicting from the IMU, or hold
-            if self.u is not None and imu is not None:
-                self.u += imu["LongAccel"] * dt
+        """One task: the new estimate (None until the four wheels have been received). `imu`: the values of the
+        latest valid IMU_Motion frame, None when there is none (never received, timed out, last frame invalid)."""
+        self.now += dt
+        a = None
+        if imu is not None:  # a: LongAccel + the body-frame term YawRate * v_x of the fit (VCU-4WS-01 inputs)
+            a = imu["LongAccel"] + (math.radians(imu["YawRate"]) * wheels[0] if wheels is not None else 0.0)
+        if wheels is None:  # a wheel timed out: no w (WHEEL_FAULT, the estimate is not judged)
+            self.t_d = None
+            if self.u is not None and a is not None:
+                self.u += a * dt
             return self.u
-        v_x, u_wheels, _ = wheels
-        if self.u is None or imu is None:  # no prediction: the wheels (IMU-OUT-02: speed estimate falls back)
-            self.u = u_wheels
+        w = wheels[1]
+        if self.u is None or a is None or dt > self.MAX_GAP_S:  # rule 1
+            self.u, self.t_d = w, None
             return self.u
-        u_dot = imu["LongAccel"] + math.radians(imu["YawRate"]) * v_x
-        predicted = self.u + u_dot * dt
-        braking_slide = u_dot <= -self.SLIDE_ACCEL and u_wheels < predicted
-        driving_slide = u_dot >= self.SLIDE_ACCEL and u_wheels > predicted
-        sliding = abs(u_wheels - predicted) > self.WINDOW and (braking_slide or driving_slide)
-        self.u = predicted if sliding else u_wheels
+        p = self.u + a * dt  # rule 2
+        e = w - p
+        if abs(e) <= self.BAND:  # rule 3: the wheels roll with the car; the step limit D
+            self.u, self.t_d = p + max(-self.STEP, min(self.STEP, e)), None
+        elif (e < 0.0 and a <= -self.SLIDE_ACCEL) or (e > 0.0 and a >= self.SLIDE_ACCEL):  # rule 4: a slide
+            self.u, self.t_d = p, None
+        elif (e > 0.0 and a <= -self.SLIDE_ACCEL) or (e < 0.0 and a >= self.SLIDE_ACCEL):  # rule 5: lost the car
+            self.u, self.t_d = w, None
+        else:  # rule 6: |a| < A, the IMU does not say which: confirm for T_c
+            if self.t_d is None:
+                self.t_d = self.now
+            if self.now - self.t_d >= self.CONFIRM_S - 1e-9:  # 1 ns: float rounding of the summed dt
+                self.u, self.t_d = w, None
+            else:
+                self.u = p
         return self.u
 
 
@@ -730,7 +758,7 @@ class Vcu:
         dt = TASK_S if self._last_eval is None else now - self._last_eval
         self._last_eval = now
         wheels = self._wheel_fit(now)
-        u = self.speed.update(dt, wheels, self._valid("IMU_Motion", now))
+        u = self.speed.update(dt, wheels, self._imu(now))
         fault, command = self._decide(now, u)
         if fault == OK:  # VCU-FLT-10: no latching, executed at once
             self.last_executed = command
@@ -805,6 +833,11 @@ class Vcu:
                 return None
             status[name] = (float(values["SteerAngle"]), float(values["WheelSpeed"]))
         return rigid_fit(status)
+
+    def _imu(self, now: float) -> dict[str, float] | None:
+        """VCU-4WS-01: the latest valid IMU_Motion, None when never received, timed out or its last frame invalid."""
+        rx = self.rx["IMU_Motion"]
+        return None if rx.last_rejected else self._valid("IMU_Motion", now)
 
     def _valid(self, name: str, now: float) -> dict[str, float] | None:
         rx = self.rx[name]
