@@ -33,6 +33,7 @@ torque it needs; in TORQUE and OFF modes the hand wheel is free under the robot'
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Protocol
 
 from plant.vehicles import SbwParams
@@ -236,3 +237,113 @@ class SbwMechanics:
             read(sensors)
             u_m, u_M = control(sensors, h)
             substep(h, u_m, u_M, driver)
+
+
+IO_CYCLE = 0.005          # s, GenMsgCycleTime of IO_SbwActuators (dbc/bench.dbc)
+_COUNTER_MODULO = 15      # E2E Profile 11 AliveCounter 0..14
+
+
+class ActuatorEmulation:
+    """The rig's "smart actuators" for an external SBW (docs/contract/plant.md PLANT-IO-SBW-03, -04, -06): a
+    MotorController that realises IO_SbwActuators on the mechanics.
+
+    Steering actuator: a position servo with the request's rate as feed-forward. The k-th frame, applied at t_k,
+    gives θ_k and w_k = (θ_k − θ_{k−1}) / (n · IO_CYCLE) (n the AliveCounter steps between the two frames; w = 0
+    for the first frame after none or a timeout); the reference is r = θ_k + w_k · min(t − t_k, IO_CYCLE) with
+    rate ṙ. The servo imposes θ̈_p = ω_n² (r − θ_p) + 2 ζ ω_n (ṙ − θ̇_p) by computed torque: the pinion's inertia
+    (J_p + J_M r_M²) times that acceleration plus the load the rig knows (viscous and dry friction, the aligning
+    torque), as a target current limited to the motor's current limit. Road-feel motor: target current
+    RoadFeelTorqueRequest / (K_m r_m), limited likewise. Both currents follow their targets as first-order lags
+    of `rig_current_time_constant`: the voltage of each substep is the one that, held over h, moves the motor's
+    current (eq. 5/8, integrated exactly by SbwMechanics.substep) by (1 − e^{−h/τ}) of the way to its target,
+    within the supply voltage. No valid frame (`take(None)`): the last position request is held (none yet:
+    centre) and the road-feel torque is 0.
+    """
+
+    def __init__(self, mech: SbwMechanics) -> None:
+        p = mech.p
+        self.mech = mech
+        self.wn, self.zeta = p.rig_servo_frequency, p.rig_servo_damping
+        self.tau = p.rig_current_time_constant
+        self.j_p, self.b_p, self.friction = mech.j_p, mech.b_p, mech.friction
+        self.kt_p, self.kt_c = mech.kt_p, mech.kt_c
+        self.i_p_max, self.i_c_max = p.steer_motor_current_limit, p.road_feel_current_limit
+        self.u_max = p.supply_voltage
+        self._r_c, self._l_c = p.road_feel_resistance, p.road_feel_inductance
+        self._r_p, self._l_p = p.steer_motor_resistance, p.steer_motor_inductance
+        self._h = -1.0
+        self._decay_c = self._decay_p = self._step = 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        """No frame yet: reference centred, no road-feel torque."""
+        self.request = 0.0          # θ_k, rad
+        self.rate = 0.0             # w_k, rad/s
+        self.elapsed = 0.0          # t − t_k, s
+        self.torque = 0.0           # road-feel torque request, N·m at the column
+        self._frame: object = None  # the values mapping last applied (a new mapping = a new frame)
+        self._counter: float | None = None
+
+    def take(self, frame: Mapping[str, float] | None) -> None:
+        """Once per plant tick, before the substeps: the latest valid IO_SbwActuators values (None: none yet or
+        timed out)."""
+        if frame is None:
+            if self._frame is not None:          # timeout: hold the last request, no road-feel torque
+                self._frame, self._counter = None, None
+                self.rate = 0.0
+                self.torque = 0.0
+            return
+        if frame is self._frame:
+            return
+        request = frame["PinionAngleRequest"] * _RAD
+        counter = frame.get("AliveCounter")
+        if self._frame is None or counter is None or self._counter is None:
+            self.rate = 0.0
+        else:
+            steps = int(counter - self._counter) % _COUNTER_MODULO or 1
+            self.rate = (request - self.request) / (steps * IO_CYCLE)
+        self.request, self.elapsed = request, 0.0
+        self.torque = frame["RoadFeelTorqueRequest"]
+        self._frame, self._counter = frame, counter
+
+    def _set_h(self, h: float) -> None:
+        self._h = h
+        self._decay_c = math.exp(-h * self._r_c / self._l_c)
+        self._decay_p = math.exp(-h * self._r_p / self._l_p)
+        self._step = 1.0 - math.exp(-h / self.tau)
+
+    def _voltage(self, current: float, target: float, decay: float, resistance: float, emf: float) -> float:
+        """The voltage that, held over h, moves the current by `_step` of the way to `target` (eq. 5/8)."""
+        wanted = current + (target - current) * self._step
+        steady = (wanted - current * decay) / (1.0 - decay)
+        u = resistance * steady + emf
+        limit = self.u_max
+        return limit if u > limit else -limit if u < -limit else u
+
+    def control(self, sensors: SbwSensors, h: float) -> tuple[float, float]:
+        """(U_m, U_M) for the substep h (plant.sbw.MotorController)."""
+        if h != self._h:
+            self._set_h(h)
+        mech = self.mech
+        elapsed = self.elapsed
+        if elapsed < IO_CYCLE:
+            reference, rate = self.request + self.rate * elapsed, self.rate
+        else:
+            reference, rate = self.request + self.rate * IO_CYCLE, 0.0
+        self.elapsed = elapsed + h
+        theta, omega = mech.theta_p, mech.omega_p
+        wn = self.wn
+        accel = wn * wn * (reference - theta) + 2.0 * self.zeta * wn * (rate - omega)
+        direction = omega if omega != 0.0 else accel
+        dry = math.copysign(self.friction, direction) if direction != 0.0 else 0.0
+        aligning = -mech.trail * mech.front_lateral_force / mech.ratio
+        torque = self.j_p * accel + self.b_p * omega + dry - aligning
+        limit = self.i_p_max
+        target = torque / self.kt_p
+        target = limit if target > limit else -limit if target < -limit else target
+        u_p = self._voltage(mech.i_M, target, self._decay_p, self._r_p, self.kt_p * omega)
+        limit = self.i_c_max
+        target = self.torque / self.kt_c
+        target = limit if target > limit else -limit if target < -limit else target
+        u_c = self._voltage(mech.i_m, target, self._decay_c, self._r_c, self.kt_c * mech.omega_c)
+        return u_c, u_p

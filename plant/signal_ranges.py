@@ -40,6 +40,9 @@ SBW_RACK_FORCE = (-12000.0, 12000.0)        # SBW_Pinion.RackForce, N
 PLANT_SBW_ANGLE = (-2000.0, 2000.0)         # PLANT_SbwAngles.HandWheelAngle/PinionAngle, deg
 PLANT_SBW_TORQUE = (-65.0, 65.0)            # PLANT_SbwTorques.DriverTorque/RoadFeelTorque/AligningTorque, N·m
 PLANT_SBW_SENSOR_ANGLE = (-3000.0, 3000.0)  # PLANT_SbwSensors.HandWheelSensor/PinionSensor, deg
+# the SBW's bench I/O (dbc/bench.dbc, docs/contract/plant.md PLANT-IO-SBW-02; the currents as SBW_* above)
+IO_SBW_ANGLE = (-3000.0, 3000.0)            # IO_SbwHandWheel.HandWheelSensor/ColumnAngle, IO_SbwPinion.*, deg
+IO_SBW_TORSION_TORQUE = (-65.0, 65.0)       # IO_SbwHandWheel.TorsionBarTorque, N·m
 # the ABS ECU (dbc/chassis.dbc)
 ABS_WHEEL_SPEED = (0.0, 204.75)             # ABS_WheelSpeeds.WheelSpeedxx, km/h
 ABS_REF_SPEED = (0.0, 250.0)                # ABS_SteerState.RefVehicleSpeed, km/h
@@ -93,6 +96,13 @@ BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
     ("PLANT_SbwTorques", "AligningTorque"): PLANT_SBW_TORQUE,
     ("PLANT_SbwSensors", "HandWheelSensor"): PLANT_SBW_SENSOR_ANGLE,
     ("PLANT_SbwSensors", "PinionSensor"): PLANT_SBW_SENSOR_ANGLE,
+    ("IO_SbwHandWheel", "HandWheelSensor"): IO_SBW_ANGLE,
+    ("IO_SbwHandWheel", "ColumnAngle"): IO_SBW_ANGLE,
+    ("IO_SbwHandWheel", "TorsionBarTorque"): IO_SBW_TORSION_TORQUE,
+    ("IO_SbwPinion", "PinionSensor"): IO_SBW_ANGLE,
+    ("IO_SbwPinion", "ActuatorAngle"): IO_SBW_ANGLE,
+    ("IO_SbwCurrents", "RoadFeelMotorCurrent"): SBW_ROAD_FEEL_CURRENT,
+    ("IO_SbwCurrents", "SteerMotorCurrent"): SBW_STEER_MOTOR_CURRENT,
     **{("ABS_WheelSpeeds", f"WheelSpeed{w}"): ABS_WHEEL_SPEED for w in _WHEELS},
     ("ABS_SteerState", "RefVehicleSpeed"): ABS_REF_SPEED,
     ("ABS_SteerState", "FrontWheelAngleEst"): ABS_ANGLE,

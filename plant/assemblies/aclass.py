@@ -4,9 +4,12 @@ single-track model (docs/spec/formulas.md §5), as bus nodes.
 Behaviours, stepped in this order every plant tick:
 1. PLANT (`AclassPlant`): the physical world. It takes the steering robot's command (BENCH_SteeringRobot)
    and the injected sensor faults (BENCH_SbwSensorFault), moves the SBW mechanics (plant/sbw.py) in
-   substeps during which the SBW ECU's fast loops run (plant/ecus/sbw.py, `control`), then the vehicle
-   with the road-wheel angle pinion/15 (plant/single_track.py; ISO inside, bus signs outside), and
-   publishes ground truth: PLANT_Position/Motion/Dynamics/Status and PLANT_SbwAngles/Torques/Sensors.
+   substeps during which the motor controller runs: the SBW ECU's fast loops (plant/ecus/sbw.py, `control`),
+   or with an external SBW the rig's actuator emulation driven by IO_SbwActuators (plant/sbw.py,
+   `ActuatorEmulation`), then the vehicle with the road-wheel angle pinion/15 (plant/single_track.py; ISO
+   inside, bus signs outside), and publishes ground truth: PLANT_Position/Motion/Dynamics/Status and
+   PLANT_SbwAngles/Torques/Sensors; with an external SBW also its sensor I/O, IO_SbwHandWheel/Pinion/Currents,
+   sampled every 5 ms (docs/contract/plant.md PLANT-IO-SBW-02).
 2. SBW (`SbwEcu`): reads its bus inputs, runs the yaw-rate feedback, publishes SBW_HandWheel/SBW_Pinion.
 3. IMU (plant/ecus/imu.py): IMU_Motion from the vehicle's true motion.
 4. ABS (`WheelSpeedSensors`): ABS_WheelSpeeds from the vehicle's motion (this car has no ABS function;
@@ -18,8 +21,9 @@ the car drives straight at BENCH_Control.InitialSpeed, which this model holds co
 dynamics: LongAccel is 0); PLANT_Status.ScenarioIdAck echoes the id (the scenario protocol,
 plant/scenario.py). RoadMu and SensorNoise do not affect the linear model.
 
-External nodes: with SBW external the mechanics are not simulated (the real ECU has its own actuators);
-the road-wheel angle is SBW_Pinion.PinionAngle / 15 (held when the message is missing). With PLANT external
+External nodes: with SBW external the mechanics are simulated as with the reference SBW and the real ECU drives
+them through the bench I/O (docs/contract/plant.md, "Bench I/O — SBW"): it reads the sensors and sends a position
+request to the steering actuator and a torque request to the road-feel motor. With PLANT external
 nothing of the physics runs here: the simulated SBW ECU, whose loops run inside the plant's time step, is
 left out too. IMU and ABS external: not built.
 """
@@ -35,7 +39,7 @@ from plant.declaration import Vehicle
 from plant.driver import SteeringRobot
 from plant.ecus.imu import Imu
 from plant.ecus.sbw import SbwEcu
-from plant.sbw import SbwMechanics, SbwSensors
+from plant.sbw import IO_CYCLE, ActuatorEmulation, SbwMechanics, SbwSensors
 from plant.scenario import ScenarioTracker
 from plant.single_track import SingleTrack, SingleTrackParams
 from plant.vehicles import PARAMETER_FILES, AclassParams, SbwParams
@@ -79,7 +83,9 @@ class AclassPlant:
         self.vehicle_params = vehicle
         self.model = SingleTrack(single_track_params(vehicle))
         self.ecu = ecu
-        self.mechanics = SbwMechanics(sbw) if ecu is not None else None
+        self.mechanics = SbwMechanics(sbw)
+        # the motor controller: the reference ECU's fast loops, or the rig's actuators for an external SBW
+        self.emulation = ActuatorEmulation(self.mechanics) if ecu is None else None
         self.robot = SteeringRobot(sbw)
         self.sensors = SbwSensors()
         self.control_rate = sbw.control_rate
@@ -94,11 +100,11 @@ class AclassPlant:
 
     def _reset_world(self) -> None:
         self.model.reset(0.0)
-        if self.mechanics is not None:
-            self.mechanics.reset()
+        self.mechanics.reset()
+        if self.emulation is not None:
+            self.emulation.reset()
         self.robot.reset()
         self.x = self.y = 0.0               # world position of the CoG, m (start frame, docs/spec/formulas.md §1)
-        self._bus_pinion = 0.0              # deg, SBW_Pinion.PinionAngle when the SBW is external
 
     def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:
         for behaviour in self.linked:
@@ -126,9 +132,7 @@ class AclassPlant:
     @property
     def road_wheel_angle(self) -> float:
         """Front road-wheel angle, rad, bus signs."""
-        if self.mechanics is not None:
-            return self.mechanics.road_wheel_angle
-        return self._bus_pinion * _RAD / self.ratio
+        return self.mechanics.road_wheel_angle
 
     # -- tick -------------------------------------------------------------------------------------------------
     def step(self, io: NodeIO, t: float, dt: float) -> None:
@@ -138,22 +142,25 @@ class AclassPlant:
         self.robot.command(io.latest("BENCH_SteeringRobot"))
         model = self.model
         mech = self.mechanics
-        if mech is not None and self.ecu is not None:
-            fault = io.latest("BENCH_SbwSensorFault")
-            if fault is not None and ranges.finite(fault.get("SensorFault", 0.0), fault.get("SensorOffset", 0.0)):
-                mech.set_sensor_fault(int(fault["SensorFault"]), fault["SensorOffset"] * _RAD)
-            else:
-                mech.set_sensor_fault(0)
-            self._load_front_axle(mech)
-            substeps = max(1, math.ceil(dt * self.control_rate - 1e-9))
-            mech.advance(dt, self.ecu, self.robot, self.sensors, substeps)
+        fault = io.latest("BENCH_SbwSensorFault")
+        if fault is not None and ranges.finite(fault.get("SensorFault", 0.0), fault.get("SensorOffset", 0.0)):
+            mech.set_sensor_fault(int(fault["SensorFault"]), fault["SensorOffset"] * _RAD)
         else:
-            pinion = io.latest("SBW_Pinion")
-            if pinion is not None and ranges.finite(pinion.get("PinionAngle", math.nan)):
-                self._bus_pinion = pinion["PinionAngle"]
+            mech.set_sensor_fault(0)
+        self._load_front_axle(mech)
+        substeps = max(1, math.ceil(dt * self.control_rate - 1e-9))
+        emulation = self.emulation
+        if emulation is not None:
+            emulation.take(io.latest("IO_SbwActuators"))
+            mech.advance(dt, emulation, self.robot, self.sensors, substeps)
+        else:
+            assert self.ecu is not None
+            mech.advance(dt, self.ecu, self.robot, self.sensors, substeps)
         model.step(dt, -self.road_wheel_angle)
         self._move(dt)
         self._publish(io, t)
+        if emulation is not None and abs(t - round(t / IO_CYCLE) * IO_CYCLE) < 1e-7:
+            self._publish_io(io)
 
     def _load_front_axle(self, mech: SbwMechanics) -> None:
         """The front tyre force on the rack (eq. 10) from the vehicle's state, bus signs."""
@@ -200,8 +207,6 @@ class AclassPlant:
         io.send_values("PLANT_Dynamics", Sideslip=slip, LatAccel=lat, LongAccel=0.0)
         self.scenario.acknowledge(io, t)
         mech = self.mechanics
-        if mech is None:
-            return
         s = self.sensors
         mech.read(s)
         lo, hi = ranges.PLANT_SBW_ANGLE
@@ -220,6 +225,30 @@ class AclassPlant:
         hand = 0.0 if hand != hand else lo if hand < lo else hi if hand > hi else hand
         pinion = 0.0 if pinion != pinion else lo if pinion < lo else hi if pinion > hi else pinion
         io.send_values("PLANT_SbwSensors", HandWheelSensor=hand, PinionSensor=pinion)
+
+
+    def _publish_io(self, io: NodeIO) -> None:
+        """The external SBW's sensors, sampled now (a multiple of 5 ms): PLANT-IO-SBW-02. `self.sensors` holds the
+        reading `_publish` just took; every value limited to its signal's range (a reading beyond reads the end)."""
+        s, mech = self.sensors, self.mechanics
+        lo, hi = ranges.IO_SBW_ANGLE
+        hand, column = s.hand_wheel * _DEG, s.column * _DEG
+        hand = 0.0 if hand != hand else lo if hand < lo else hi if hand > hi else hand
+        column = 0.0 if column != column else lo if column < lo else hi if column > hi else column
+        torque = s.torsion_torque
+        tlo, thi = ranges.IO_SBW_TORSION_TORQUE
+        torque = 0.0 if torque != torque else tlo if torque < tlo else thi if torque > thi else torque
+        io.send_values("IO_SbwHandWheel", HandWheelSensor=hand, ColumnAngle=column, TorsionBarTorque=torque)
+        pinion, actuator = s.pinion * _DEG, s.motor_pinion * _DEG
+        pinion = 0.0 if pinion != pinion else lo if pinion < lo else hi if pinion > hi else pinion
+        actuator = 0.0 if actuator != actuator else lo if actuator < lo else hi if actuator > hi else actuator
+        io.send_values("IO_SbwPinion", PinionSensor=pinion, ActuatorAngle=actuator)
+        i_m, i_M = mech.i_m, mech.i_M
+        lo, hi = ranges.SBW_ROAD_FEEL_CURRENT
+        i_m = 0.0 if i_m != i_m else lo if i_m < lo else hi if i_m > hi else i_m
+        lo, hi = ranges.SBW_STEER_MOTOR_CURRENT
+        i_M = 0.0 if i_M != i_M else lo if i_M < lo else hi if i_M > hi else i_M
+        io.send_values("IO_SbwCurrents", RoadFeelMotorCurrent=i_m, SteerMotorCurrent=i_M)
 
 
 class WheelSpeedSensors:

@@ -207,6 +207,11 @@ class SbwParams:
     robot_rate_limit: float = param("deg/s")
     robot_bandwidth: float = param("rad/s")
     robot_torque_lag: float = param("s")
+    # the rig's actuator emulation for an external SBW (plant/sbw.py ActuatorEmulation; docs/contract/plant.md
+    # PLANT-IO-SBW-03, -04)
+    rig_servo_frequency: float = param("rad/s")
+    rig_servo_damping: float = param("1")
+    rig_current_time_constant: float = param("s")
     # reference ECU: bilateral control (plant/ecus/sbw.py)
     control_rate: float = param("Hz")
     assist_gain: float = param("1")

@@ -165,11 +165,16 @@ def test_right_turn_signs_follow_formulas_section_1() -> None:
     assert rig.v("PLANT_SbwTorques", "AligningTorque") < 0 and rig.v("SBW_HandWheel", "DriverTorque") > 0
 
 
-def test_external_sbw_takes_the_road_wheel_angle_from_sbw_pinion() -> None:
+def test_external_sbw_steers_the_road_wheels_through_the_simulated_pinion() -> None:
+    """With SBW external the mechanics still run (docs/contract/plant.md PLANT-IO-SBW-01): the road wheels turn
+    the simulated pinion / 15, which the rig's actuator holds at IO_SbwActuators.PinionAngleRequest; SBW_Pinion
+    (the external ECU's report) does not steer the car, and the request is held when its frames time out."""
     rig = Rig(50.0, external=("SBW",))
-    rig.io.values["SBW_Pinion"] = {"PinionAngle": 30.0}
+    rig.io.values["SBW_Pinion"] = {"PinionAngle": -80.0}
+    rig.io.values["IO_SbwActuators"] = {"PinionAngleRequest": 30.0, "RoadFeelTorqueRequest": 0.0}
     rig.run(2.0)
-    assert rig.plant is not None and rig.plant.mechanics is None
+    assert rig.plant is not None and rig.plant.emulation is not None
+    assert rig.v("PLANT_SbwAngles", "PinionAngle") == pytest.approx(30.0, abs=0.01)
     expected = load_parameters("ACLASS")
     u = 13.89
     big_l = expected.cog_to_front_axle + expected.cog_to_rear_axle
@@ -177,7 +182,7 @@ def test_external_sbw_takes_the_road_wheel_angle_from_sbw_pinion() -> None:
                                       - expected.cog_to_front_axle / expected.cornering_stiffness_rear)
     gain = (u / big_l) / (1 + k * u * u)
     assert rig.v("PLANT_Motion", "YawRate") == pytest.approx(gain * 30.0 / 15.0, rel=1e-3)
-    rig.io.silenced.add("SBW_Pinion")                                  # timed out: the angle is held
+    rig.io.silenced.add("IO_SbwActuators")                             # timed out: the request is held
     rig.run(0.5)
     assert rig.v("PLANT_Motion", "YawRate") == pytest.approx(gain * 30.0 / 15.0, rel=1e-3)
 
