@@ -17,6 +17,7 @@ import numpy as np
 
 from bench.case import Case
 from bench.results import Series
+from testcases.ev4wis.oracle import rpm_from_speed
 from testcases.limits import limit_value, limits_file, load_limits
 from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.path_driver import CarModel
@@ -38,24 +39,32 @@ LAW = {"2WS": "OFF", "FEEDFORWARD": "FEEDFORWARD", "FEEDBACK": "FEEDBACK"}
 WHEELS = ("FL", "FR", "RL", "RR")
 SPEED_SETTLE_S = 3.0        # s the hub motors get to bring the speed back after the scenario start
 SPEED_TOL = limit("speed_settled_rel_tol")   # relative: the speed counts as settled within 0.3 % of the target
+#: a wheel command is the request's within 0.5 % or 0.2 rpm (docs/contract/vcu.md VCU-MODE-01's tolerance)
+WHEEL_RPM_REL_TOL, WHEEL_RPM_ABS_TOL = 0.005, 0.2
 #: s: the driver's model of servo lag (50 ms, docs/spec/vehicles.md A) + network delay, chosen
 DRIVER_LAG = 0.07
 
 
 def start(bench: Case, speed_kmh: float, strategy: str, mu: float = 1.0) -> float:
     """Fresh EV at `speed_kmh` (on the 0.01 m/s grid of InitialSpeed/TargetSpeed), ADAPTIVE with the
-    strategy's rear-steering law, hand wheel 0, road friction mu; waits until the speed is steady (the VCU
-    commands 0 rpm until the case sends its request, so the hub motors first slow down a little).
-    Returns the speed as the bus carries it, m/s (the oracle uses this value)."""
+    strategy's rear-steering law, hand wheel 0, road friction mu; returns at the moment of docs/contract/vcu-4ws.md
+    VCU-4WS-01 from which every 4WS law is judged: the VCU executes the case's request (VcuFault 0, every
+    VCU_WheelCmd_xx at the straight-ahead wheel speed 30 u/(π r) of vcu.md VCU-MODE-07) and the car runs at it
+    (PLANT_Motion.Speed within SPEED_TOL). Not at the restart itself: the car then still rolls at InitialSpeed
+    while the VCU executes the scenario's first frames (standstill, 0 rpm; plant.md PLANT-SCN-04), so the hub
+    motors first brake it a little. Returns the speed as the bus carries it, m/s (the oracle uses this value)."""
     u = round(oracle.mps(speed_kmh), 2)
     bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=u, RoadMu=mu)
     bench.set("BENCH_VcuConfig", RearSteerLaw=LAW[strategy])
     bench.set("DRV_Steering", HandWheelAngle=0.0)
     bench.set("DRV_MotionRequest", DriveMode="ADAPTIVE", TargetSpeed=u)
+    rpm = rpm_from_speed(u)
+    rpm_tol = max(WHEEL_RPM_REL_TOL * rpm, WHEEL_RPM_ABS_TOL)
 
     def steady() -> bool:
-        return (abs(bench.value("PLANT_Motion", "Speed") - u) <= SPEED_TOL * u
-                and bench.value("VCU_VehicleState", "VcuFault") == 0)
+        return (bench.value("VCU_VehicleState", "VcuFault") == 0
+                and all(abs(bench.value(f"VCU_WheelCmd_{w}", "WheelSpeedCmd") - rpm) <= rpm_tol for w in WHEELS)
+                and abs(bench.value("PLANT_Motion", "Speed") - u) <= SPEED_TOL * u)
 
     if not bench.wait_until(steady, SPEED_SETTLE_S):
         bench.received("VCU_VehicleState", "VcuFault")   # a silent VCU ends the case here, in one line

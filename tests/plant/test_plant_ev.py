@@ -160,8 +160,11 @@ def test_adaptive_high_speed_hook_is_used_above_20_kmh():
     rig = Rig(vcu=Vcu(PARAMS, high_speed_law=law))
     rig.request(2, 10.0, hand_wheel=15 * 2.0)
     rig.run(0.2)
-    # the law gets the vehicle's speed (VCU-4WS-01), here that of the wheels, not TargetSpeed
-    assert calls and calls[-1] == pytest.approx(rig.sent("VCU_VehicleState")["VehicleSpeed"], abs=0.05)
+    # the law gets the vehicle's speed (VCU-4WS-01: within 1 km/h of the truth), not TargetSpeed and not that of
+    # the wheels, which the hub motors spin faster than the tyres let the car accelerate (8.6 m/s, car 6.3 m/s)
+    truth = rig.sent("PLANT_Motion")["Speed"]
+    assert rig.sent("VCU_VehicleState")["VehicleSpeed"] > truth + 1.0        # the wheels do slip here
+    assert calls and calls[-1] == pytest.approx(truth, abs=1.0 / 3.6)
     assert 20.0 / 3.6 < calls[-1] < 10.0
     angles = [rig.sent(f"VCU_WheelCmd_{c}")["SteerAngleCmd"] for c in CORNERS]
     assert angles[0] > 0 and angles[2] > 0                       # rear steers with the front
