@@ -76,11 +76,12 @@ class BrakeHydraulics:
         return 0.0
 
     def command(self, valves: Sequence[Valve | int], duties: Sequence[float]) -> None:
-        """The ABS ECU's valve commands (held until the next command)."""
+        """The ABS ECU's valve commands (held until the next command). A duty of 0 closes the inlet (INCREASE at
+        duty 0 holds, as IO_AbsValves.InletDutyXX says); one outside [0, 1] (or NaN) opens it fully."""
         for i in range(4):
             self.valves[i] = Valve(valves[i])
             d = duties[i]
-            self.duties[i] = d if 0.0 < d <= 1.0 else 1.0
+            self.duties[i] = d if 0.0 <= d <= 1.0 else 1.0
 
     def release(self) -> None:
         """Valves unpowered (the ABS is passive): every circuit follows the master cylinder."""

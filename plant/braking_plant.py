@@ -10,6 +10,11 @@ Inputs (io.latest; a timed-out message keeps its last value, the driver does not
   - BENCH_AbsStimulus (dbc/bench.dbc): CruiseSpeed > 0: a drive robot holds that speed (km/h, true speed)
     with the accelerator while the master pressure is below 0.5 bar (steady-state circular tests, [P4]
     §4); ValveBypass = 1: the hydraulic unit ignores the ABS valves (the locked-wheel reference run).
+  - BENCH_AbsSensorFault (dbc/bench.dbc): a fault of one wheel-speed sensor (plant/sensors.py), on the simulated
+    ABS's wires and on IO_AbsSensors alike; absent or timed out: none.
+  - IO_AbsValves, only while the ABS is external (docs/contract/plant.md PLANT-IO-ABS-02): the valve commands
+    of the external ABS, applied from the tick after a valid frame arrived and held; none valid for 15 ms (the
+    message's timeout), or none yet: RELEASED, the valves unpowered.
   - BENCH_Control: a change of ScenarioId (the first one seen included) resets the world and every linked
     behaviour (the in-process ABS ECU): straight ahead at InitialSpeed, wheels free rolling, brakes
     released; RoadMu (tyre set, plant/braking_vehicle.road_shape) and SensorNoise (plant/sensors.py) are taken
@@ -22,6 +27,11 @@ PLANT_Dynamics (Sideslip at the CoG positive right, LatAccel positive right, Lon
 road-wheel angle positive right, master pressure, bypass) and PLANT_AbsWheel_xx (true circumferential
 speed, braking slip positive when braking, wheel pressure, normal load). All clamped to the DBC ranges, and
 sampled every 10 ms at the ABS ECU's update instants (PUBLISH_MS), plus at once after a scenario reset.
+
+Bench I/O of an external ABS (docs/contract/plant.md PLANT-IO-ABS-01): IO_AbsSensors, the sensor model's readings
+sampled every 5 ms in the tick the frame goes out (SENSOR_PHASE_MS), so a reading is never older than its frame.
+With the simulated ABS the plant sends no I/O: the ECU reads the sensors and sets the valves through its wires
+(read_sensors, command_valves, release_valves).
 """
 
 from __future__ import annotations
@@ -45,6 +55,13 @@ CRUISE_RELEASE_BAR = 0.5
 #: PLANT message has a cycle of 10 ms or more (dbc/bench.dbc)
 PUBLISH_MS = 10
 WHEEL_MESSAGES = tuple(f"PLANT_AbsWheel_{c}" for c in CORNERS)
+#: IO_AbsSensors (dbc/bench.dbc): every 5 ms; the restbus sends a message at the ticks id mod cycle + k cycle
+#: (0x6D0 mod 5 = 4 ms), so the plant samples the sensors in those ticks (before the frame is built)
+SENSOR_PERIOD_MS, SENSOR_PHASE_MS = 5, 0x6D0 % 5
+SENSOR_SIGNALS = tuple(f"WheelSensor{c}" for c in CORNERS)
+VALVE_SIGNALS = tuple(f"Valve{c}" for c in CORNERS)
+DUTY_SIGNALS = tuple(f"InletDuty{c}" for c in CORNERS)
+RELEASED = 3          # IO_AbsValves.ValveXX: unpowered (the value table's fourth entry; plant/brakes.Valve has three)
 
 
 def vehicle_spec(car: AclassParams, abs_params: AbsParams) -> VehicleSpec:
@@ -63,8 +80,10 @@ class BrakingPlantNode:
 
     nodes: tuple[str, ...] = ("PLANT",)
 
-    def __init__(self, car: AclassParams, abs_params: AbsParams, *, vehicle_code: int) -> None:
+    def __init__(self, car: AclassParams, abs_params: AbsParams, *, vehicle_code: int,
+                 external_abs: bool = False) -> None:
         self.params = abs_params
+        self.external_abs = external_abs     # the ABS is a real ECU on the bench I/O (IO_AbsSensors, IO_AbsValves)
         self.vehicle = BrakingVehicle(vehicle_spec(car, abs_params))
         self.hydraulics = BrakeHydraulics(
             inlet_flow=abs_params.inlet_flow, outlet_flow=abs_params.outlet_flow,
@@ -143,6 +162,13 @@ class BrakingPlantNode:
             accel = pedals.get("AccelPedal", 0.0)
             self._demand = demand
             self._accel = accel if ranges.finite(accel) and accel > 0.0 else 0.0
+        fault = io.latest("BENCH_AbsSensorFault")
+        if fault is None:
+            self.sensors.set_fault(0, 0)
+        else:
+            self.sensors.set_fault(fault.get("FaultWheel", 0.0), fault.get("SensorFault", 0.0))
+        if self.external_abs:
+            self._apply_valves(io.latest("IO_AbsValves"))
         stimulus = io.latest("BENCH_AbsStimulus")
         cruise = bypass = 0.0
         if stimulus is not None:
@@ -159,9 +185,33 @@ class BrakingPlantNode:
         veh.brake_torque = hyd.torques()
         veh.step(dt)
         ms = round(t * 1000.0)
+        if self.external_abs and ms % SENSOR_PERIOD_MS == SENSOR_PHASE_MS:
+            readings = self.sensors.sample(veh.wheel_speeds_kmh(), SENSOR_PERIOD_MS / 1000.0)
+            io.send_values("IO_AbsSensors", **dict(zip(SENSOR_SIGNALS, readings, strict=True)))
         if ms % PUBLISH_MS == 0 or self._ack_due:
             self._ack_due = False
             self._publish(io, t)
+
+    def _apply_valves(self, frame: Mapping[str, float] | None) -> None:
+        """An external ABS's IO_AbsValves (the latest valid frame, None when timed out or never received):
+        RELEASED (3) or no frame = valves unpowered."""
+        hyd = self.hydraulics
+        if frame is None:
+            hyd.release()
+            return
+        codes = [frame.get(name, RELEASED) for name in VALVE_SIGNALS]
+        if all(code == RELEASED for code in codes):
+            hyd.release()
+            return
+        valves, duties = [], []
+        for code, name in zip(codes, DUTY_SIGNALS, strict=True):
+            if code == RELEASED or code not in (0, 1, 2):
+                valves.append(Valve.INCREASE)
+                duties.append(1.0)
+            else:
+                valves.append(Valve(int(code)))
+                duties.append(frame.get(name, 1.0))
+        hyd.command(valves, duties)
 
     def _publish(self, io: NodeIO, t: float) -> None:
         veh, hyd = self.vehicle, self.hydraulics

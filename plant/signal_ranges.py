@@ -52,6 +52,8 @@ PLANT_ABS_SPEED = (0.0, 250.0)              # PLANT_AbsVehicle.VehicleSpeed, km/
 PLANT_ABS_ANGLE = (-90.0, 90.0)             # PLANT_AbsVehicle.FrontWheelAngle, deg
 PLANT_ABS_PRESSURE = (0.0, 400.0)           # PLANT_AbsVehicle.MasterPressure, PLANT_AbsWheel_xx.BrakePressure, bar
 PLANT_ABS_WHEEL_SPEED = (0.0, 600.0)        # PLANT_AbsWheel_xx.WheelSpeed, km/h
+IO_ABS_WHEEL_SENSOR = (0.0, 204.75)         # IO_AbsSensors.WheelSensorxx, km/h (the whole raw range)
+IO_ABS_INLET_DUTY = (0.0, 1.0)              # IO_AbsValves.InletDutyxx
 PLANT_ABS_SLIP = (-1.0, 1.0)                # PLANT_AbsWheel_xx.Slip
 PLANT_ABS_LOAD = (0.0, 12750.0)             # PLANT_AbsWheel_xx.NormalLoad, N
 
@@ -113,6 +115,8 @@ BY_SIGNAL: dict[tuple[str, str], tuple[float, float]] = {
     **{(f"PLANT_AbsWheel_{w}", "Slip"): PLANT_ABS_SLIP for w in _WHEELS},
     **{(f"PLANT_AbsWheel_{w}", "BrakePressure"): PLANT_ABS_PRESSURE for w in _WHEELS},
     **{(f"PLANT_AbsWheel_{w}", "NormalLoad"): PLANT_ABS_LOAD for w in _WHEELS},
+    **{("IO_AbsSensors", f"WheelSensor{w}"): IO_ABS_WHEEL_SENSOR for w in _WHEELS},
+    **{("IO_AbsValves", f"InletDuty{w}"): IO_ABS_INLET_DUTY for w in _WHEELS},
 }
 
 

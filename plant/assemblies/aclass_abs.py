@@ -7,9 +7,9 @@ hand_wheel_ratio 18 is [P4]'s i_w and replaces the car's 15 for this vehicle).
 Step order (the returned list IS the order): PLANT, then ABS. The ABS reads the sensors and commands the
 valves of the plant by direct reference (its wires), so it sees the wheels of this very tick; its valve
 commands act from the next plant tick (the hydraulics' own delay). Nodes named in `external` are left out:
-with ABS external the hydraulic unit's valves stay unpowered (no valve commands reach the plant over CAN:
-the contract has none), so the car brakes without ABS; with PLANT external nothing is built (the ABS has no
-sensors to read).
+with ABS external the plant sends the sensor readings in IO_AbsSensors and takes the valve commands from
+IO_AbsValves (the bench I/O, docs/contract/plant.md PLANT-IO-ABS-01, -02); with PLANT external nothing is built
+(the ABS has no sensors to read).
 """
 
 from __future__ import annotations
@@ -37,8 +37,9 @@ MESSAGES = frozenset({
     "PLANT_AbsVehicle", "PLANT_AbsWheel_FL", "PLANT_AbsWheel_FR", "PLANT_AbsWheel_RL", "PLANT_AbsWheel_RR",
 })
 
-#: What its behaviours read of the stimulus: the ABS test's drive robot and valve bypass, the pedals, the hand wheel.
-STIMULUS = ("BENCH_AbsStimulus", "DRV_Pedals", "DRV_Steering")
+#: What its behaviours read of the stimulus: the ABS test's drive robot and valve bypass, the sensor faults, the
+#: pedals, the hand wheel.
+STIMULUS = ("BENCH_AbsStimulus", "BENCH_AbsSensorFault", "DRV_Pedals", "DRV_Steering")
 
 
 def build(external: Collection[str]) -> list[Behaviour]:
@@ -46,7 +47,7 @@ def build(external: Collection[str]) -> list[Behaviour]:
     if "PLANT" in external:
         return []
     car, abs_params = (parameters.load() for parameters in PARAMETERS)
-    plant = BrakingPlantNode(car, abs_params, vehicle_code=CODE)
+    plant = BrakingPlantNode(car, abs_params, vehicle_code=CODE, external_abs="ABS" in external)
     behaviours: list[Behaviour] = [plant]
     if "ABS" not in external:
         ecu = AbsEcu(abs_params, car, plant)

@@ -26,7 +26,8 @@ still publishes, from sensors it cannot read, nothing but its start values; the 
 Inputs from the bus: DRV_Pedals (brake switch: the driver's demand of plant/brakes.py at or above
 brake_switch_pressure).
 
-AbsFault (value table): 0 OK; 1 WHEEL_SPEED_INVALID: a sensor reads non-finite or out of range, or reads
+AbsFault (value table): 0 OK; 1 WHEEL_SPEED_INVALID: a sensor reads non-finite or outside its measuring range
+0-200 km/h (a shorted line reads 204.75, plant/sensors.py), or reads
 below 1 km/h for 0.5 s while the other three read above 20 km/h without braking (an open sensor line);
 2 INPUT_TIMEOUT: DRV_Pedals never received or timed out. In a fault the ABS is passive (valves unpowered:
 the brakes work without ABS), TurnDirection is 0 and the estimate is restarted when the fault clears.
@@ -46,12 +47,14 @@ from plant import signal_ranges as ranges
 from plant.brakes import Valve
 from plant.ecus.abs_control import ControlConfig, WheelController
 from plant.ecus.abs_estimator import STRAIGHT, Estimate, EstimatorConfig, TurnStateEstimator
+from plant.sensors import MEASURING_RANGE_KMH
 from plant.vehicles import AbsParams, AclassParams
 
 KMH = 3.6
 OUTPUT_PERIOD_MS = 10            # ABS_WheelSpeeds / ABS_SteerState cycle (dbc/chassis.dbc)
 ACCEL_WINDOW = 4                 # control periods over which the wheel acceleration is differenced (20 ms)
 SENSOR_LOST_KMH, SENSOR_OTHERS_KMH, SENSOR_LOST_S = 1.0, 20.0, 0.5
+_SENSOR_LO, _SENSOR_HI = MEASURING_RANGE_KMH    # a reading outside is a sensor fault (a shorted line: 204.75)
 #: select-low on the rear axle: DECREASE wins over HOLD, HOLD over INCREASE
 _SELECT_LOW_RANK = {Valve.INCREASE: 0, Valve.HOLD: 1, Valve.DECREASE: 2}
 
@@ -161,7 +164,7 @@ class AbsEcu:
         pedals = io.latest("DRV_Pedals")
         speeds = self.hardware.read_sensors(period)
         fault = _FAULT_OK
-        if not all(math.isfinite(v) and ranges.ABS_WHEEL_SPEED[0] <= v <= ranges.ABS_WHEEL_SPEED[1] for v in speeds):
+        if not all(math.isfinite(v) and _SENSOR_LO <= v <= _SENSOR_HI for v in speeds):
             fault = AbsFault.WHEEL_SPEED_INVALID
             speeds = [_clamp(v, ranges.ABS_WHEEL_SPEED) for v in speeds]
         self.speeds = speeds
