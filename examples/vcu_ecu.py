@@ -663,7 +663,8 @@ class SpeedEstimator:
     The informative estimator of vcu-4ws.md VCU-4WS-01, rules 1-6 as written. Each task (period dt) reads w,
     the forward component of the wheels' rigid fit (VCU-OUT-05), and a, the latest valid LongAccel plus the
     body-frame term YawRate * v_x of the fit (which VCU-4WS-01 allows; u_dot of IMU-OUT-01's body frame):
-      1. u undefined, no valid IMU_Motion, or more than 50 ms since the previous task: u = w.
+      1. u undefined, no valid IMU_Motion, LongAccel at its range end (+/-30 m/s^2: the IMU clamps there, so
+         it bounds the acceleration without measuring it), or more than 50 ms since the previous task: u = w.
       2. predict p = u + a dt, e = w - p.
       3. |e| <= B: u = p + clamp(e, -D, D) (the wheels, at most D per task away from the prediction).
       4. the wheels slide the way the IMU pushes (e < -B with a <= -A, or e > +B with a >= +A): u = p.
@@ -681,6 +682,7 @@ class SpeedEstimator:
     CONFIRM_S = 0.030  # T_c, s
     STEP = 0.05  # D, m/s per task
     MAX_GAP_S = 0.050  # rule 1: more than 50 ms since the previous task
+    ACCEL_RANGE_END = 30.0  # rule 1: IMU_Motion.LongAccel's range end (dbc/chassis.dbc), m/s^2
 
     u: float | None = None
     t_d: float | None = None  # when an unconfirmed disagreement began (rule 6), None: none
@@ -700,7 +702,8 @@ class SpeedEstimator:
                 self.u += a * dt
             return self.u
         w = wheels[1]
-        if self.u is None or a is None or dt > self.MAX_GAP_S:  # rule 1
+        clamped = imu is not None and abs(imu["LongAccel"]) >= self.ACCEL_RANGE_END
+        if self.u is None or a is None or clamped or dt > self.MAX_GAP_S:  # rule 1
             self.u, self.t_d = w, None
             return self.u
         p = self.u + a * dt  # rule 2
