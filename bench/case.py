@@ -487,6 +487,31 @@ class Case:
                                       node=node)
         return self._steps.record(name, True, f"held {seconds:g} s", f"for {seconds:g} s", "always", node=node)
 
+    def expect_clean_bus(self) -> bool:
+        """No invalid frame (range, E2E, length) since the case (or its latest scenario) started. Records one
+        step when every frame was valid, else one step per sending node: the DUT's invalid frames (and frames
+        of no known message) fail the case; those of a message none of whose senders is among the case's DUTs
+        are judged as their senders' (the step's `node`, as `expect`'s). A frame of the bench's own stimulus
+        that reaches the monitor out of sequence on a late host is then the bench's problem, shown under its
+        node, and makes the case inconclusive if the DUT failed too, instead of failing the DUT for it.
+        Returns True when no frame was invalid."""
+        name = "no invalid frame on the bus (range, E2E, length)"
+        duts = set(self.result.duts)
+        codebook = self.session.codebook
+        by_node: dict[str, list[InvalidFrame]] = {}
+        for frame in self.invalid_log():
+            codec = codebook.by_name.get(frame.message)
+            senders = codec.senders if codec is not None else ()
+            node = "" if not duts or not senders or set(senders) & duts else ",".join(senders)
+            by_node.setdefault(node, []).append(frame)
+        if not by_node:
+            return self._steps.record(name, True, 0, 0, "", "", "", "")
+        for node, frames in sorted(by_node.items()):
+            detail = "; ".join(f"{f.message} at {f.t:.3f} s: {f.reason}" for f in frames[:5])
+            self._steps.record(name + (f" from {node}" if node else ""), False, len(frames), 0, "", "", detail,
+                               node)
+        return False
+
     def check_cycle_times(self, messages: Iterable[str] | None = None, *, p50_band: float = 0.05,
                           p99_max: float = 1.5, max_max: float = 3.0, min_frames: int = 10) -> bool:
         """Measured cycle time per message since the case started: p50 within ±p50_band of the DBC

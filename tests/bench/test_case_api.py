@@ -88,3 +88,25 @@ def test_check_cycle_times_fails_a_periodic_message_that_never_arrived(on_bench:
     assert (dropped.verdict, dropped.measured) == ("fail", "no frames since the case started")
     assert steps["cycle time WHL_Status_FR"].verdict == "pass"   # its neighbours came and pass
     assert [s.name for s in case.result.steps if s.verdict == "fail"] == ["cycle time WHL_Status_FL"]
+
+
+def test_expect_clean_bus_judges_each_invalid_frame_as_its_senders(on_bench: tuple[BenchSession, Case]) -> None:
+    """Invalid frames of a message the DUT does not send are its sender's step (the bench's own stimulus out of
+    sequence on a late host is not the DUT's failure); the DUT's own invalid frames fail the case."""
+    _, case = on_bench
+    case.result.duts = ["VCU"]
+    case.start_scenario(Vehicle="EV4WIS")
+    assert case.expect_clean_bus()                                               # nothing invalid: one pass
+    assert [(s.name, s.verdict, s.node) for s in case.result.steps[-1:]] == [
+        ("no invalid frame on the bus (range, E2E, length)", "pass", "")]
+    case.inject("counter_jump", "DRV_Steering", duration=0.05, param=5)              # sent by DRIVER, simulated
+    case.run(0.2)
+    assert not case.expect_clean_bus()
+    step = case.result.steps[-1]
+    assert (step.verdict, step.node) == ("fail", "DRIVER") and "DRV_Steering" in step.detail
+    assert not case.result.failed_steps                                          # not the VCU's failure
+    case.inject("counter_jump", "VCU_WheelCmd_FL", duration=0.05, param=5)           # the DUT's own message
+    case.run(0.2)
+    assert not case.expect_clean_bus()
+    assert [s.name for s in case.result.failed_steps] == ["no invalid frame on the bus (range, E2E, length)"]
+    assert "VCU_WheelCmd_FL" in case.result.failed_steps[0].detail
