@@ -100,6 +100,28 @@ class Case:
                                 for name, s in self._monitor.by_name.items()}
         self._invalid_mark = self._monitor.invalid_dropped + len(self._monitor.invalid_log)
 
+    # -- the run ------------------------------------------------------------------------------------
+    @property
+    def external(self) -> frozenset[str]:
+        """The nodes declared external in this run (`--external`): real ECUs on the bus, which the bench does
+        not simulate. Records no step."""
+        return frozenset(self.session.external)
+
+    def calibration(self, node: str, name: str, unit: str) -> float:
+        """A value of bench.toml's `[calibration.NODE]` table (the calibration of a real ECU that a case needs to
+        judge it), checked to be in `unit`. A missing table or name, or another unit, ends the case as
+        inconclusive in one line naming bench.toml and the key (the ECU is not at fault). Records no step."""
+        project = self.session.project
+        table = project.calibration.get(node)
+        where = f"{project.path}: [calibration.{node}]"
+        if table is None or name not in table:
+            raise Inconclusive(f"{where} {name}: missing; the case needs the external {node}'s value "
+                               f"({name} = {{ value = <number>, unit = \"{unit}\" }})")
+        value, given = table[name]
+        if given != unit:
+            raise Inconclusive(f"{where} {name}: unit {given!r}, the case needs {unit!r}")
+        return value
+
     # -- time --------------------------------------------------------------------------------------
     @property
     def now(self) -> float:

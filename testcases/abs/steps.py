@@ -3,7 +3,8 @@ the ECU's outputs paired with the plant's ground truth, the report's plots and t
 
 Only the bench's public API and DBC names: dbc/chassis.dbc (ABS_WheelSpeeds, ABS_SteerState, DRV_Steering,
 DRV_Pedals) and dbc/bench.dbc (BENCH_Control, BENCH_AbsStimulus, PLANT_AbsVehicle, PLANT_AbsWheel_xx, PLANT_*).
-Limits: testcases/abs/limits.toml [abs]. Expected values: testcases/abs/oracle.py.
+Limits: testcases/abs/limits.toml [abs] (each also in docs/contract/abs.md); an external ABS's calibration:
+bench.toml [calibration.ABS] (`thresholds`). Expected values: testcases/abs/oracle.py.
 
 Pairing estimate and truth: the ABS updates its outputs every 10 ms and the plant samples its truth at the same
 instants (both documented with dbc/bench.dbc's truth messages), and each message goes out within the same
@@ -42,6 +43,17 @@ def limit(name: str) -> float:
 
 def source(name: str) -> str:
     return f"limits.toml abs.{name}: {LIMITS[name][2]}"
+
+
+def thresholds(bench: Case) -> tuple[float, float, float, str]:
+    """(V_l0, V_l1, V_l2 in km/h, where they come from) of the ABS under test, with which the cases evaluate eq. 13
+    (docs/contract/abs.md ABS-TURN-01): an external ABS's own calibration, bench.toml [calibration.ABS] v_l0, v_l1,
+    v_l2 (missing: the case is inconclusive, naming the key); the bench's own ABS's, limits.toml ecu_v_l*."""
+    if "ABS" in bench.external:
+        l0, l1, l2 = (bench.calibration("ABS", name, "km/h") for name in ("v_l0", "v_l1", "v_l2"))
+        return l0, l1, l2, "the external ABS's calibration (bench.toml [calibration.ABS])"
+    return (limit("ecu_v_l0"), limit("ecu_v_l1"), limit("ecu_v_l2"),
+            "the reference ABS's calibration (limits.toml abs.ecu_v_l*)")
 
 
 # -- scenario and stimulus ---------------------------------------------------------------------------------

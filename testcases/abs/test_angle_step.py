@@ -31,8 +31,6 @@ TEST = "angle step while braking under ABS (Fig. 6-8)"
 @pytest.mark.parametrize("side", ["left", "right"])
 @pytest.mark.dut("ABS")
 @pytest.mark.req("ABS-TURN-01", "ABS-TURN-04", "ABS-EST-01", "ABS-EST-02", "ABS-FLT-01")
-@pytest.mark.reference_only("ABS", reason="brakes under ABS: the plant's hydraulic unit takes valve commands only "
-                                          "from the simulated ABS (the contract has no valve message)")
 def test_abs_angle_step_under_abs(bench, side: str) -> None:
     hand_wheel = -HAND_WHEEL if side == "left" else HAND_WHEEL
     expected_turn = 1 if side == "left" else -1

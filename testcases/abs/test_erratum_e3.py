@@ -7,7 +7,8 @@ Corrected (what the bench checks): ddV < V_l2 for both signs.
 The bench drives tight steady turns both ways (hand wheel +/-810 deg: delta = 45 deg at i_w 18, 20 km/h held by
 the drive robot), where ddV = B r (1 - cos delta) (eq. 8) exceeds V_l2 while dV1 and dV2 are well inside
 (V_l0, V_l1). The oracle (testcases/abs/oracle.py) evaluates both versions of eq. 13 on the mean bus wheel
-speeds (ABS_WheelSpeeds) of the settled window, with the reference ECU's thresholds (limits [abs] ecu_v_l*):
+speeds (ABS_WheelSpeeds) of the settled window, with the ECU's thresholds (steps.thresholds: the reference's
+limits [abs] ecu_v_l*, an external ABS's bench.toml [calibration.ABS]):
 - the corrected rule gives 0 both ways, the printed rule gives 0 for the left turn but -1 for the right one
   (the erratum changes the result here: the scenario demonstrates it);
 - the ECU's TurnDirection is the corrected rule's value, the same for both directions (>= 99 % of samples).
@@ -28,7 +29,7 @@ SETTLE, WINDOW = 3.0, 3.0
 @pytest.mark.dut("ABS")
 @pytest.mark.req("ABS-TURN-01", "ABS-TURN-03", "ABS-OUT-01")
 def test_abs_erratum_e3(bench) -> None:
-    l0, l1, l2 = steps.limit("ecu_v_l0"), steps.limit("ecu_v_l1"), steps.limit("ecu_v_l2")
+    l0, l1, l2, calibration = steps.thresholds(bench)
     rows = []
     results = {}
     for side, hand_wheel in (("left", -HAND_WHEEL), ("right", HAND_WHEEL)):
@@ -62,6 +63,6 @@ def test_abs_erratum_e3(bench) -> None:
     bench.table("Erratum E3 ([P4] eq. 13): printed vs corrected rule on the bus wheel speeds, and the bench",
                 ["turn", "hand wheel deg", "dV1 km/h", "dV2 km/h", "ddV km/h", "T printed", "T corrected (checked)",
                  "TurnDirection (median)"], rows)
-    bench.note(f"V_l0 {l0:g}, V_l1 {l1:g}, V_l2 {l2:g} km/h (the reference ECU's calibration). In a tight turn "
+    bench.note(f"V_l0 {l0:g}, V_l1 {l1:g}, V_l2 {l2:g} km/h ({calibration}). In a tight turn "
                f"ddV = B r (1 - cos delta) grows beyond V_l2; the printed right-turn branch would still report a "
                f"right turn while the left-turn branch rejects the mirror image. docs/spec/formulas.md §6 erratum E3.")

@@ -60,8 +60,6 @@ def _mean_decel(d: dict, v_hi: float, v_lo: float) -> float:
 @pytest.mark.parametrize("road", list(ROADS))
 @pytest.mark.dut("ABS")
 @pytest.mark.req("ABS-BRK-01", "ABS-TURN-01", "PLANT-DYN-04")
-@pytest.mark.reference_only("ABS", reason="brakes under ABS: the plant's hydraulic unit takes valve commands only "
-                                          "from the simulated ABS (the contract has no valve message)")
 def test_abs_straight_braking(bench, road: str) -> None:
     mu, tyre = ROADS[road]
     locked = _stop(bench, mu, bypass=True)
