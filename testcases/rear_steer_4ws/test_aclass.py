@@ -22,10 +22,7 @@ from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.steps import limit, mean_since
 from testcases.stimulus import STIMULUS
 
-pytestmark = [pytest.mark.dut("PLANT"), pytest.mark.req("PLANT-DYN-02", "PLANT-DYN-05"),
-              pytest.mark.reference_only("SBW", reason="reads the simulated SBW's true pinion angle "
-                                                "(PLANT_SbwAngles), which the plant has only while it simulates "
-                                                "the SBW")]
+pytestmark = [pytest.mark.dut("PLANT"), pytest.mark.req("PLANT-DYN-02", "PLANT-DYN-05")]
 
 #: docs/spec/vehicles.md B, "Derived (linear 2-DOF)": value, printed decimals (tolerance = half a unit of the last one)
 PUBLISHED = {"K [s²/m²]": (1.90e-3, 0.005e-3), "characteristic speed [km/h]": (82.6, 0.05),

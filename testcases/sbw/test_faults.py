@@ -1,18 +1,26 @@
-"""SBW faults at 50 km/h: a timed-out SBW_Pinion, an out-of-range hand-wheel angle and a timed-out ECU input,
-each detected by the bench and (where the reference ECU is a receiver) by the reference SBW ECU, with its
-documented safe reaction (plant/ecus/sbw.py; SBW_Pinion.SbwFault value table of dbc/chassis.dbc; issue 4).
+"""SBW faults at 50 km/h: a timed-out SBW_Pinion, the three angle-sensor faults and a timed-out ECU input, each
+detected by the bench and by the SBW, with its documented safe reaction (docs/contract/sbw.md SBW-FLT-01..05;
+SBW_Pinion.SbwFault value table of dbc/chassis.dbc; issues 4, 26).
 
 - SBW_Pinion dropped for 100 ms (fault injection): the bench's monitor times it out 3 cycles after the last
-  frame and sees it come back; steering is not affected (the SBW's own loops do not use the bus). SBW_Pinion
-  has no receiver among ACLASS's simulated ECUs (its contract receiver, the VCU, is not part of this car), so
-  the reference ECU's side of a timed-out input is shown with IMU_Motion below.
-- Hand-wheel angle sensor reading beyond the contract range ±900° (BENCH_SbwSensorFault: offset 1000°): the
-  bench sees the reading beyond the range (PLANT_SbwSensors); the ECU flags HANDWHEEL_RANGE, replaces the
-  sensor by the column estimate (so SBW_HandWheel stays in range and true), drops the yaw-rate feedback and
-  keeps steering at ratio 1; the fault clears with the sensor.
+  frame and sees it come back; steering is not affected (the SBW's own loops do not use the bus). Only the
+  simulated SBW's frames can be dropped: reference only.
+- The angle-sensor faults go in through the plant's sensor model (BENCH_SbwSensorFault), which feeds the
+  simulated SBW's wires and an external SBW's bench I/O (IO_SbwHandWheel, IO_SbwPinion; docs/contract/plant.md
+  PLANT-IO-SBW-05) alike, so they judge a real SBW too, on the bus (SbwFault, SBW_HandWheel, SBW_Pinion) and on
+  the plant's ground truth (PLANT_SbwAngles, PLANT_SbwSensors):
+  - hand-wheel sensor offset 1000° (beyond ±900°): HANDWHEEL_RANGE (SBW-FLT-01);
+  - hand-wheel sensor stuck while the robot turns the hand wheel 15° on: HANDWHEEL_STUCK (SBW-FLT-02);
+  - pinion sensor offset 30° (more than 20° from the actuator's rotor angle): PINION_RANGE (SBW-FLT-03).
+  Each: SbwFault within 0.05 s of the condition, held while it lasts, the substitute on the bus within 0.1° of
+  the truth, the pinion target = the hand wheel (no feedback), steering on (true |θ_h − θ_p| ≤ 0.5°), SbwFault 0
+  once the sensor is healthy. The cases select the reference SBW's YAW_RATE mode (BENCH_SbwConfig, which a real
+  SBW ignores) so that "feedback off" is a real check on the reference; a real SBW without feedback passes it
+  trivially.
 - IMU_Motion dropped for 300 ms in YAW_RATE mode: the bench times it out; the ECU flags INPUT_TIMEOUT, the
-  pinion target returns to the hand-wheel angle (fixed ratio); the feedback resumes after.
-Limits: testcases/sbw/limits.toml [sbw].
+  pinion target returns to the hand-wheel angle (fixed ratio); the feedback resumes after (reference only: the
+  feedback mode is the reference SBW's coding).
+Limits: testcases/sbw/limits.toml [sbw] (the same numbers as docs/contract/sbw.md).
 """
 
 from __future__ import annotations
@@ -27,6 +35,8 @@ from testcases.sbw.steps import SBW_FAULT, Limits, expect_clean_bus, plot_steeri
 SPEED_KMH = 50.0
 HAND_WHEEL = 20.0      # deg held during the faults
 CONTRACT_RANGE = 900.0  # deg, SBW_HandWheel.HandWheelAngle range (dbc/chassis.dbc)
+STUCK_TURN = 15.0      # deg the robot turns the hand wheel on while its sensor is stuck (> stuck_motion)
+PINION_OFFSET = 30.0   # deg added to the pinion sensor (> sensor_plausibility, within the ±600° range)
 
 
 def _first_time(t: np.ndarray, mask: np.ndarray) -> float:
@@ -78,64 +88,131 @@ def test_sbw_pinion_timeout(bench) -> None:
                                                                     ("SBW_HandWheel", "AliveCounter")], ylabel="-")
 
 
-@pytest.mark.dut("SBW")
-@pytest.mark.req("SBW-FLT-01", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
-@pytest.mark.reference_only("SBW", reason="injects the sensor fault into the simulated SBW's sensors "
-                                          "(BENCH_SbwSensorFault) and reads its true angles (PLANT_SbwAngles)")
-def test_sbw_handwheel_out_of_range(bench) -> None:
-    lim = Limits(bench)
+def _sensor_fault(bench, lim: Limits, *, fault: str, offset: float, code: str, condition: str,
+                  condition_at, hold: float = 0.6, move_to: float | None = None) -> None:
+    """Inject one angle-sensor fault at 50 km/h with the hand wheel at HAND_WHEEL (and, with `move_to`, turn it
+    there 0.2 s into the fault), clear it after `hold` s, and judge the SBW's detection and reaction.
+    `condition_at(t_inject)` gives the bench time the fault's condition holds from (from the ground truth);
+    `code` the SbwFault expected; the reaction window starts 0.5 s after the last robot motion or 0.2 s after
+    the detection, whichever is later."""
     start(bench, SPEED_KMH, "YAW_RATE")
     robot_angle(bench, HAND_WHEEL)
     bench.run(1.5)
     t_inject = bench.now
-    bench.set("BENCH_SbwSensorFault", SensorFault="HANDWHEEL_OFFSET", SensorOffset=1000.0)
-    bench.run(0.6)
+    bench.set("BENCH_SbwSensorFault", SensorFault=fault, SensorOffset=offset)
+    t_settled = t_inject
+    if move_to is not None:
+        bench.run(0.2)
+        robot_angle(bench, move_to)
+        t_settled = bench.now + 0.5
+    bench.run(hold)
     t_clear = bench.now
     bench.set("BENCH_SbwSensorFault", SensorFault="NONE", SensorOffset=0.0)
     bench.run(0.5)
-    bench.note(f"hand-wheel angle sensor offset +1000° from {t_inject - bench.start:.3f} s to "
-               f"{t_clear - bench.start:.3f} s (BENCH_SbwSensorFault)")
+    bench.note(f"{fault} ({offset:+g}°) from {t_inject - bench.start:.3f} s to {t_clear - bench.start:.3f} s "
+               f"(BENCH_SbwSensorFault){'' if move_to is None else f'; robot to {move_to:g}° 0.2 s into it'}")
 
-    ts, sensor = signal(bench, "PLANT_SbwSensors", "HandWheelSensor", t_inject)
-    t_bench = _first_time(ts, np.abs(sensor) > CONTRACT_RANGE)
-    bench.expect_true("bench: hand-wheel sensor reading beyond the contract range ±900° (PLANT_SbwSensors)",
-                      math.isfinite(t_bench), measured=f"{np.max(np.abs(sensor)):.1f}°",
-                      expected="> 900°", detail=f"first frame at {t_bench:.3f} s")
-    tf, fault = signal(bench, "SBW_Pinion", "SbwFault", t_inject)
-    t_ecu = _first_time(tf, fault == SBW_FAULT["HANDWHEEL_RANGE"])
-    lim.at_most("reference ECU: SbwFault = HANDWHEEL_RANGE after the bench saw the reading", "fault_detection_max",
-                t_ecu - t_bench, detail=f"bench {t_bench:.3f} s, ECU {t_ecu:.3f} s")
-    during = (tf > t_ecu + 0.2) & (tf <= t_clear - bench.start)
-    bench.expect_true("reference ECU: HANDWHEEL_RANGE held while the sensor is out of range",
-                      bool(np.all(fault[during] == SBW_FAULT["HANDWHEEL_RANGE"])),
-                      measured=", ".join(f"{v:g}" for v in sorted(set(fault[during].tolist()))),
-                      expected=f"{SBW_FAULT['HANDWHEEL_RANGE']} only")
+    t_condition = condition_at(t_inject)
+    bench.expect_true(f"bench: {condition}", math.isfinite(t_condition),
+                      detail=f"from {t_condition:.3f} s" if math.isfinite(t_condition) else "never")
+    tf, values = signal(bench, "SBW_Pinion", "SbwFault", t_inject)
+    t_ecu = _first_time(tf, values == SBW_FAULT[code])
+    lim.at_most(f"SBW: SbwFault = {code} after the condition", "fault_detection_max", t_ecu - t_condition,
+                detail=f"condition {t_condition:.3f} s, SbwFault {t_ecu:.3f} s")
+    t_from = max(t_ecu + 0.2, t_settled - bench.start)
+    t_to = t_clear - bench.start
+    during = (tf > t_from) & (tf <= t_to)
+    bench.expect_true(f"SBW: {code} held while the sensor is faulty", bool(np.all(values[during] == SBW_FAULT[code])),
+                      measured=", ".join(f"{v:g}" for v in sorted(set(values[during].tolist()))),
+                      expected=f"{SBW_FAULT[code]} only")
 
-    # safe reaction: plausible hand-wheel angle on the bus, fixed ratio, steering continues
+    # safe reaction: the substitute on the bus is the truth, fixed ratio, steering continues
     th, hw_bus = signal(bench, "SBW_HandWheel", "HandWheelAngle", t_inject)
     tt, hw_true = signal(bench, "PLANT_SbwAngles", "HandWheelAngle", t_inject)
     _, pin_true = signal(bench, "PLANT_SbwAngles", "PinionAngle", t_inject)
-    window = (th > t_ecu + 0.2) & (th <= t_clear - bench.start)
-    substitute_error = float(np.max(np.abs(hw_bus[window] - np.interp(th[window], tt, hw_true))))
-    bench.expect("reaction: SBW_HandWheel.HandWheelAngle = column estimate of the true hand wheel (max error)",
-                 substitute_error, 0.0, abs_tol=0.1, unit="deg", detail="one LSB of HandWheelAngle (0.1°)")
+    window = (th > t_from) & (th <= t_to)
+    if code == "PINION_RANGE":
+        tp, pin_bus = signal(bench, "SBW_Pinion", "PinionAngle", t_inject)
+        in_fault = (tp > t_from) & (tp <= t_to)
+        substitute = float(np.max(np.abs(pin_bus[in_fault] - np.interp(tp[in_fault], tt, pin_true))))
+        what = "SBW_Pinion.PinionAngle = the actuator's rotor angle, the true pinion (max error)"
+    else:
+        substitute = float(np.max(np.abs(hw_bus[window] - np.interp(th[window], tt, hw_true))))
+        what = "SBW_HandWheel.HandWheelAngle = column estimate of the true hand wheel (max error)"
+    bench.expect(f"reaction: {what}", substitute, 0.0, abs_tol=0.1, unit="deg",
+                 detail="one LSB of the angle (0.1°)")
     tp, target = signal(bench, "SBW_Pinion", "PinionAngleTarget", t_inject)
-    in_fault = (tp > t_ecu + 0.2) & (tp <= t_clear - bench.start)
+    in_fault = (tp > t_from) & (tp <= t_to)
     ratio_error = float(np.max(np.abs(target[in_fault] - np.interp(tp[in_fault], th, hw_bus))))
-    bench.expect("reaction: yaw-rate feedback off, pinion target = hand wheel (max difference)", ratio_error, 0.0,
+    bench.expect("reaction: no feedback, pinion target = hand wheel (max difference)", ratio_error, 0.0,
                  abs_tol=0.1, unit="deg", detail="ratio 1 of the mechanical car; one LSB of the angles")
-    window_true = (tt > t_ecu + 0.2) & (tt <= t_clear - bench.start)
+    window_true = (tt > t_from) & (tt <= t_to)
     lim.at_most("reaction: steering continues, max |hand wheel − pinion| (truth)", "fault_tracking_error_max",
                 float(np.max(np.abs(hw_true[window_true] - pin_true[window_true]))))
     bench.expect("SbwFault after the sensor recovered", bench.value("SBW_Pinion", "SbwFault"), SBW_FAULT["OK"])
     expect_clean_bus(bench)
     lim.report()
-    plot_steering(bench, "hand-wheel sensor out of range")
-    bench.plot("hand-wheel angle sensor reading vs what the ECU sends",
-               [("PLANT_SbwSensors", "HandWheelSensor", "sensor reading (PLANT_SbwSensors)"),
-                ("SBW_HandWheel", "HandWheelAngle", "SBW_HandWheel.HandWheelAngle"),
-                ("PLANT_SbwAngles", "HandWheelAngle", "hand wheel, truth")], ylabel="angle [deg]")
-    bench.plot("SbwFault (1 = HANDWHEEL_RANGE)", [("SBW_Pinion", "SbwFault")], ylabel="value")
+    plot_steering(bench, fault)
+    sensor = "PinionSensor" if code == "PINION_RANGE" else "HandWheelSensor"
+    bus = ("SBW_Pinion", "PinionAngle") if code == "PINION_RANGE" else ("SBW_HandWheel", "HandWheelAngle")
+    truth = "PinionAngle" if code == "PINION_RANGE" else "HandWheelAngle"
+    bench.plot("angle sensor reading vs what the SBW sends",
+               [("PLANT_SbwSensors", sensor, f"sensor reading (PLANT_SbwSensors.{sensor})"),
+                (*bus, ".".join(bus)), ("PLANT_SbwAngles", truth, "truth")], ylabel="angle [deg]")
+    bench.plot(f"SbwFault ({SBW_FAULT[code]} = {code})", [("SBW_Pinion", "SbwFault")], ylabel="value")
+
+
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-FLT-01", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
+def test_sbw_handwheel_out_of_range(bench) -> None:
+    """Hand-wheel sensor offset +1000°: the condition holds from the first PLANT_SbwSensors frame beyond ±900°."""
+    lim = Limits(bench)
+
+    def beyond_range(t_inject: float) -> float:
+        ts, sensor = signal(bench, "PLANT_SbwSensors", "HandWheelSensor", t_inject)
+        return _first_time(ts, np.abs(sensor) > CONTRACT_RANGE)
+
+    _sensor_fault(bench, lim, fault="HANDWHEEL_OFFSET", offset=1000.0, code="HANDWHEEL_RANGE",
+                  condition="hand-wheel sensor reading beyond the contract range ±900° (PLANT_SbwSensors)",
+                  condition_at=beyond_range)
+
+
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-FLT-02", "COM-VAL-01")
+def test_sbw_handwheel_stuck(bench) -> None:
+    """Hand-wheel sensor stuck at 20°, then the robot turns the hand wheel to 35°: the condition holds from the
+    first PLANT_SbwAngles frame whose true hand wheel (what the column estimate measures) is more than
+    stuck_motion from the stuck reading."""
+    lim = Limits(bench)
+    stuck_motion = lim["stuck_motion"]
+
+    def moved(t_inject: float) -> float:
+        ts, sensor = signal(bench, "PLANT_SbwSensors", "HandWheelSensor", t_inject)
+        tt, hw_true = signal(bench, "PLANT_SbwAngles", "HandWheelAngle", t_inject)
+        stuck = float(sensor[0]) if len(sensor) else math.nan
+        return _first_time(tt, np.abs(hw_true - stuck) > stuck_motion)
+
+    _sensor_fault(bench, lim, fault="HANDWHEEL_STUCK", offset=0.0, code="HANDWHEEL_STUCK",
+                  condition=f"true hand wheel moved more than {stuck_motion:g}° from the stuck reading",
+                  condition_at=moved, hold=1.2, move_to=HAND_WHEEL + STUCK_TURN)
+
+
+@pytest.mark.dut("SBW")
+@pytest.mark.req("SBW-FLT-03", "COM-VAL-01")
+def test_sbw_pinion_sensor_implausible(bench) -> None:
+    """Pinion sensor offset +30°: the condition holds from the first PLANT_SbwSensors frame more than
+    sensor_plausibility from the true pinion (what the actuator's rotor angle measures)."""
+    lim = Limits(bench)
+    plausibility = lim["sensor_plausibility"]
+
+    def implausible(t_inject: float) -> float:
+        ts, sensor = signal(bench, "PLANT_SbwSensors", "PinionSensor", t_inject)
+        tt, pin_true = signal(bench, "PLANT_SbwAngles", "PinionAngle", t_inject)
+        return _first_time(ts, np.abs(sensor - np.interp(ts, tt, pin_true)) > plausibility)
+
+    _sensor_fault(bench, lim, fault="PINION_OFFSET", offset=PINION_OFFSET, code="PINION_RANGE",
+                  condition=f"pinion sensor more than {plausibility:g}° from the true pinion (PLANT_SbwSensors)",
+                  condition_at=implausible)
 
 
 @pytest.mark.dut("SBW")

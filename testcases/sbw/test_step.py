@@ -6,8 +6,9 @@ The robot steps the hand wheel to the angle that gives the plain 15:1 car a stea
 50 ms after the hand wheel does; the yaw rate's ISO 7401 figures (response time to 90 %, peak response time,
 overshoot, from the instant the hand wheel reaches 50 %) next to the linear 2-DOF model's prediction for a
 mechanical 15:1 steering driven by the same hand wheel; and the vehicle in the loop against the same model
-driven by the measured pinion angle, a check of the plant (`PLANT-DYN-02`): its step names PLANT, so it is the
-plant's verdict, never the SBW's (docs/contract/README.md). Limits: testcases/sbw/limits.toml [sbw].
+driven by the true pinion angle (PLANT_SbwAngles, with the simulated or an external SBW alike), a check of the
+plant (`PLANT-DYN-02`): its step names PLANT, so it is the plant's verdict, never the SBW's
+(docs/contract/README.md). Limits: testcases/sbw/limits.toml [sbw].
 """
 
 from __future__ import annotations
@@ -88,11 +89,13 @@ def test_sbw_step_50kmh(bench) -> None:
                  ["peak response time", ideal.peak_time, predicted.peak_time, measured.peak_time, "s"],
                  ["overshoot", ideal.overshoot * 100.0, predicted.overshoot * 100.0, measured.overshoot * 100.0, "%"]])
 
-    # the vehicle in the loop: its yaw rate vs the 2-DOF model driven by the measured pinion angle
-    t_pin, r_pin, _ = predicted_yaw(bench, u, ("SBW_Pinion", "PinionAngle"), RATIO)
+    # the vehicle in the loop: its yaw rate vs the 2-DOF model driven by the true pinion angle (the plant's own,
+    # PLANT_SbwAngles: an SBW's measured value is 0.1° and 10 ms coarse, PLANT-IO-SBW-01)
+    t_pin, r_pin, _ = predicted_yaw(bench, u, ("PLANT_SbwAngles", "PinionAngle"), RATIO)
     tm, yaw_truth = signal(bench, "PLANT_Motion", "YawRate")
     deviation = float(np.max(np.abs(np.interp(t_pin, tm, yaw_truth) - r_pin)))
-    lim.at_most("max |PLANT_Motion.YawRate − 2-DOF model fed with SBW_Pinion / 15|", "model_yaw_rate_abs_tol",
+    lim.at_most("max |PLANT_Motion.YawRate − 2-DOF model fed with PLANT_SbwAngles.PinionAngle / 15|",
+                "model_yaw_rate_abs_tol",
                 deviation, node="PLANT")   # the plant's check (PLANT-DYN-02), never the SBW's
 
     bench.check_cycle_times(["SBW_HandWheel", "SBW_Pinion", "IMU_Motion"])
@@ -100,6 +103,6 @@ def test_sbw_step_50kmh(bench) -> None:
     lim.report()
     plot_steering(bench, "step 50 km/h",
                   extra_yaw=[Series("2-DOF model, hand wheel / 15 (mechanical car)", t_pred.tolist(), r_pred.tolist()),
-                             Series("2-DOF model, SBW_Pinion / 15", t_pin.tolist(), r_pin.tolist())],
+                             Series("2-DOF model, true pinion / 15", t_pin.tolist(), r_pin.tolist())],
                   extra_ay=[Series("2-DOF model, hand wheel / 15", t_pred.tolist(), ay_pred.tolist())])
 
