@@ -510,12 +510,12 @@ class Case:
         return self._steps.record(name, True, f"held {seconds:g} s", f"for {seconds:g} s", "always", node=node)
 
     def expect_clean_bus(self) -> bool:
-        """No invalid frame (range, E2E, length) since the case (or its latest scenario) started. Records one
-        step when every frame was valid, else one step per sending node: the DUT's invalid frames (and frames
-        of no known message) fail the case; those of a message none of whose senders is among the case's DUTs
-        are judged as their senders' (the step's `node`, as `expect`'s). A frame of the bench's own stimulus
-        that reaches the monitor out of sequence on a late host is then the bench's problem, shown under its
-        node, and makes the case inconclusive if the DUT failed too, instead of failing the DUT for it.
+        """No invalid frame (range, E2E, length) since the case (or its latest scenario) started.
+        Records one step when every frame was valid, else one step per sending node: the DUT's invalid frames
+        (and frames of no known message) fail the case; those of a message none of whose senders is among the
+        case's DUTs are judged as their senders' (the step's `node`, as `expect`'s). A frame of the bench's own
+        stimulus that reaches the monitor out of sequence on a late host is then the bench's problem, shown under
+        its node, and makes the case inconclusive if the DUT failed too, instead of failing the DUT for it.
         Returns True when no frame was invalid."""
         name = "no invalid frame on the bus (range, E2E, length)"
         duts = set(self.result.duts)
