@@ -11,6 +11,7 @@ a fault (results.json, the monitor's count per case); the example and the plant 
 
 from __future__ import annotations
 
+import ast
 import json
 import random
 import re
@@ -84,3 +85,15 @@ def _check_report(out: Path, node: str, min_ran: int) -> Campaign:
     assert not invalid, f"invalid frames outside the fault cases: {invalid}"
     assert not [c["nodeid"] for c in results if c.get("inconclusive")], "inconclusive cases: the bench was late"
     return Campaign(ran, skipped, results)
+
+
+def third_party_imports(example: Path) -> set[str]:
+    """The top-level packages an example imports beyond the standard library: what a supplier writes from the
+    documents needs python-can, cantools and autosar-e2e (`e2e`), nothing of bench or plant."""
+    imported = set()
+    for node in ast.walk(ast.parse(example.read_text())):
+        if isinstance(node, ast.Import):
+            imported |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            imported.add(node.module.split(".")[0])
+    return imported - set(sys.stdlib_module_names)

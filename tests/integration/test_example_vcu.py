@@ -22,7 +22,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from tests.external_ecu import judge_example
+from tests.external_ecu import judge_example, third_party_imports
 from tests.repo import E2E_ATTRIBUTE_DEFINITIONS, ROOT
 
 EXAMPLE = ROOT / "examples" / "vcu_ecu.py"
@@ -122,15 +122,7 @@ def test_example_rigid_fit_is_the_least_squares_fit(wheels: list[tuple[float, fl
 def test_example_needs_nothing_of_the_bench() -> None:
     """The example is what a supplier writes from the documents: python-can, cantools, autosar-e2e (`e2e`) and the
     standard library, nothing of bench or plant."""
-    import ast
-
-    imported = set()
-    for node in ast.walk(ast.parse(EXAMPLE.read_text())):
-        if isinstance(node, ast.Import):
-            imported |= {alias.name.split(".")[0] for alias in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            imported.add(node.module.split(".")[0])
-    assert imported - set(sys.stdlib_module_names) == {"can", "cantools", "e2e"}, imported
+    assert third_party_imports(EXAMPLE) == {"can", "cantools", "e2e"}
 
 
 def _chassis():
