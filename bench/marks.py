@@ -5,6 +5,8 @@ and whether it only makes sense while a node is the bench's own simulation.
     @pytest.mark.req("ECU-FLT-03", ...)                the requirement id(s) it checks
     @pytest.mark.reference_only("ECU", reason="...")   skipped while ECU is external (a real ECU)
     @pytest.mark.campaign(name="smoke")                the campaign it belongs to (-m "campaign(name='smoke')")
+    @pytest.mark.calibration("ECU", v_l0="km/h")       bench.toml [calibration.ECU] values it needs while ECU is
+                                                       external (checked before the first case)
 
 Reading and checking them is plain code on pytest's marks, so the plugin only wires hooks and the
 checks can be tested without running pytest.
@@ -12,18 +14,20 @@ checks can be tested without running pytest.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
 import pytest
 
-DUT, REQ, REFERENCE_ONLY, CAMPAIGN = "dut", "req", "reference_only", "campaign"
+DUT, REQ, REFERENCE_ONLY, CAMPAIGN, CALIBRATION = "dut", "req", "reference_only", "campaign", "calibration"
 MARKER_HELP = {
     DUT: "dut(NODE, ...): the node(s) of the databases this case judges",
     REQ: "req(ID, ...): the requirement id(s) of the contract documents this case checks",
     REFERENCE_ONLY: "reference_only(NODE, ..., reason=TEXT): the case only makes sense while NODE is the "
                     "bench's own simulation; skipped with TEXT when NODE is external",
     CAMPAIGN: "campaign(name=NAME): the campaign the case belongs to (select one with -m \"campaign(name='NAME')\")",
+    CALIBRATION: "calibration(NODE, NAME=UNIT, ...): the values of bench.toml's [calibration.NODE] the case needs "
+                 "while NODE is external, checked (present, in UNIT) before the first case runs",
 }
 
 
@@ -40,11 +44,12 @@ class CaseMarks:
     duts: list[str] = field(default_factory=list)
     reqs: list[str] = field(default_factory=list)
     reference_only: list[ReferenceOnly] = field(default_factory=list)
+    calibration: dict[str, dict[str, str]] = field(default_factory=dict)   # node -> name -> unit
     problems: list[str] = field(default_factory=list)
 
     @property
     def any(self) -> bool:
-        return bool(self.duts or self.reqs or self.reference_only or self.problems)
+        return bool(self.duts or self.reqs or self.reference_only or self.calibration or self.problems)
 
 
 def _strings(mark: pytest.Mark, what: str, problems: list[str]) -> list[str]:
@@ -63,6 +68,9 @@ def read_marks(item: pytest.Item) -> CaseMarks:
     """The case's markers, outermost first, each value once; malformed markers become problems."""
     marks = CaseMarks()
     for mark in reversed(list(item.iter_markers())):      # iter_markers: closest (function) first
+        if mark.name == CALIBRATION:
+            _read_calibration(mark, marks)
+            continue
         if mark.name not in (DUT, REQ, REFERENCE_ONLY):
             continue
         extra = set(mark.kwargs) - ({"reason"} if mark.name == REFERENCE_ONLY else set())
@@ -83,12 +91,44 @@ def read_marks(item: pytest.Item) -> CaseMarks:
     return marks
 
 
+def _read_calibration(mark: pytest.Mark, marks: CaseMarks) -> None:
+    nodes = _strings(mark, "node name", marks.problems)
+    if len(nodes) != 1 or not mark.kwargs:
+        marks.problems.append(f"@pytest.mark.calibration: give one node and its names with units, e.g. "
+                              f"calibration(\"ABS\", v_l0=\"km/h\"), got {mark.args!r} {mark.kwargs!r}")
+        return
+    for name, unit in mark.kwargs.items():
+        if not isinstance(unit, str) or not unit:
+            marks.problems.append(f"@pytest.mark.calibration({nodes[0]!r}): {name}={unit!r} is not a unit")
+        else:
+            marks.calibration.setdefault(nodes[0], {})[name] = unit
+
+
+def missing_calibration(marks: CaseMarks, external: Collection[str],
+                        calibration: Mapping[str, Mapping[str, tuple[float, str]]]) -> list[str]:
+    """What bench.toml's [calibration.NODE] lacks for this case while NODE is external: "[calibration.NODE] NAME:
+    missing" or "...: unit 'X', the case needs 'Y'" (the bench's own simulated ECU needs none)."""
+    found = []
+    for node, names in marks.calibration.items():
+        if node not in external:
+            continue
+        table = calibration.get(node, {})
+        for name, unit in names.items():
+            if name not in table:
+                found.append(f"[calibration.{node}] {name}: missing (give {name} = {{ value = <number>, "
+                             f"unit = \"{unit}\" }}, the external {node}'s value)")
+            elif table[name][1] != unit:
+                found.append(f"[calibration.{node}] {name}: unit {table[name][1]!r}, the case needs {unit!r}")
+    return found
+
+
 def check_marks(marks: CaseMarks, nodes: Collection[str], requirements: Collection[str],
                 documents: str) -> list[str]:
     """What is wrong with the case's markers against the databases' nodes and the contract's ids."""
     problems = list(marks.problems)
     known = ", ".join(nodes)
-    used = [(DUT, n) for n in marks.duts] + [(REFERENCE_ONLY, n) for r in marks.reference_only for n in r.nodes]
+    used = [(DUT, n) for n in marks.duts] + [(REFERENCE_ONLY, n) for r in marks.reference_only for n in r.nodes] \
+        + [(CALIBRATION, n) for n in marks.calibration]
     for name, node in used:
         if node not in nodes:
             problems.append(f"@pytest.mark.{name}: {node!r} is not a node of the databases (nodes: {known})")

@@ -33,7 +33,15 @@ from bench.codec import load_codebook
 from bench.config import ProjectConfig, RunSettings, load_config
 from bench.errors import BenchError, Inconclusive
 from bench.faults import parse_fault
-from bench.marks import MARKER_HELP, CaseMarks, check_marks, read_marks, skip_reason, split_names
+from bench.marks import (
+    MARKER_HELP,
+    CaseMarks,
+    check_marks,
+    missing_calibration,
+    read_marks,
+    skip_reason,
+    split_names,
+)
 from bench.options import add_pytest_options
 from bench.report.junit import step_summary
 from bench.results import SIMULATION_FAILED, CaseRef, RequirementInfo, RunResult, Step, Table
@@ -190,17 +198,33 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
             if reason:
                 item.add_marker(pytest.mark.skip(reason=reason))
     wanted = split_names(config.getoption("--bench-dut"))
-    if not wanted:
+    if wanted:
+        _, nodes = _facts(config)
+        unknown = [n for n in wanted if n not in nodes]
+        if unknown:
+            raise pytest.UsageError(f"--bench-dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(nodes)})")
+        keep = [(item, marks) for item, marks in marked if set(marks.duts) & set(wanted)]
+        if len(keep) != len(items):
+            kept = {id(i) for i, _ in keep}
+            config.hook.pytest_deselected(items=[i for i in items if id(i) not in kept])
+            items[:] = [i for i, _ in keep]
+            marked = keep
+    _check_calibration(config, marked)
+
+
+def _check_calibration(config: pytest.Config, marked: list[tuple[pytest.Item, CaseMarks]]) -> None:
+    """The calibration the selected cases need of their external nodes is in bench.toml, before the first case
+    (one line naming the file and the key; a case never learns it too late)."""
+    needed = [(item, marks) for item, marks in marked if marks.calibration and not item.get_closest_marker("skip")]
+    if not needed:
         return
-    _, nodes = _facts(config)
-    unknown = [n for n in wanted if n not in nodes]
-    if unknown:
-        raise pytest.UsageError(f"--bench-dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(nodes)})")
-    keep = [item for item, marks in marked if set(marks.duts) & set(wanted)]
-    if len(keep) != len(items):
-        kept = {id(i) for i in keep}
-        config.hook.pytest_deselected(items=[i for i in items if id(i) not in kept])
-        items[:] = keep
+    project, _ = _facts(config)
+    external = _external(config, project)
+    problems: dict[str, None] = {}
+    for _, marks in needed:
+        problems.update(dict.fromkeys(missing_calibration(marks, external, project.calibration)))
+    if problems:
+        raise pytest.UsageError("; ".join(f"{project.path}: {p}" for p in problems))
 
 
 def _external(config: pytest.Config, project: ProjectConfig) -> set[str]:

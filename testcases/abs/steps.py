@@ -20,6 +20,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+import pytest
 
 from bench.case import Case
 from bench.results import Series
@@ -45,10 +46,16 @@ def source(name: str) -> str:
     return f"limits.toml abs.{name}: {LIMITS[name][2]}"
 
 
+#: The marker of a case that calls `thresholds`: bench.toml must give an external ABS's V_l0, V_l1, V_l2 (checked by
+#: the bench before the first case).
+NEEDS_THRESHOLDS = pytest.mark.calibration("ABS", v_l0="km/h", v_l1="km/h", v_l2="km/h")
+
+
 def thresholds(bench: Case) -> tuple[float, float, float, str]:
     """(V_l0, V_l1, V_l2 in km/h, where they come from) of the ABS under test, with which the cases evaluate eq. 13
     (docs/contract/abs.md ABS-TURN-01): an external ABS's own calibration, bench.toml [calibration.ABS] v_l0, v_l1,
-    v_l2 (missing: the case is inconclusive, naming the key); the bench's own ABS's, limits.toml ecu_v_l*."""
+    v_l2 (the case carries NEEDS_THRESHOLDS, so the bench has checked them before the first case); the bench's own
+    ABS's, limits.toml ecu_v_l*."""
     if "ABS" in bench.external:
         l0, l1, l2 = (bench.calibration("ABS", name, "km/h") for name in ("v_l0", "v_l1", "v_l2"))
         return l0, l1, l2, "the external ABS's calibration (bench.toml [calibration.ABS])"

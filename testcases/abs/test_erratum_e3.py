@@ -26,6 +26,7 @@ HAND_WHEEL = 810.0   # deg: delta 45 deg
 SETTLE, WINDOW = 3.0, 3.0
 
 
+@steps.NEEDS_THRESHOLDS
 @pytest.mark.dut("ABS")
 @pytest.mark.req("ABS-TURN-01", "ABS-TURN-03", "ABS-OUT-01")
 def test_abs_erratum_e3(bench) -> None:

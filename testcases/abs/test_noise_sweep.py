@@ -33,6 +33,7 @@ def _rising(turns: np.ndarray) -> int:
     return int(np.count_nonzero((t[1:] != 0) & (t[:-1] == 0)) + (1 if t.size and t[0] != 0 else 0))
 
 
+@steps.NEEDS_THRESHOLDS
 @pytest.mark.dut("ABS")
 @pytest.mark.req("ABS-TURN-01", "ABS-TURN-05", "ABS-OUT-01")
 def test_abs_noise_sweep(bench) -> None:

@@ -73,3 +73,28 @@ def test_every_requirement_id_is_in_the_contract(collected: _Collected, project:
 def test_every_bench_case_checks_a_requirement(collected: _Collected) -> None:
     missing = [nodeid for nodeid, bench, _, reqs in collected.cases if bench and not reqs]
     assert not missing, f"{len(missing)} case(s) without @pytest.mark.req(...):\n" + "\n".join(missing)
+
+
+def test_calibration_marker_is_checked_against_bench_toml_for_external_nodes_only() -> None:
+    """@pytest.mark.calibration names what bench.toml's [calibration.NODE] must give while NODE is external: a
+    missing name or another unit is one line naming the key; the bench's own simulated ECU needs none; a malformed
+    marker is a marker problem."""
+    from types import SimpleNamespace
+
+    from bench.marks import missing_calibration
+
+    def marks_of(*marks: pytest.Mark):   # read_marks reads an item's iter_markers only
+        return read_marks(SimpleNamespace(iter_markers=lambda: list(marks)))    # type: ignore[arg-type]
+
+    marks = marks_of(pytest.mark.calibration("ABS", v_l0="km/h", v_l1="km/h").mark)
+    assert marks.calibration == {"ABS": {"v_l0": "km/h", "v_l1": "km/h"}} and not marks.problems
+    table = {"ABS": {"v_l0": (0.6, "km/h"), "v_l1": (2.5, "m/s")}}
+    assert missing_calibration(marks, external={"VCU"}, calibration={}) == []          # simulated ABS: none needed
+    assert missing_calibration(marks, external={"ABS"}, calibration=table) == [
+        "[calibration.ABS] v_l1: unit 'm/s', the case needs 'km/h'"]
+    assert missing_calibration(marks, external={"ABS"}, calibration={}) == [
+        '[calibration.ABS] v_l0: missing (give v_l0 = { value = <number>, unit = "km/h" }, the external ABS\'s value)',
+        '[calibration.ABS] v_l1: missing (give v_l1 = { value = <number>, unit = "km/h" }, the external ABS\'s value)']
+    for bad in (pytest.mark.calibration("ABS"), pytest.mark.calibration("ABS", "VCU", v_l0="km/h"),
+                pytest.mark.calibration("ABS", v_l0="")):
+        assert marks_of(bad.mark).problems, bad
