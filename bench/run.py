@@ -19,7 +19,7 @@ from bench.config import ProjectConfig, RunSettings
 from bench.errors import BenchError, Inconclusive
 from bench.faults import Fault
 from bench.findings import FindingCollector
-from bench.logproc import LogProcess
+from bench.log.logproc import LogProcess
 from bench.monitor import DuplicateSender, Monitor
 from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
 from bench.session import BenchSession

@@ -13,11 +13,11 @@ import importlib.util
 import json
 import logging
 from dataclasses import asdict, dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 from bench import options
+from bench import version as bench_version
 from bench.config import load_config
 from bench.errors import ConfigError
 
@@ -49,13 +49,6 @@ class ShardRecord:
     def load(cls, path: Path) -> ShardRecord:
         data = json.loads(path.read_text())
         return cls(**{k: data[k] for k in cls.__dataclass_fields__ if k in data})
-
-
-def bench_version() -> str:
-    try:
-        return metadata.version("chassis-hil-bench")
-    except metadata.PackageNotFoundError:
-        return "unknown"
 
 
 def sha256(path: Path) -> str:

@@ -1,9 +1,10 @@
 """The run log's writing cost per frame, and the choices behind it (issue 18): writers, encodings, compression.
 
 The frames of one short run (EV4WIS, PIVOT, S s of bench time, through bench.run.BenchRun) are read back from
-its MCAP and written again, in this process, the way the log process writes them (bench/logproc.py: the raw
+its MCAP and written again, in this process, the way the log process writes them (bench/log/logproc.py: the raw
 frame's record, a decode, the decoded record), CPU time per frame, median of 3:
-  - the recorder as it is (bench/recorder.py: one pack per message record and per message index);
+  - the recorder as it is (bench/log/recorder.py with bench/log/mcapfast.py: one pack per message record and
+    per message index);
   - the same with mcap's own `Writer.add_message` (the recorder's fallback; what it did before);
   - `Recorder.frames` per batch of 2000, what the log process does since issue 18 (the same records);
 and the parts, on the same frames: decode; the decoded values as JSON by the json module, by the recorder's
@@ -46,10 +47,12 @@ def record_frames(seconds: float, out: Path) -> Path:
 def measure(result: common.Result, args: argparse.Namespace) -> None:
     import zstandard
 
-    import bench.recorder
+    import bench.log.format
+    import bench.log.mcapfast
+    import bench.log.recorder
     from bench.codec import load_codebook, load_dbc
     from bench.config import load_config
-    from bench.logread import read_frames
+    from bench.log.logread import read_frames
 
     seconds = 2.0 if args.quick else 10.0
     source = record_frames(seconds, args.work / "source")
@@ -61,9 +64,9 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     loaded = [load_dbc(p) for p in databases]
 
     def write_log() -> int:
-        """What bench/logproc.py's loop does per frame."""
+        """What bench/log/logproc.py's loop does per frame."""
         path = args.work / "written.mcap"
-        recorder = bench.recorder.Recorder(path, loaded, attachments=databases)
+        recorder = bench.log.recorder.Recorder(path, loaded, attachments=databases)
         for t, frame_id, data, direction, valid, error in frames:
             recorder.frame(t, frame_id, data, channel="bench", direction=direction, valid=valid, error=error)
             codec = by_id.get(frame_id) if valid else None
@@ -73,20 +76,20 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
         return path.stat().st_size
 
     fast, size = _cpu_per_frame(write_log, n)
-    fast_adder = bench.recorder._fast_adder
-    bench.recorder._fast_adder = lambda writer: None   # the recorder's fallback: mcap's Writer.add_message
+    supported = bench.log.mcapfast.supported
+    bench.log.mcapfast.supported = lambda: False   # the recorder on mcap's public Writer.add_message alone
     try:
         slow, _ = _cpu_per_frame(write_log, n)
     finally:
-        bench.recorder._fast_adder = fast_adder
+        bench.log.mcapfast.supported = supported
     base = "the recorder through mcap's Writer.add_message"
     result.add("log writing, the recorder per frame (frame + decode + decoded)", fast, "µs CPU per frame", slow, base,
                note=f"{n} frames of {seconds:g} s of bench time; {size / n:.0f} bytes per frame in the file")
 
     def write_batched() -> int:
-        """What bench/logproc.py does since issue 18: Recorder.frames per batch (the same records)."""
+        """What bench/log/logproc.py does since issue 18: Recorder.frames per batch (the same records)."""
         path = args.work / "batched.mcap"
-        recorder = bench.recorder.Recorder(path, loaded, attachments=databases)
+        recorder = bench.log.recorder.Recorder(path, loaded, attachments=databases)
         for start in range(0, n, 2000):
             recorder.frames(frames[start:start + 2000], channel="bench", codecs=by_id)
         recorder.close()
@@ -105,7 +108,7 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
                "µs CPU per frame")
     encoder = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
     by_json, texts = _cpu_per_frame(lambda: [encoder.encode(v).encode() for v in values], n)
-    entries = {c.name: bench.recorder._Decoded(c.message) for c in codecs}
+    entries = {c.name: bench.log.recorder._Decoded(c.message) for c in codecs}
     names = [c.name for c in codecs]
     by_template, texts2 = _cpu_per_frame(
         lambda: [(entries[m].template % tuple(v.values())).encode() for m, v in zip(names, values)], n)
@@ -125,10 +128,10 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     frame_texts = []
     for t, frame_id, data, direction, valid, error in frames:
         ns = int(t * 1e9 + 0.5)
-        padded = data + bench.recorder._PAD[len(data)] if len(data) < 8 else data
-        frame_texts.append((bench.recorder._FRAME_JSON % (
+        padded = data + bench.log.format.PAD[len(data)] if len(data) < 8 else data
+        frame_texts.append((bench.log.format.FRAME_JSON % (
             ns // 1_000_000_000, ns % 1_000_000_000, '"bench"', frame_id, "false", "false", "false", len(padded),
-            ",".join(bench.recorder._DECIMAL[b] for b in padded), '"bench"', direction,
+            ",".join(bench.log.format.DECIMAL[b] for b in padded), '"bench"', direction,
             "true" if valid else "false", json.dumps(error), "")).encode())
     records += b"".join(frame_texts)
     chunk = records[: 1 << 20]   # one chunk of the recorder's size (CHUNK_BYTES)

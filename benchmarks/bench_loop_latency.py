@@ -71,7 +71,7 @@ def pooled_latencies(mcap: Path) -> tuple[dict[str, list[float]], dict[str, list
     """Per wheel pair: the latencies (s) from the logged decoded frames, by bench.timing's definition (its
     LatencyFollower fed in time order as bench.timing.follow_latencies does), and each change's step (deg):
     the latest command minus the status at rest before the change, when the status followed."""
-    from bench.logread import read_decoded
+    from bench.log.logread import read_decoded
     from bench.timing import LatencyFollower
 
     pairs = wheel_pairs()

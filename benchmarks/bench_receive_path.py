@@ -3,7 +3,7 @@
 N valid contract frames (every message of chassis.dbc and bench.dbc at its DBC cycle time, signals moving
 as sinusoids over their DBC ranges, AliveCounter and Checksum right: built by `bench.restbus.Restbus.build`)
 go through `bench.monitor.Monitor` (length, E2E, counter sequence, decode, range; history kept) with a sink
-that logs the raw frame and its decoded values to `bench.recorder.Recorder`, on this one thread; the time
+that logs the raw frame and its decoded values to `bench.log.recorder.Recorder`, on this one thread; the time
 includes closing the log (every chunk compressed and on disk).
 
 Baseline in the same run, same frames: plain cantools `Database.decode_message` plus python-can's
@@ -82,8 +82,8 @@ def make_frames(n: int) -> tuple[list[tuple[float, int, bytes]], object, object]
 def bench_path(frames, project, codebook, path: Path) -> tuple[float, float, int]:
     """Monitor + Recorder (frame + decoded) on this thread; (wall s, CPU s, invalid frames)."""
     from bench.codec import load_dbc
+    from bench.log.recorder import Recorder
     from bench.monitor import Monitor
-    from bench.recorder import Recorder
 
     recorder = Recorder(path, [load_dbc(p) for p in project.databases], attachments=list(project.databases))
 
@@ -116,7 +116,7 @@ def bench_monitor_only(frames, codebook) -> tuple[float, float]:
 
 def bench_recorder_only(frames, project, codebook, path: Path) -> tuple[float, float]:
     from bench.codec import load_dbc
-    from bench.recorder import Recorder
+    from bench.log.recorder import Recorder
 
     by_id = codebook.by_id
     decoded = [(t, fid, data, by_id[fid].name, by_id[fid].decode(data)) for t, fid, data in frames]

@@ -237,7 +237,7 @@ class ProcessCpu:
 
     @staticmethod
     def _role(cmd: str, pid: int, root: int) -> str:
-        if "bench.logproc" in cmd:
+        if "bench.log.logproc" in cmd:
             return "log process(es)"
         if pid == root:
             return "bench run (pytest, bus, plant, monitors)"

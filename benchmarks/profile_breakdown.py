@@ -27,12 +27,12 @@ RULES: list[tuple[str, ...] | tuple[str, str, str | None]] = [
     ("idle: waiting for the tick's wall-clock deadline (recv timeout, sleep)", "can/", r"recv", "WallClock.wait_until"),
     ("idle: waiting for the tick's wall-clock deadline (recv timeout, sleep)", "bench/clock.py",
      r"WallClock\.wait_until"),
-    ("log: mcap writer (records, chunks, indexes)", "mcap/", None, "bench/recorder.py"),
-    ("log: zstd compression", "zstandard", None, "bench/recorder.py"),
-    ("log: JSON of decoded values (json module)", "json/", None, "bench/recorder.py"),
-    ("log: hand-over to the log process (pickle, pipe)", "bench/logproc.py", r"LogProcess\."),
-    ("log: recorder's own code (frame JSON, checks)", "bench/recorder.py", None),
-    ("log: log process's own loop (decode again, dispatch)", "bench/logproc.py", r"_serve"),
+    ("log: mcap writer (records, chunks, indexes)", "mcap/", None, "bench/log/recorder.py"),
+    ("log: zstd compression", "zstandard", None, "bench/log/recorder.py"),
+    ("log: JSON of decoded values (json module)", "json/", None, "bench/log/recorder.py"),
+    ("log: hand-over to the log process (pickle, pipe)", "bench/log/logproc.py", r"LogProcess\."),
+    ("log: recorder's own code (frame JSON, checks)", "bench/log/recorder.py", None),
+    ("log: log process's own loop (decode again, dispatch)", "bench/log/logproc.py", r"_serve"),
     ("report: HTML, plots (SVG, jinja2)", "bench/report/", None),
     ("report: HTML, plots (SVG, jinja2)", "bench/results_io.py", None),
     ("timing collector (report's timing section)", "bench/timing.py", None),
@@ -80,7 +80,7 @@ def process_of(frames: list[str]) -> str:
     if not procs:
         return "main"
     inner = procs[-1]
-    if "bench.logproc" in inner:
+    if "bench.log.logproc" in inner:
         return "log process" + (" (of an xdist worker)" if len(procs) > 2 else "")
     if len(procs) > 1:
         return "child: " + re.sub(r'^process \d+:"?', "", inner)[:50]

@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import common  # noqa: E402
 
-from bench.logread import read_frames  # noqa: E402
+from bench.log.logread import read_frames  # noqa: E402
 
 
 def rss_kib(pid: int) -> int | None:

@@ -13,9 +13,9 @@ import can
 from rich.console import Console
 from rich.table import Table
 
-from bench.canio import frame_to_message
 from bench.errors import LogError
-from bench.logread import LoggedFrame, LogSummary, read_frames, run_start, summarise
+from bench.log.canio import frame_to_message
+from bench.log.logread import LoggedFrame, LogSummary, read_frames, run_start, summarise
 
 #: --format -> (python-can writer, file suffix). Direction (Rx/Tx) is carried by BLF (the DIR flag),
 #: ASC ("Rx"/"Tx") and candump (python-can's trailing R/T); CSV has no column for it.

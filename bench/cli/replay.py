@@ -25,7 +25,7 @@ from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 from bench.cli.common import add_bus_options, bus_options_for, reject_virtual
 from bench.config import load_config
 from bench.errors import ConfigError, LogError
-from bench.logread import MAGIC, read_frames
+from bench.log.logread import MAGIC, read_frames
 
 DIRECTIONS = ("tx", "rx", "all")
 

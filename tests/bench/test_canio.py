@@ -1,4 +1,4 @@
-"""The ".mcap" python-can log format (bench.canio): python-can's logger and player speak the bench's run log.
+"""The ".mcap" python-can log format (bench.log.canio): python-can's logger and player speak the bench's run log.
 
 Issue 7, acceptance 3 (first half): `python -m can.logger -f x.mcap` records from a bus and `bench log info
 x.mcap` reads it. udp_multicast traffic stays on this host: every bus here has hop limit 0 (the logger's
@@ -21,10 +21,10 @@ import can
 import pytest
 
 from bench.bus import open_bus
-from bench.canio import MCAPReader, MCAPWriter
 from bench.errors import LogError
-from bench.logread import read_decoded, read_frames
-from bench.recorder import Recorder
+from bench.log.canio import MCAPReader, MCAPWriter
+from bench.log.logread import read_decoded, read_frames
+from bench.log.recorder import Recorder
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import can
 
-from bench.canio import MCAPReader, MCAPWriter
-from bench.logread import read_frames
+from bench.log.canio import MCAPReader, MCAPWriter
+from bench.log.logread import read_frames
 
 
 def messages(count: int) -> list[can.Message]:

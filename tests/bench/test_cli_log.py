@@ -10,7 +10,7 @@ import pytest
 
 from bench.cli import log as log_cli
 from bench.errors import LogError
-from bench.recorder import Recorder
+from bench.log.recorder import Recorder
 
 DBC = """VERSION ""
 NS_ :

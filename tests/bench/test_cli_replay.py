@@ -27,7 +27,7 @@ def test_empty_log_is_a_one_line_error(tmp_path: Path) -> None:
 
 
 def test_complete_log_without_frames_is_an_error(tmp_path: Path) -> None:
-    from bench.recorder import Recorder
+    from bench.log.recorder import Recorder
 
     log = tmp_path / "no-frames.mcap"
     with Recorder(log, []):

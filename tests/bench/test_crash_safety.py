@@ -1,5 +1,5 @@
 """Crash safety: a bench run killed with SIGKILL keeps at least 95 % of the frames it put on the bus
-before the kill in its MCAP log. The log is written by a child process (bench/logproc.py) that gets the
+before the kill in its MCAP log. The log is written by a child process (bench/log/logproc.py) that gets the
 frames every 0.2 s and finishes the file when the run dies; if it dies too, the file still reads back
 up to its last chunk (flushed every 0.5 s: tests/bench/test_recorder.py kills a recorder itself)."""
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from bench.bus import open_bus
-from bench.logread import read_frames, summarise
+from bench.log.logread import read_frames, summarise
 from tests.repo import ROOT
 
 RUN_SECONDS = 8.0

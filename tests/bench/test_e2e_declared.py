@@ -183,9 +183,9 @@ def test_an_override_changes_what_is_sent_and_checked() -> None:
 def test_the_log_process_and_the_mcap_writer_load_with_the_override(tmp_path: Path) -> None:
     """The run's log child and python-can's MCAP writer load the databases as the run does: an override that no
     profile can use stops them with its reason, a good one is what their monitor checks."""
-    from bench.canio import MCAPWriter
     from bench.errors import BenchError
-    from bench.logproc import LogProcess
+    from bench.log.canio import MCAPWriter
+    from bench.log.logproc import LogProcess
 
     bad = {"P11_Status": {"Offset": 44}}
     with pytest.raises(BenchError, match="Offset 44 is not a multiple of 8"):

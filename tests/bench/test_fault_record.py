@@ -24,7 +24,7 @@ from bench.codec import Codebook
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError
 from bench.faults import CASE, FaultPlan, parse_fault, validate
-from bench.logread import read_decoded, summarise
+from bench.log.logread import read_decoded, summarise
 from bench.results import RunResult
 from bench.run import BenchRun
 from tests import repo

@@ -25,9 +25,9 @@ from bench.cli import main
 from bench.codec import Codebook, DecodeError, load_codebook
 from bench.dbccheck import check_text
 from bench.errors import BenchError
-from bench.logread import MAGIC, read_decoded, read_frames, read_steps, summarise
+from bench.log.logread import MAGIC, read_decoded, read_frames, read_steps, summarise
+from bench.log.recorder import Recorder
 from bench.monitor import Monitor
-from bench.recorder import Recorder
 from tests.reference import COUNTER_VALUES, protected
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
@@ -213,7 +213,7 @@ def _write(data: bytes) -> Path:
 
 
 def _read_all(data: bytes) -> None:
-    """Every reader of `bench.logread` on these bytes: a clean (possibly empty) iteration or a BenchError."""
+    """Every reader of `bench.log.logread` on these bytes: a clean (possibly empty) iteration or a BenchError."""
     path = _write(data)
     for reader in (read_frames, read_decoded, read_steps):
         try:

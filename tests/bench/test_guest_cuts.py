@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from bench.clock import VirtualClock, WallClock
-from bench.logread import read_frames, summarise
-from bench.recorder import Recorder
+from bench.log.logread import read_frames, summarise
+from bench.log.recorder import Recorder
 
 
 def test_a_recorder_without_interval_reads_no_clock_and_writes_chunks_only_when_flushed(

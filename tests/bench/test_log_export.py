@@ -18,8 +18,8 @@ import can
 import pytest
 
 from bench.cli import main
-from bench.logread import LoggedFrame, read_frames
-from bench.recorder import Recorder
+from bench.log.logread import LoggedFrame, read_frames
+from bench.log.recorder import Recorder
 from tests.repo import ROOT
 
 CASES = ROOT / "tests" / "fixtures" / "cases"

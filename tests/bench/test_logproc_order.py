@@ -11,10 +11,10 @@ from mcap.reader import make_reader
 from mcap.records import Metadata
 from mcap.stream_reader import StreamReader
 
-import bench.logproc
+import bench.log.logproc
 from bench.codec import load_codebook, load_dbc
-from bench.logproc import LogProcess
-from bench.recorder import Recorder
+from bench.log.logproc import LogProcess
+from bench.log.recorder import Recorder
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 ORIGIN_NS = 1_764_000_000_000_000_000
@@ -80,4 +80,4 @@ def test_the_log_process_keeps_the_order_of_steps_and_frames(tmp_path: Path) -> 
     with path.open("rb") as file:
         names = [r.name for r in StreamReader(file).records if isinstance(r, Metadata)]
     assert "bench.fault" in names and "bench.clock" in names
-    assert bench.logproc.BATCH_FRAMES > 300   # the hand-overs above are the test's, not the size limit's
+    assert bench.log.logproc.BATCH_FRAMES > 300   # the hand-overs above are the test's, not the size limit's

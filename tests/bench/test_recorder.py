@@ -25,8 +25,9 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from bench.errors import BenchError, LogError
-from bench.logread import LoggedFrame, read_decoded, read_frames, read_steps, summarise
-from bench.recorder import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC, Recorder
+from bench.log.format import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
+from bench.log.logread import LoggedFrame, read_decoded, read_frames, read_steps, summarise
+from bench.log.recorder import Recorder
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 FALLBACK_DBC = """VERSION ""
@@ -271,7 +272,7 @@ KILLED_WRITER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
     import cantools
-    from bench.recorder import Recorder
+    from bench.log.recorder import Recorder
     databases = [cantools.database.load_string(sys.stdin.read(), "dbc")]
     recorder = Recorder(Path(sys.argv[1]), databases, flush_interval=0.2, chunk_size=1 << 30)  # time flushes only
     n = 0
@@ -327,7 +328,7 @@ def test_close_is_idempotent_and_atexit_safe(tmp_path: Path) -> None:
     code = textwrap.dedent("""
         import sys, cantools
         from pathlib import Path
-        from bench.recorder import Recorder
+        from bench.log.recorder import Recorder
         recorder = Recorder(Path(sys.argv[1]), [cantools.database.load_string(sys.stdin.read(), "dbc")])
         recorder.frame(0.5, 0x100, b"\\x01\\x02", channel="can0", direction="rx")
         sys.exit(0)
@@ -369,26 +370,63 @@ def test_stream_is_valid_for_an_in_memory_reader(log: tuple[Path, Written]) -> N
 
 
 def test_fast_message_path_writes_what_mcaps_writer_writes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The recorder's one-pack message records and message indexes (bench.recorder._fast_adder) are mcap's own
-    bytes: the same log written through mcap's Writer.add_message has the same records, chunk for chunk."""
-    from mcap.records import Metadata
+    """The fast path (bench.log.mcapfast: one-pack message records and message indexes) writes mcap's own bytes:
+    the same log written through mcap's public Writer.add_message is the same file, byte for byte (chunks,
+    indexes, statistics and CRCs), with the creation time fixed."""
+    from datetime import UTC, datetime
+
     from mcap.stream_reader import StreamReader
 
-    import bench.recorder
+    import bench.log.mcapfast
+    import bench.log.recorder
 
+    class Fixed(datetime):
+        @classmethod
+        def now(cls, tz: Any = None) -> Fixed:
+            return cls(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
+
+    monkeypatch.setattr(bench.log.recorder, "datetime", Fixed)
+    taken: list[bool] = []
+    fast_adder = bench.log.mcapfast.fast_adder
+
+    def recording(writer: Any) -> Any:
+        add = fast_adder(writer)
+        taken.append(add is not None)
+        return add
+
+    monkeypatch.setattr(bench.log.mcapfast, "fast_adder", recording)
     fast, slow = tmp_path / "fast.mcap", tmp_path / "slow.mcap"
     write_log(fast, tmp_path, count=400, chunk_size=4096)
-    monkeypatch.setattr(bench.recorder, "_fast_adder", lambda writer: None)
+    assert taken == [True, True]   # the per-message and the batch adder: the fast path was taken
+    monkeypatch.setattr(bench.log.mcapfast, "supported", lambda: False)
     write_log(slow, tmp_path, count=400, chunk_size=4096)
+    assert taken[2:] == [False, False]   # mcap's public writer
 
-    def records(path: Path) -> list[Any]:
-        with path.open("rb") as file:
-            out = list(StreamReader(file, skip_magic=False, emit_chunks=True).records)
-        return [r for r in out if not (isinstance(r, Metadata) and r.name == "bench")]   # its "created" time
-
-    fast_records, slow_records = records(fast), records(slow)
-    assert sum(type(r).__name__ == "Chunk" for r in fast_records) > 3
-    assert fast_records == slow_records
+    with fast.open("rb") as file:
+        assert sum(type(r).__name__ == "Chunk" for r in StreamReader(file, emit_chunks=True).records) > 3
+    assert fast.read_bytes() == slow.read_bytes()
     with fast.open("rb") as file:   # chunk CRCs and the summary's statistics hold
         reader = make_reader(file, validate_crcs=True)
         assert sum(1 for _ in reader.iter_messages()) == reader.get_summary().statistics.message_count
+
+
+def test_the_pinned_mcap_is_the_one_the_fast_path_supports() -> None:
+    """pyproject.toml pins mcap to the releases bench.log.mcapfast knows, and the installed one is among them
+    (else the byte comparison above compared mcap's writer with itself)."""
+    import tomllib
+    from importlib.metadata import version
+
+    from packaging.requirements import Requirement
+
+    import bench.log.mcapfast
+    from tests.repo import ROOT
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    pins = [Requirement(r) for r in project["dependencies"] if Requirement(r).name == "mcap"]
+    assert len(pins) == 1
+    spec = pins[0].specifier
+    assert version("mcap") in spec
+    assert bench.log.mcapfast.supported()
+    for prefix in bench.log.mcapfast.SUPPORTED:   # each supported release line lies inside the pin, and only those
+        assert f"{prefix}0" in spec
+    assert "1.5.0" not in spec and "1.7.0" not in spec

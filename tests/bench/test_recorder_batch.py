@@ -13,11 +13,12 @@ import pytest
 from mcap.records import Metadata
 from mcap.stream_reader import StreamReader
 
-import bench.recorder
+import bench.log.mcapfast
+import bench.log.recorder
 from bench.codec import Codebook, load_codebook, load_dbc
 from bench.errors import BenchError
-from bench.logread import read_decoded, read_frames
-from bench.recorder import Recorder
+from bench.log.logread import read_decoded, read_frames
+from bench.log.recorder import Recorder
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 ORIGIN_NS = 1_764_000_000_123_456_789
@@ -53,7 +54,7 @@ def frames_of(codebook: Codebook, count: int, seed: int) -> list[Frame]:
 
 
 def per_frame(path: Path, frames: list[Frame], codebook: Codebook, batch: int, chunk_size: int = 4096) -> int:
-    """What bench.logproc wrote before the batch path: frame() and decoded() per frame; the refusals."""
+    """What bench.log.logproc wrote before the batch path: frame() and decoded() per frame; the refusals."""
     recorder = Recorder(path, [load_dbc(CHASSIS_DBC), load_dbc(BENCH_DBC)], flush_interval=math.inf,
                         chunk_size=chunk_size)
     recorder.set_origin(ORIGIN_NS, "virtual")
@@ -93,14 +94,14 @@ def records(path: Path) -> list[Any]:
     return [r for r in out if not (isinstance(r, Metadata) and r.name == "bench")]
 
 
-@pytest.mark.parametrize("cache", [bench.recorder._TEXT_CACHE, 7])
+@pytest.mark.parametrize("cache", [bench.log.recorder._TEXT_CACHE, 7])
 @pytest.mark.parametrize("fast", [True, False], ids=["packed", "mcap-add_message"])
 def test_a_batch_writes_what_frame_and_decoded_write(
     tmp_path: Path, codebook: Codebook, monkeypatch: pytest.MonkeyPatch, cache: int, fast: bool,
 ) -> None:
-    monkeypatch.setattr(bench.recorder, "_TEXT_CACHE", cache)
+    monkeypatch.setattr(bench.log.recorder, "_TEXT_CACHE", cache)
     if not fast:
-        monkeypatch.setattr(bench.recorder, "_fast_adder", lambda writer: None)
+        monkeypatch.setattr(bench.log.mcapfast, "supported", lambda: False)   # mcap's public writer
     frames = frames_of(codebook, 3000, seed=cache)
     reference, batch = tmp_path / "per_frame.mcap", tmp_path / "batch.mcap"
     refused = per_frame(reference, frames, codebook, batch=700)

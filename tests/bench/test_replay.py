@@ -14,7 +14,7 @@ import pytest
 
 from bench.bus import open_bus
 from bench.cli import main
-from bench.recorder import Recorder
+from bench.log.recorder import Recorder
 from tests.repo import ROOT
 
 SPACING = 0.010   # s between the logged tx frames

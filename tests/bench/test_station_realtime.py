@@ -152,8 +152,8 @@ def test_a_frame_waiting_from_before_the_start_gets_time_zero() -> None:
 def test_the_log_process_skips_a_record_it_cannot_write_and_keeps_the_rest(tmp_path, codebook) -> None:
     """A frame whose time does not fit the log (negative) is reported and skipped; the log goes on."""
     from bench.config import load_config
-    from bench.logproc import LogProcess
-    from bench.logread import read_frames
+    from bench.log.logproc import LogProcess
+    from bench.log.logread import read_frames
 
     databases = load_config().databases
     codec = codebook["VCU_WheelCmd_FL"]

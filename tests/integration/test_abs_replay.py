@@ -1,5 +1,5 @@
 """Replay (issue 6, acceptance 2): run a scenario through the bench, read the recorded ABS_WheelSpeeds,
-ABS_SteerState and DRV_Pedals back from the MCAP log (bench.logread.read_decoded), feed the estimator
+ABS_SteerState and DRV_Pedals back from the MCAP log (bench.log.logread.read_decoded), feed the estimator
 (plant/ecus/abs_estimator.py, no bus) and get the same TurnDirection as the ECU produced live.
 
 The scenario covers both identification paths: a steady left turn before braking ([P4] §3.1), back to
@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from bench.config import RunSettings, load_config
-from bench.logread import read_decoded
+from bench.log.logread import read_decoded
 from bench.run import BenchRun
 from plant.ecus.abs import brake_demand, estimator_config
 from plant.ecus.abs_estimator import TurnStateEstimator

@@ -21,7 +21,7 @@ import pytest
 
 from bench.codec import load_codebook
 from bench.config import load_config
-from bench.logread import read_frames
+from bench.log.logread import read_frames
 from tests.bench.test_bus_groups import _ipv4_group, _ipv6_available, _ipv6_group
 from tests.repo import ROOT
 

@@ -149,3 +149,44 @@ def test_the_import_scan_sees_relative_and_from_imports() -> None:
     found = {module for _, _, module in imports(folder)}
     assert "bench.node" in found
     assert any(module.startswith("plant.") for module in found)
+
+
+# -- the log package ------------------------------------------------------------------------------------------
+#: What bench/log/ may import of the bench besides itself: the frame checks it logs with, the errors, the version.
+LOG_MAY_IMPORT = {"bench", "bench.version", "bench.errors", "bench.codec", "bench.monitor", "bench.config"}
+#: The one module that may reach into mcap's private state (its bytes are compared with mcap's public writer's,
+#: tests/bench/test_recorder.py).
+MCAP_FAST_PATH = "bench/log/mcapfast.py"
+
+
+def test_the_log_package_sits_below_the_session() -> None:
+    """bench/log/ imports no part of the bench above it (session, station, run, cli, report, pytest plugin) and no
+    pytest: a python-can tool loads it through its entry points without the bench's runner."""
+    wrong = [f"{file}:{line}: {module}" for file, line, module in imports(BENCH / "log")
+             if (_top(module) == "bench" and module not in LOG_MAY_IMPORT and not module.startswith("bench.log")
+                 and not any(module.startswith(f"{allowed}.") for allowed in LOG_MAY_IMPORT - {"bench"}))
+             or _top(module) in {"pytest", "_pytest"}]
+    assert not wrong, "bench/log/ imports beyond " + ", ".join(sorted(LOG_MAY_IMPORT)) + ":\n" + "\n".join(wrong)
+
+
+def _private_mcap(folder: Path) -> Iterator[str]:
+    """'file:line: what' for each import of a `_` name from mcap, and each use of mcap's Writer's mangled names."""
+    for file, line, module in imports(folder):
+        if _top(module) == "mcap" and any(part.startswith("_") for part in module.split(".")):
+            yield f"{file}:{line}: {module}"
+    for path in sorted(folder.rglob("*.py")):
+        if path == Path(__file__):   # this test names what it looks for
+            continue
+        for number, text in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            if "_Writer__" in text:
+                yield f"{path.relative_to(ROOT)}:{number}: {text.strip()[:80]}"
+
+
+def test_no_private_mcap_name_outside_the_fast_path() -> None:
+    found = [hit for folder in ("bench", "plant", "tests", "benchmarks", "scripts", "testcases")
+             for hit in _private_mcap(ROOT / folder)]
+    outside = [hit for hit in found if not hit.startswith(MCAP_FAST_PATH + ":")]
+    assert not outside, f"mcap's private names outside {MCAP_FAST_PATH}:\n" + "\n".join(outside)
+    # the scan sees the fast path's own import and mangled names (else it checks nothing)
+    assert any("mcap._chunk_builder" in hit for hit in found)
+    assert any("_Writer__chunk_builder" in hit for hit in found)

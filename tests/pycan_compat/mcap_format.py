@@ -9,7 +9,7 @@ import unittest
 
 import can
 
-from bench.canio import MCAPReader, MCAPWriter
+from bench.log.canio import MCAPReader, MCAPWriter
 
 from . import logformats_test
 
@@ -18,7 +18,7 @@ from . import logformats_test
 
 
 class TestMcapFileFormat(logformats_test.TestBlfFileFormat.__bases__[0]):
-    """Tests bench.canio.MCAPWriter and bench.canio.MCAPReader."""
+    """Tests bench.log.canio.MCAPWriter and bench.log.canio.MCAPReader."""
 
     def _setup_instance(self):
         super()._setup_instance_helper(

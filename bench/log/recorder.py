@@ -1,17 +1,13 @@
-"""The run log: one MCAP file per run, openable as is in Foxglove.
+"""The run log's writer: one MCAP file per run, openable as is in Foxglove (format: bench.log.format).
 
-Why MCAP with JSON messages and JSON schemas: Foxglove shows them without plugins (Raw
-Messages, Plot, Log panels), and JSON keeps the recorder pure Python yet fast enough for a
-busy bus (>= 20 000 frames/s, each with its decoded message). Channels:
-
-- `/can/frames`: every raw frame (`bench.CanFrame`, ROS `can_msgs/Frame` fields plus bench fields);
-- `/can/decoded/<Message>`: the decoded signals of each DBC message (numbers; a non-finite value is null);
-- `/bench/steps`: test steps and verdicts as `foxglove.Log`.
+JSON keeps the recorder pure Python yet fast enough for a busy bus (>= 20 000 frames/s, each with its decoded
+message): the records are written through mcap's public `Writer`, and through bench.log.mcapfast's packing into
+that writer when the installed mcap is one it was checked against (the same bytes).
 
 Chunks are zstd-compressed (mcap's default, and the best ratio for JSON) and finalised at least
 every `flush_interval` s of wall time (checked on every write; `math.inf`: only by `flush()`) or
 when `chunk_size` bytes are pending; the file is flushed to the OS after each, so a run killed with SIGKILL leaves a log
-readable up to its last chunk (`bench.logread` reads such a file). The DBC files are attached
+readable up to its last chunk (`bench.log.logread` reads such a file). The DBC files are attached
 at open, so even a log killed early says which databases it was recorded with.
 """
 
@@ -19,20 +15,15 @@ from __future__ import annotations
 
 import atexit
 import bisect
-import itertools
 import json
 import math
 import mimetypes
-import operator
 import os
 import platform
-import struct
 import threading
 import time
-from collections import deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import UTC, datetime
-from importlib.metadata import PackageNotFoundError, version
 from io import BufferedIOBase
 from pathlib import Path
 from types import TracebackType
@@ -40,113 +31,44 @@ from typing import IO, Any, Protocol, SupportsFloat, cast
 
 import cantools
 from cantools.database.namedsignalvalue import NamedSignalValue
-from mcap._chunk_builder import ChunkBuilder
-from mcap.records import MessageIndex, Statistics
 from mcap.writer import CompressionType, Writer
 
+from bench import version as bench_version
 from bench.errors import BenchError, LogError
+from bench.log import mcapfast
+from bench.log.format import (
+    BENCH_METADATA,
+    CLOCK_METADATA,
+    DECIMAL,
+    DECODED_PREFIX,
+    ENCODING,
+    EXACT_T,
+    FRAME_HEAD,
+    FRAME_SCHEMA,
+    FRAME_SCHEMA_NAME,
+    FRAME_TAIL,
+    FRAMES_TOPIC,
+    LIBRARY,
+    LOG_SCHEMA,
+    LOG_SCHEMA_NAME,
+    MAX_DATA,
+    PAD,
+    SCHEMA_ENCODING,
+    STEPS_TOPIC,
+    decoded_template,
+    extra_fields,
+    log_ns,
+    message_schema,
+    step_text,
+)
+from bench.log.mcapfast import RECORD_OVERHEAD, record_ends, records_size
 
-FRAMES_TOPIC = "/can/frames"
-CLOCK_METADATA = "bench.clock"   # origin_ns: the log time of bench time 0
-STEPS_TOPIC = "/bench/steps"
-DECODED_PREFIX = "/can/decoded/"
-FRAME_SCHEMA_NAME = "bench.CanFrame"
-LOG_SCHEMA_NAME = "foxglove.Log"
 COMPRESSION = CompressionType.ZSTD
 CHUNK_BYTES = 1 << 20
-MAX_DATA = 64  # CAN FD
 
-_MAX_T = 1.8e10  # s: log times are uint64 ns (~584 years)
-_EXACT_T = 2.0 ** 22  # s: below it t * 1e9 < 2**53, an exact float product
-_RECORD_OVERHEAD = 31  # bytes of an MCAP Message record besides its data
-
-
-def _records_size(payloads: list[bytes]) -> int:
-    """Bytes of the MCAP Message records of these payloads."""
-    return sum(map(len, payloads)) + _RECORD_OVERHEAD * len(payloads)
-
-
-def _record_ends(payloads: list[bytes]) -> list[int]:
-    """Where each payload's record ends, counted from the first one's start."""
-    return list(itertools.accumulate(map(operator.add, map(len, payloads), itertools.repeat(_RECORD_OVERHEAD))))
-_DECIMAL = [str(i) for i in range(256)]
-_PAD = [bytes(8 - n) for n in range(8)]
-_FRAME_HEAD = b'{"header":{"stamp":{"sec":%d,"nsec":%d},%b'   # a frame record: its stamp, then its tail
-_FRAME_TAIL = (
-    '"frame_id":%s},"id":%d,"is_rtr":%s,"is_extended":%s,'
-    '"is_error":%s,"dlc":%d,"data":[%s],"channel":%s,"direction":"%s","valid":%s,"error":%s%s}'
-)
-_FRAME_JSON = _FRAME_HEAD.decode().replace("%b", "") + _FRAME_TAIL   # the whole record as one %-format
 _TEXT_CACHE = 1 << 14   # distinct frames whose record texts `Recorder.frames` keeps (then it starts again)
 _PLAIN_NUMBERS = frozenset((int, float))
 _ENCODER = json.JSONEncoder(allow_nan=False, separators=(",", ":"), default=lambda o: o.value)
-
-_TIME: dict[str, Any] = {
-    "type": "object",
-    "title": "Time",
-    "properties": {
-        "sec": {"type": "integer", "minimum": 0},
-        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
-    },
-}
-_BOOL = {"type": "boolean"}
-FRAME_SCHEMA: dict[str, Any] = {
-    "title": FRAME_SCHEMA_NAME,
-    "description": "A raw CAN frame seen (rx) or sent (tx) by the bench: ROS can_msgs/Frame fields plus bench fields",
-    "type": "object",
-    "properties": {
-        "header": {
-            "type": "object",
-            "properties": {"stamp": _TIME, "frame_id": {"type": "string", "description": "Bus channel"}},
-        },
-        "id": {"type": "integer", "minimum": 0, "maximum": 0x1FFFFFFF, "description": "Arbitration id, no flag bits"},
-        "is_rtr": _BOOL,
-        "is_extended": _BOOL,
-        "is_error": _BOOL,
-        "dlc": {"type": "integer", "minimum": 0, "maximum": MAX_DATA,
-                "description": "Number of data bytes; of a remote frame, the length it requests"},
-        "data": {
-            "type": "array",
-            "items": {"type": "integer", "minimum": 0, "maximum": 255},
-            "minItems": 8,
-            "maxItems": MAX_DATA,
-            "description": "Payload, padded with zeros to 8 bytes",
-        },
-        "channel": {"type": "string", "description": "Bus channel"},
-        "direction": {"type": "string", "enum": ["rx", "tx"]},
-        "valid": {"type": "boolean", "description": "False when the bench rejected the frame"},
-        "error": {"type": "string", "description": "Why the frame is invalid; empty when valid"},
-        # Written only when true (or set): a classic frame's record stays as it was.
-        "is_fd": {"type": "boolean", "description": "CAN FD frame (absent: FD when more than 8 data bytes)"},
-        "bitrate_switch": {"type": "boolean", "description": "CAN FD: data phase at the higher bit rate (BRS)"},
-        "error_state_indicator": {"type": "boolean", "description": "CAN FD: sender error-passive (ESI)"},
-        "channel_number": {"type": "integer", "description": "The channel when the bus named it by a number "
-                           "(python-can); channel is then its decimal text"},
-    },
-    "required": ["header", "id", "is_rtr", "is_extended", "is_error", "dlc", "data", "channel", "direction", "valid",
-                 "error"],
-}
-# The shape of Foxglove's published foxglove.Log JSON schema, so the Log panel shows the steps.
-LOG_SCHEMA: dict[str, Any] = {
-    "title": LOG_SCHEMA_NAME,
-    "description": "A log message",
-    "type": "object",
-    "properties": {
-        "timestamp": {**_TIME, "description": "Timestamp of log message"},
-        "level": {
-            "title": "LogLevel: Log level",
-            "description": "Log level",
-            "oneOf": [
-                {"title": title, "const": value}
-                for value, title in enumerate(("UNKNOWN", "DEBUG", "INFO", "WARNING", "ERROR", "FATAL"))
-            ],
-        },
-        "message": {"type": "string", "description": "Log message"},
-        "name": {"type": "string", "description": "Process or node name"},
-        "file": {"type": "string", "description": "Filename"},
-        "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
-    },
-}
 
 
 class Decoder(Protocol):
@@ -156,35 +78,6 @@ class Decoder(Protocol):
     def name(self) -> str: ...
 
     def decode(self, data: bytes) -> Mapping[str, float | int | str]: ...
-
-
-def message_schema(message: cantools.database.can.Message) -> dict[str, Any]:
-    """The JSON schema of a decoded DBC message: one number per signal, described from the DBC."""
-    properties: dict[str, Any] = {}
-    for signal in message.signals:
-        parts = [signal.comment or signal.name]
-        if signal.unit:
-            parts.append(f"[{signal.unit}]")
-        if signal.choices:
-            parts.append("choices: " + ", ".join(f"{value} = {name}" for value, name in signal.choices.items()))
-        properties[signal.name] = {"type": "number", "description": " ".join(parts)}
-    about = f"{message.comment}; " if message.comment else ""
-    return {
-        "title": message.name,
-        "description": f"{about}CAN id 0x{message.frame_id:X}, decoded by the bench; null marks a non-finite value",
-        "type": "object",
-        "properties": properties,
-    }
-
-
-def _ns(t: float) -> int:
-    """Bench time (s) to integer ns, rounded: log_time is a uint64, so reject what does not fit."""
-    if not 0.0 <= t <= _MAX_T:  # also false for NaN
-        raise ValueError(f"time {t!r} s is not in [0, {_MAX_T:g}]")
-    if t < _EXACT_T:
-        return int(t * 1e9 + 0.5)
-    seconds = int(t)    # wall-clock times: t * 1e9 is past 2**53, so split off the exact fraction first
-    return seconds * 1_000_000_000 + int((t - seconds) * 1e9 + 0.5)
 
 
 def _number(value: object, choices: Mapping[str, int]) -> int | float | None:
@@ -206,164 +99,9 @@ def _number(value: object, choices: Mapping[str, int]) -> int | float | None:
     return number if math.isfinite(number) else None
 
 
-def _extra_fields(is_fd: bool, bitrate_switch: bool, error_state_indicator: bool, channel_number: int | None) -> str:
-    """The optional fields of a frame record (CAN FD flags, a numbered channel), each only when set."""
-    extra = ""
-    if is_fd:
-        extra += ',"is_fd":true'
-    if bitrate_switch:
-        extra += ',"bitrate_switch":true'
-    if error_state_indicator:
-        extra += ',"error_state_indicator":true'
-    if channel_number is not None:
-        if isinstance(channel_number, bool) or not isinstance(channel_number, int):
-            raise ValueError(f"channel number {channel_number!r} is not an int")
-        extra += f',"channel_number":{channel_number}'
-    return extra
-
-
-_MESSAGE_HEAD = struct.Struct("<BQHIQQ")   # opcode, record length, channel id, sequence, log time, publish time
-_MESSAGE_OPCODE = 0x05
-_MESSAGE_FIELDS = 22    # bytes of a Message record's fields before its data
-
-
-_INDEX_OPCODE = 0x07
-
-
-class _MessageIndex(MessageIndex):
-    """mcap's MessageIndex written in one pack (mcap's writes each entry's two fields one by one)."""
-
-    def write(self, stream: Any) -> None:
-        size = 16 * len(self.records)
-        stream.write(struct.pack(f"<BQHI{size // 8}Q", _INDEX_OPCODE, 6 + size, self.channel_id, size,
-                                 *itertools.chain.from_iterable(self.records)))
-
-
-def _fast_adder(writer: Writer) -> Callable[[int, int, bytes], None] | None:
-    """`writer.add_message(channel_id, ns, payload, ns)` in one pack and one write per message.
-
-    mcap's pure-Python writer builds a Message object and writes its five fields one by one through a
-    BytesIO (about 4 µs a message, more than JSON and compression together); the log writes two messages
-    per frame. This writes the same bytes (tests/bench/test_recorder.py compares the files record by record)
-    into the writer's open chunk and keeps its chunk index and statistics as `add_message` does, through
-    the writer's private state. None (the caller then uses `add_message`) when that state is not what
-    mcap 1.x has."""
-    builder = getattr(writer, "_Writer__chunk_builder", None)
-    stats = getattr(writer, "_Writer__statistics", None)
-    limit = getattr(writer, "_Writer__chunk_size", None)
-    if type(builder) is not ChunkBuilder or type(stats) is not Statistics or type(limit) is not int:
-        return None
-    if not all(hasattr(builder, name) for name in ("record_writer", "message_indices", "num_messages",
-                                                       "message_start_time", "message_end_time")):
-        return None
-    counts = stats.channel_message_counts
-    indices = builder.message_indices
-    pack = _MESSAGE_HEAD.pack
-
-    def add(channel_id: int, ns: int, payload: bytes) -> None:
-        records = builder.record_writer
-        offset = records.count
-        records.write(pack(_MESSAGE_OPCODE, _MESSAGE_FIELDS + len(payload), channel_id, 0, ns, ns) + payload)
-        if stats.message_count == 0 or ns < stats.message_start_time:
-            stats.message_start_time = ns
-        if ns > stats.message_end_time:
-            stats.message_end_time = ns
-        counts[channel_id] += 1
-        stats.message_count += 1
-        if builder.num_messages == 0 or ns < builder.message_start_time:
-            builder.message_start_time = ns
-        if ns > builder.message_end_time:
-            builder.message_end_time = ns
-        index = indices.get(channel_id)
-        if index is None:
-            index = indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
-        index.records.append((ns, offset))
-        builder.num_messages += 1
-        if records.count > limit:   # as add_message does (the recorder's own limit usually comes first)
-            writer.flush()  # type: ignore[no-untyped-call]   # mcap's Writer.flush carries no annotations
-
-    return add
-
-
-def _fast_bulk_adder(writer: Writer) -> Callable[[list[int], list[int], list[bytes]], None] | None:
-    """`_fast_adder`'s work for many messages at once (one write, C-level packing), with the same bytes, chunk
-    index and statistics; the caller keeps the messages of one call inside one chunk. None: as `_fast_adder`."""
-    if _fast_adder(writer) is None:
-        return None
-    builder: ChunkBuilder = getattr(writer, "_Writer__chunk_builder")   # noqa: B009 - private, checked above
-    stats: Statistics = getattr(writer, "_Writer__statistics")          # noqa: B009
-    limit: int = getattr(writer, "_Writer__chunk_size")                 # noqa: B009
-    counts = stats.channel_message_counts
-    indices = builder.message_indices
-    pack = _MESSAGE_HEAD.pack
-    repeat = itertools.repeat
-    add = operator.add
-
-    def add_many(channels: list[int], nss: list[int], payloads: list[bytes]) -> None:
-        # mcap's writer closes its chunk after the record that takes it past its own limit (only a chunk that
-        # holds many schemas, with a small chunk_size, gets there first): split the messages where it would
-        if builder.record_writer.count + _records_size(payloads) <= limit:
-            add_within(channels, nss, payloads)   # the usual case (the recorder's own limit comes first)
-            return
-        start = 0
-        ends = _record_ends(payloads)
-        while True:
-            stop = bisect.bisect_right(ends, limit - builder.record_writer.count + (ends[start - 1] if start else 0),
-                                       start) + 1
-            if stop >= len(payloads):
-                break
-            add_within(channels[start:stop], nss[start:stop], payloads[start:stop])
-            start = stop
-        add_within(channels[start:], nss[start:], payloads[start:])
-
-    def add_within(channels: list[int], nss: list[int], payloads: list[bytes]) -> None:
-        records = builder.record_writer
-        sizes = list(map(len, payloads))
-        heads = map(pack, repeat(_MESSAGE_OPCODE), map(add, sizes, repeat(_MESSAGE_FIELDS)), channels, repeat(0), nss,
-                    nss)
-        offsets = itertools.accumulate(map(add, sizes, repeat(_RECORD_OVERHEAD)), initial=records.count)
-        # each record as one piece (head + payload): joining half as many pieces costs a third (bytes.join
-        # takes a buffer of each), and operator functions, not bound int.__add__, are called without a tuple
-        records.write(b"".join(map(add, heads, payloads)))
-        first, last = min(nss), max(nss)
-        if stats.message_count == 0 or first < stats.message_start_time:
-            stats.message_start_time = first
-        if last > stats.message_end_time:
-            stats.message_end_time = last
-        if builder.num_messages == 0 or first < builder.message_start_time:
-            builder.message_start_time = first
-        if last > builder.message_end_time:
-            builder.message_end_time = last
-        # each message's (time, offset) onto its channel's index, in order, by map over list.append
-        entries: dict[int, list[tuple[int, int]]] = {}
-        for channel_id in dict.fromkeys(channels):   # in order of first appearance, as mcap's writes them
-            index = indices.get(channel_id)
-            if index is None:
-                index = indices[channel_id] = _MessageIndex(channel_id=channel_id, records=[])
-            entries[channel_id] = index.records
-            counts[channel_id] -= len(index.records)   # + the index's length below: the channel's new messages
-        deque(map(list.append, map(entries.__getitem__, channels), zip(nss, offsets)), 0)
-        for channel_id, records_of_channel in entries.items():
-            counts[channel_id] += len(records_of_channel)
-        stats.message_count += len(payloads)
-        builder.num_messages += len(payloads)
-        if records.count > limit:
-            writer.flush()  # type: ignore[no-untyped-call]   # mcap's Writer.flush carries no annotations
-
-    return add_many
-
-
 def _finalise_chunk(writer: Writer, file: IO[bytes]) -> None:
-    """Write the open chunk and hand the file's buffer to the OS, so SIGKILL cannot lose it.
-
-    mcap >= 1.2 has the public `Writer.flush()`; older releases only have the private,
-    name-mangled `__finalize_chunk`, the one private call of the bench, kept here.
-    """
-    flush = getattr(writer, "flush", None)
-    if flush is not None:
-        flush()
-    else:  # pragma: no cover - old mcap
-        writer._Writer__finalize_chunk()  # type: ignore[attr-defined]   # mcap < 1.2's private method, see above
+    """Write the open chunk and hand the file's buffer to the OS, so SIGKILL cannot lose it."""
+    writer.flush()  # type: ignore[no-untyped-call]   # mcap's Writer.flush carries no annotations
     file.flush()
 
 
@@ -375,11 +113,10 @@ class _Decoded:
     def __init__(self, message: cantools.database.can.Message) -> None:
         self.channel_id = 0
         self.names = frozenset(signal.name for signal in message.signals)
-        # The fast path of `decoded`: every signal in DBC order, each an int or float: the JSON the json
-        # module writes, from one %-format (repr of an int or a float is its JSON; a non-finite float's
-        # repr, nan or inf, adds an "n" to the text and sends the values the careful way).
+        # The fast path of `decoded`: every signal in DBC order, each an int or float, from one %-format (a
+        # non-finite value adds an "n" to the text and sends the values the careful way).
         self.order = tuple(signal.name for signal in message.signals)
-        self.template = "{" + ",".join(json.dumps(name).replace("%", "%%") + ":%r" for name in self.order) + "}"
+        self.template = decoded_template(self.order)
         self.letters = self.template.count("n")
         self.choices = {
             signal.name: {str(name): int(value) for value, name in (signal.choices or {}).items()}
@@ -462,12 +199,12 @@ class Recorder:
         `data` as given); `channel_number`, the channel when the bus named it by a number (python-can's
         int channels), so a reader gets it back."""
         try:
-            ns = _ns(t) + self._origin_ns
+            ns = log_ns(t) + self._origin_ns
         except (TypeError, ValueError) as exc:
             raise LogError(f"run log {self.path}: bad frame {arbitration_id!r} on {channel!r}: {exc}") from None
         tail = self._frame_tail(arbitration_id, data, channel, direction, is_extended, is_error, is_remote, valid,
                                 error, is_fd, bitrate_switch, error_state_indicator, dlc, channel_number)
-        self._write(self._frames_id, ns, _FRAME_HEAD % (ns // 1_000_000_000, ns % 1_000_000_000, tail))
+        self._write(self._frames_id, ns, FRAME_HEAD % (ns // 1_000_000_000, ns % 1_000_000_000, tail))
 
     def _frame_tail(
         self, arbitration_id: int, data: bytes, channel: str, direction: str, is_extended: bool, is_error: bool,
@@ -492,16 +229,16 @@ class Recorder:
             data = bytes(data)
             size = len(data)
             if size < 8:
-                data += _PAD[size]
+                data += PAD[size]
             elif size > MAX_DATA:
                 raise ValueError(f"{size} data bytes, at most {MAX_DATA}")
             extra = ""
             if is_fd or bitrate_switch or error_state_indicator or channel_number is not None:
-                extra = _extra_fields(is_fd, bitrate_switch, error_state_indicator, channel_number)
-            return (_FRAME_TAIL % (
+                extra = extra_fields(is_fd, bitrate_switch, error_state_indicator, channel_number)
+            return (FRAME_TAIL % (
                 quoted, arbitration_id,
                 "true" if is_remote else "false", "true" if is_extended else "false", "true" if is_error else "false",
-                size, ",".join([_DECIMAL[b] for b in data]), quoted, direction,
+                size, ",".join([DECIMAL[b] for b in data]), quoted, direction,
                 "true" if valid else "false", json.dumps(str(error)) if error else '""', extra,
             )).encode()
         except (TypeError, ValueError) as exc:
@@ -512,7 +249,7 @@ class Recorder:
         value."""
         channel_id, payload = self._decoded_payload(message, signals)
         try:
-            ns = _ns(t) + self._origin_ns
+            ns = log_ns(t) + self._origin_ns
         except (TypeError, ValueError) as exc:
             raise LogError(f"run log {self.path}: bad decoded {message}: {exc}") from None
         self._write(channel_id, ns, payload)
@@ -545,7 +282,7 @@ class Recorder:
     def frames(self, frames: Iterable[Sequence[Any]], *, channel: str, codecs: Mapping[int, Decoder]) -> list[str]:
         """Log a batch of frames `(t, arbitration_id, data, direction, valid, error)` on `/can/frames`, each valid
         one whose id has a codec also decoded on `/can/decoded/<codec.name>`: the same records, in the same order
-        and chunks, as `frame()` then `decoded()` per frame, at about half the CPU (bench.logproc, issue 18).
+        and chunks, as `frame()` then `decoded()` per frame, at about half the CPU (bench.log.logproc, issue 18).
 
         Why cheaper: a frame's record texts depend on the frame, not on its time, and most frames of a run repeat an
         earlier one (a PIVOT run: 17 % distinct), so each distinct frame is validated, decoded and written as
@@ -554,7 +291,7 @@ class Recorder:
         nothing; a frame that does not decode writes its frame record only), as `frame()`/`decoded()` would raise.
         """
         texts = self._texts
-        head = _FRAME_HEAD
+        head = FRAME_HEAD
         origin = self._origin_ns
         frames_id = self._frames_id
         problems: list[str] = []
@@ -568,8 +305,8 @@ class Recorder:
             key = (arbitration_id, data, direction, valid, error, channel)
             known = texts.get(key)
             try:
-                # _ns(t) inline for a bench time (the call was a tenth of the cost of a repeated frame)
-                ns = (int(t * 1e9 + 0.5) if type(t) is float and 0.0 <= t < _EXACT_T else _ns(t)) + origin
+                # log_ns(t) inline for a bench time (the call was a tenth of the cost of a repeated frame)
+                ns = (int(t * 1e9 + 0.5) if type(t) is float and 0.0 <= t < EXACT_T else log_ns(t)) + origin
                 if known is None:
                     known = self._frame_texts(key, codecs)
             except (LogError, ValueError, TypeError) as exc:   # LogError: the frame; the others: its time
@@ -615,20 +352,17 @@ class Recorder:
     def step(self, t: float, level: int, name: str, message: str, file: str = "", line: int = 0) -> None:
         """Log a test step or verdict on `/bench/steps` (level 1 DEBUG .. 5 FATAL, as foxglove.Log)."""
         try:
-            ns = _ns(t) + self._origin_ns
+            ns = log_ns(t) + self._origin_ns
             if level not in range(6) or not isinstance(line, int) or line < 0:
                 raise ValueError(f"level {level!r} not in 0..5 or line {line!r} not an int >= 0")
-            payload = json.dumps({
-                "timestamp": {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}, "level": int(level),
-                "message": str(message), "name": str(name), "file": str(file), "line": line,
-            }, separators=(",", ":"))
+            payload = step_text(ns, level, name, message, file, line)
         except (TypeError, ValueError) as exc:
             raise LogError(f"run log {self.path}: bad step {name!r}: {exc}") from None
         self._write(self._steps_id, ns, payload.encode())
 
     def set_origin(self, epoch_ns: int, time_mode: str = "") -> None:
         """From now on log time = `epoch_ns` + bench time, so viewers show the date of the run; a metadata
-        record `bench.clock` (`origin_ns`) lets readers give bench time back (bench.logread)."""
+        record `bench.clock` (`origin_ns`) lets readers give bench time back (bench.log.logread)."""
         if not isinstance(epoch_ns, int) or not 0 <= epoch_ns < 2**62:   # to 2116; + bench time fits uint64
             raise LogError(f"run log {self.path}: bad time origin {epoch_ns!r} ns")
         self.metadata(CLOCK_METADATA, {"origin_ns": str(epoch_ns), "time_mode": str(time_mode),
@@ -671,32 +405,34 @@ class Recorder:
     def _start(self, blobs: list[tuple[Path, bytes, int]], profile: str) -> None:
         """Header, attachments and metadata straight to disk; schemas and channels into the first chunk."""
         self._writer = Writer(self._file, chunk_size=4 * self._chunk_bytes, compression=COMPRESSION)
-        self._add = _fast_adder(self._writer) or self._add_slowly
-        self._add_many = _fast_bulk_adder(self._writer) or self._add_one_by_one
-        self._writer.start(profile="", library=f"chassis-hil-bench/{_bench_version()}")
+        self._add = mcapfast.fast_adder(self._writer) or self._add_slowly
+        self._add_many = mcapfast.fast_bulk_adder(self._writer) or self._add_one_by_one
+        self._writer.start(profile="", library=f"{LIBRARY}/{bench_version()}")
         for attachment, data, mtime_ns in blobs:
             dbc = attachment.suffix.lower() == ".dbc"
             media = "application/x-dbc" if dbc else mimetypes.guess_type(attachment.name)[0]
             self._writer.add_attachment(mtime_ns, 0, attachment.name, media or "application/octet-stream", data)
-        self._writer.add_metadata("bench", {
+        self._writer.add_metadata(BENCH_METADATA, {
             "profile": profile,
             "created": datetime.now(UTC).isoformat(timespec="seconds"),
             "host": platform.node(),
             "python": platform.python_version(),
-            "bench": _bench_version(),
+            "bench": bench_version(),
             "attachments": ", ".join(attachment.name for attachment, _, _ in blobs),
             "compression": COMPRESSION.name.lower(),
         })
         _finalise_chunk(self._writer, self._file)  # header, attachments and metadata on disk now
 
-        frame_schema = self._writer.register_schema(FRAME_SCHEMA_NAME, "jsonschema", json.dumps(FRAME_SCHEMA).encode())
-        self._frames_id = self._writer.register_channel(FRAMES_TOPIC, "json", frame_schema)
-        log_schema = self._writer.register_schema(LOG_SCHEMA_NAME, "jsonschema", json.dumps(LOG_SCHEMA).encode())
-        self._steps_id = self._writer.register_channel(STEPS_TOPIC, "json", log_schema)
+        frame_schema = self._writer.register_schema(FRAME_SCHEMA_NAME, SCHEMA_ENCODING,
+                                                    json.dumps(FRAME_SCHEMA).encode())
+        self._frames_id = self._writer.register_channel(FRAMES_TOPIC, ENCODING, frame_schema)
+        log_schema = self._writer.register_schema(LOG_SCHEMA_NAME, SCHEMA_ENCODING,
+                                                  json.dumps(LOG_SCHEMA).encode())
+        self._steps_id = self._writer.register_channel(STEPS_TOPIC, ENCODING, log_schema)
         for name, entry in self._decoded.items():
             if not entry.channel_id:
-                schema = self._writer.register_schema(name, "jsonschema", entry.schema)
-                entry.channel_id = self._writer.register_channel(DECODED_PREFIX + name, "json", schema)
+                schema = self._writer.register_schema(name, SCHEMA_ENCODING, entry.schema)
+                entry.channel_id = self._writer.register_channel(DECODED_PREFIX + name, ENCODING, schema)
 
     def _write(self, channel_id: int, ns: int, payload: bytes) -> None:
         with self._lock:
@@ -706,8 +442,8 @@ class Recorder:
                     return
                 self._broken = True  # until the writer's state is whole again (KeyboardInterrupt, disk full)
                 self._add(channel_id, ns, payload)
-                self._pending += len(payload) + _RECORD_OVERHEAD
-                # flush_interval=math.inf: the caller flushes (bench.logproc), and no write reads the clock
+                self._pending += len(payload) + RECORD_OVERHEAD
+                # flush_interval=math.inf: the caller flushes (bench.log.logproc), and no write reads the clock
                 if self._pending >= self._chunk_bytes or (self._deadline != math.inf
                                                           and time.monotonic() >= self._deadline):
                     self._finish_chunk()
@@ -726,7 +462,7 @@ class Recorder:
                 if self._closed or self._broken:
                     return
                 self._broken = True
-                total = _records_size(payloads)
+                total = records_size(payloads)
                 if self._pending + total < self._chunk_bytes:   # the batch ends no chunk: no split to find
                     self._add_many(channels, nss, payloads)
                     self._pending += total
@@ -742,7 +478,7 @@ class Recorder:
 
     def _add_in_chunks(self, channels: list[int], nss: list[int], payloads: list[bytes]) -> None:
         """Add a batch that fills the open chunk: finish each chunk after the record that fills it."""
-        ends = _record_ends(payloads)
+        ends = record_ends(payloads)
         start = 0
         while start < len(payloads):
             base = ends[start - 1] if start else 0
@@ -787,9 +523,3 @@ class Recorder:
                 raise LogError(f"run log {self.path}: bad value of {message}.{name}: {exc}") from None
         return json.dumps(clean, separators=(",", ":"), allow_nan=False)
 
-
-def _bench_version() -> str:
-    try:
-        return version("chassis-hil-bench")
-    except PackageNotFoundError:  # pragma: no cover - not installed
-        return "0"

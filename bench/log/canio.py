@@ -3,8 +3,8 @@
 Registered under python-can's entry points `can.io.message_writer` and `can.io.message_reader`, so
 python-can's own tools read and write the bench's format: `python -m can.logger -f x.mcap` records a
 bus into a log that `bench log info`, `bench log export` and `bench replay` read, `python -m can.player
-x.mcap` and `can.LogReader("x.mcap")` play a bench run's log. Writing goes through `bench.recorder.Recorder`
-and reading through `bench.logread.read_frames` (which tolerates a log cut by a kill), so the format is
+x.mcap` and `can.LogReader("x.mcap")` play a bench run's log. Writing goes through `bench.log.recorder.Recorder`
+and reading through `bench.log.logread.read_frames` (which tolerates a log cut by a kill), so the format is
 exactly the one `bench run` writes.
 
 Both take a file name or a binary file object, as python-can's own formats do (so `can.Logger("x.mcap.gz")`,
@@ -33,9 +33,9 @@ from can.io.generic import BinaryIOMessageReader, BinaryIOMessageWriter
 
 from bench.codec import MessageCodec, load_codebook
 from bench.errors import LogError
-from bench.logread import LoggedFrame, read_frames
+from bench.log.logread import LoggedFrame, read_frames
+from bench.log.recorder import Recorder
 from bench.monitor import Monitor
-from bench.recorder import Recorder
 
 NO_CHANNEL = ""       # the channel label of frames whose bus gives none (read back as None)
 

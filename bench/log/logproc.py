@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 from bench.errors import BenchError, LogError
 
 if TYPE_CHECKING:   # the run's process needs neither (nor mcap's import); the child imports them
-    from bench.recorder import Decoder, Recorder
+    from bench.log.recorder import Decoder, Recorder
 
 BATCH_FRAMES = 2000      # hand over at least this often ...
 BATCH_SECONDS = 0.2      # ... and at least every 0.2 s of wall time
@@ -56,7 +56,7 @@ class LogProcess:
         # A program of its own (not multiprocessing, which would re-import the caller's main module), in a
         # session of its own so that a signal to the run's process group does not cut the log short.
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "bench.logproc", str(path), channel, json.dumps(dict(e2e_overrides or {})),
+            [sys.executable, "-m", "bench.log.logproc", str(path), channel, json.dumps(dict(e2e_overrides or {})),
              *map(str, databases)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True)
         assert self._process.stdin is not None and self._process.stdout is not None
@@ -134,9 +134,9 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
     try:
         os.nice(LOG_NICE)
     except OSError as exc:   # not fatal: the log is only written later than it could be
-        logging.getLogger("bench.logproc").warning("log process: nice(%d) failed: %s", LOG_NICE, exc)
+        logging.getLogger("bench.log.logproc").warning("log process: nice(%d) failed: %s", LOG_NICE, exc)
     from bench.codec import load_codebook
-    from bench.recorder import Recorder
+    from bench.log.recorder import Recorder
 
     try:
         codebook = load_codebook(databases, e2e_overrides)

@@ -1,4 +1,4 @@
-"""Reading run logs (MCAP, written by `bench.recorder`) back, including logs of killed runs.
+"""Reading run logs (MCAP, written by `bench.log.recorder`, format bench.log.format) back, also of killed runs.
 
 Why a streaming read for every file rather than the indexed reader: a run killed with
 SIGKILL leaves no footer and a cut last chunk, and the same code path must then give every
@@ -24,9 +24,18 @@ from mcap.records import Attachment, Channel, Footer, McapRecord, Message, Metad
 from mcap.stream_reader import StreamReader
 
 from bench.errors import LogError
-from bench.recorder import CLOCK_METADATA, DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
+from bench.log.format import (
+    CLOCK_METADATA,
+    DECODED_PREFIX,
+    FRAMES_TOPIC,
+    MAGIC,
+    STEPS_TOPIC,
+    VALID_FALSE,
+    VALID_TRUE,
+)
 
-MAGIC = b"\x89MCAP0\r\n"
+__all__ = ["MAGIC", "LoggedFrame", "LogSummary", "read_decoded", "read_frames", "read_steps", "run_start",
+           "summarise"]
 _EXACT_NS = 1 << 53   # log times below it convert to float exactly
 
 
@@ -255,9 +264,9 @@ def run_start(path: str | Path) -> float | None:
 
 def _valid(data: bytes) -> bool:
     """A frame's `valid` flag, without parsing the JSON the recorder writes compactly."""
-    if b'"valid":true' in data:
+    if VALID_TRUE in data:
         return True
-    if b'"valid":false' in data:
+    if VALID_FALSE in data:
         return False
     try:
         return bool(json.loads(data).get("valid", True))
