@@ -7,6 +7,9 @@ What a passing example must show: `bench run` exits 0 with no failure, error or 
 `min_ran` cases ran; every case names NODE as its DUT; only reference-only cases are skipped, each with its
 reason; the report's conformance table shows NODE as the real ECU; no invalid frame outside the cases that inject
 a fault (results.json, the monitor's count per case); the example and the plant end cleanly on Ctrl-C.
+
+The three processes run at real-time priority where the host allows it (`chrt -f 50`), as the README tells users to
+on a loaded host: without it a descheduled process makes the bench late (inconclusive) or the ECU late.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import ast
 import json
 import random
 import re
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -25,6 +29,14 @@ from tests.child import Child
 from tests.repo import ROOT
 
 BENCH = [sys.executable, "-m", "bench"]
+
+
+def _realtime_priority() -> list[str]:
+    """`chrt -f 50` where this host lets the test use it (root, CAP_SYS_NICE or an rtprio limit), else nothing."""
+    chrt = shutil.which("chrt")
+    if chrt is None or subprocess.run([chrt, "-f", "50", "true"], capture_output=True).returncode != 0:
+        return []
+    return [chrt, "-f", "50"]
 
 
 @dataclass
@@ -40,15 +52,16 @@ def judge_example(example: Path, node: str, out: Path, *, min_ran: int, seconds:
     """Run the campaign of `node` against `example` (module docstring) and check what a passing example shows."""
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
     bus = ["--interface", "udp_multicast", "--channel", group]
-    plant = Child([*BENCH, "plant", *bus, "--external", node, "--duration", str(int(seconds) + 60)], ROOT)
+    priority = _realtime_priority()
+    plant = Child([*priority, *BENCH, "plant", *bus, "--external", node, "--duration", str(int(seconds) + 60)], ROOT)
     ecu = None
     try:
         started = plant.wait_for("simulating", 60)
         simulated = started.split("simulating", 1)[1].split(" on ", 1)[0]
         assert node not in simulated.replace(",", " ").split(), started     # the bench leaves the node alone
-        ecu = Child([sys.executable, str(example), *bus], ROOT)
+        ecu = Child([*priority, sys.executable, str(example), *bus], ROOT)
         ecu.wait_for("running", 60)
-        run = subprocess.run([*BENCH, "run", *bus, "--external", "all", "--dut", node, "--out", str(out)],
+        run = subprocess.run([*priority, *BENCH, "run", *bus, "--external", "all", "--dut", node, "--out", str(out)],
                              cwd=ROOT, capture_output=True, text=True, timeout=seconds)
         assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-3000:]
         campaign = _check_report(out, node, min_ran)
