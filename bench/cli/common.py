@@ -30,9 +30,10 @@ def add_bus_options(parser: argparse.ArgumentParser, default_interface: str, cha
                     helps={"channel": channel_help} if channel_help else None)
 
 
-def add_node_options(parser: argparse.ArgumentParser) -> None:
-    """--external and --fault: which nodes are real, which faults the bench injects (bench.options)."""
-    add_cli_options(parser, NODE_OPTIONS)
+def add_node_options(parser: argparse.ArgumentParser, helps: dict[str, str] | None = None) -> None:
+    """--external and --fault: which nodes are real, which faults the bench injects (bench.options); `helps`
+    adapts an option's help to the command (bench.options.add_cli_options)."""
+    add_cli_options(parser, NODE_OPTIONS, helps=helps)
 
 
 def given_bus_options(args: argparse.Namespace) -> BusOptions:

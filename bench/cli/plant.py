@@ -16,12 +16,16 @@ from rich.console import Console
 from bench.cli.common import add_bus_options, add_node_options, given_bus_options, reject_virtual
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError, Inconclusive
-from bench.faults import parse_fault
+from bench.faults import CASE, CASE_PREFIX, Fault, parse_fault
 from bench.monitor import Monitor
 from bench.session import BenchSession
 
 STATUS_PERIOD = 5.0   # s between status lines
 INVALID_SHOWN = 3     # invalid frames described per status line
+#: --fault's help here: bench plant runs no cases, so its windows count from its own start only
+FAULT_HELP = ("inject a fault into the frames the plant sends: KIND:TARGET[:PARAM]@START[-END], START and END in s "
+              "from bench plant's start (an open END lasts until it stops), e.g. drop:IMU_Motion@3.5-3.8; "
+              f"not {CASE_PREFIX}: bench plant runs no cases and refuses it (docs/reliability.md)")
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -29,7 +33,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                             description="Run the plant and every simulated ECU on a bus in real time "
                                         "until SIGINT/SIGTERM or --duration.")
     add_bus_options(parser, "udp_multicast")
-    add_node_options(parser)
+    add_node_options(parser, helps={"fault": FAULT_HELP})
     parser.add_argument("--vehicle", default=None, help="vehicle of the plant at start (a scenario may change it)")
     parser.add_argument("--duration", type=float, default=None, help="stop after S seconds")
     parser.set_defaults(handler=run)
@@ -61,6 +65,19 @@ def _report_duplicates(console: Console, monitor: Monitor, shown: set[int]) -> N
             console.print(f"  {found.describe()} (from t={found.t:.3f} s)", highlight=False, markup=False)
 
 
+def plant_faults(specs: list[str]) -> list[Fault]:
+    """The --fault specs of `bench plant`: ConfigError (one line) for a `case+` window, which counts from each
+    case's start; the plant process runs no cases, so such a fault would never act (it dropped nothing)."""
+    faults = [parse_fault(spec) for spec in specs]
+    for spec, fault in zip(specs, faults, strict=True):
+        if fault.relative == CASE:
+            raise ConfigError(f"--fault {spec!r}: {CASE_PREFIX} counts from each case's start, which only `bench run` "
+                              f"knows; bench plant runs no cases, so the fault would never act: give the window in s "
+                              f"from bench plant's start (e.g. {fault.kind}:{fault.target}@{fault.start:g}-"
+                              f"{'' if math.isinf(fault.end) else f'{fault.end:g}'})")
+    return faults
+
+
 def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
     reject_virtual(args.interface)
@@ -69,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     project = load_config(Path(args.config) if args.config else None)
     settings = RunSettings(interface=args.interface, channel=args.channel, external=args.external,
                            vehicle=args.vehicle, bus=given_bus_options(args))
-    faults = [parse_fault(spec) for spec in args.fault]
+    faults = plant_faults(args.fault)
     session = BenchSession(project, settings, role="plant")
     session.faults.extend(faults)
     stop = {"now": False}
