@@ -1,6 +1,6 @@
-"""Opening buses: the in-process virtual-time bus (the embedded default) or any python-can interface.
+"""Opening buses: the embedded bus (in process, virtual time: the default) or any python-can interface.
 
-`VirtualTimeBus` is a python-can `BusABC` registered as the interface `bench_virtual`. Unlike
+`VirtualTimeBus` is a python-can `BusABC` registered as the interface `embedded`. Unlike
 python-can's `virtual` interface it keeps the sender's timestamp (the bench's virtual time; it never
 stamps the wall clock) and has no threads of its own: frames are handed over in the order they were
 sent, so that a campaign gives the same frame sequence on every run. Otherwise it behaves as python-can's
@@ -31,7 +31,13 @@ from bench.errors import ConfigError
 
 log = logging.getLogger(__name__)
 
-VIRTUAL = "virtual"   # the name users give on the command line for the embedded default
+#: The embedded bus's one name (command line, pytest options, the report, python-can's entry point): not python-can's
+#: `virtual`, which names python-can's own in-process bus (real time) and reaches it.
+EMBEDDED = "embedded"
+#: python-can's in-process bus: like the embedded bus it reaches only its own process.
+PYTHON_CAN_VIRTUAL = "virtual"
+#: Earlier names of the embedded bus, refused with one line naming the new one.
+RENAMED = {"bench_virtual": EMBEDDED}
 
 #: udp_multicast must never leave this host (Developers' guide: hop limit 0).
 UDP_MULTICAST_HOP_LIMIT = 0
@@ -359,18 +365,37 @@ def _drop_queued(sock: socket.socket) -> None:
                   dropped)
 
 
-def is_virtual(interface: str) -> bool:
-    return interface in (VIRTUAL, "bench_virtual")
+def is_embedded(interface: str) -> bool:
+    """The embedded bus: in process, in virtual time (the only bus on which the bench's time is not the wall clock)."""
+    return interface == EMBEDDED
+
+
+def in_process(interface: str) -> bool:
+    """A bus that only this process can reach (the embedded bus, python-can's virtual bus)."""
+    return interface in (EMBEDDED, PYTHON_CAN_VIRTUAL)
+
+
+def known_interfaces() -> list[str]:
+    return sorted({EMBEDDED, *can.interfaces.VALID_INTERFACES})
+
+
+def check_interface(interface: str, option: str = "--interface") -> None:
+    """An interface name the bench can open: the embedded bus or a python-can interface; an old name of the
+    embedded bus is one line naming the new one."""
+    if interface in RENAMED:
+        raise ConfigError(f"{option} {interface}: renamed to {RENAMED[interface]} (the bench's in-process "
+                          "virtual-time bus)")
+    if not is_embedded(interface) and interface not in can.interfaces.VALID_INTERFACES:
+        raise ConfigError(f"{option}: unknown python-can interface {interface!r} "
+                          f"(known: {', '.join(known_interfaces())})")
 
 
 def open_bus(interface: str, channel: str | None, options: BusOptions | None = None) -> can.BusABC:
     """Open a bus by python-can interface name with `options` (bitrate, CAN FD, [bus] table); errors name the
-    interface and channel. The in-process virtual bus has no bit timing: it ignores `options`."""
-    if is_virtual(interface):
+    interface and channel. The embedded bus has no bit timing: it ignores `options`."""
+    check_interface(interface)
+    if is_embedded(interface):
         return VirtualTimeBus(channel=channel or "bench")
-    if interface not in can.interfaces.VALID_INTERFACES:
-        raise ConfigError(f"unknown python-can interface {interface!r} "
-                          f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
     kwargs: dict[str, Any] = options.kwargs() if options is not None else {}
     if takes_hop_limit(interface):   # an IP multicast bus (udp_multicast): asked of its class's parameters
         kwargs["hop_limit"] = UDP_MULTICAST_HOP_LIMIT   # never a user's choice: the frames stay on this host
@@ -406,14 +431,16 @@ def _forget_half_open(exc: BaseException) -> None:
 
 
 def probe_bus(interface: str, channel: str | None, options: BusOptions | None = None) -> None:
-    """Open the bus once and close it: a bus that cannot be opened stops a run before its first case."""
-    if is_virtual(interface):
+    """Open the bus once and close it: a bus that cannot be opened stops a run before its first case (an
+    in-process bus has nothing to probe: the run opens it on a channel of its own)."""
+    if in_process(interface):
+        check_interface(interface)
         return
     open_bus(interface, channel, options).shutdown()
 
 
 def check_channel(interface: str, channel: str | None, option: str = "--channel") -> None:
-    """`--channel` on the in-process virtual bus is a mistake (the user meant a real bus), not a no-op."""
-    if is_virtual(interface) and channel:
-        raise ConfigError(f"{option} {channel}: the in-process virtual bus has no channels; "
+    """`--channel` on the embedded bus is a mistake (the user meant another bus), not a no-op."""
+    if is_embedded(interface) and channel:
+        raise ConfigError(f"{option} {channel}: the embedded bus (in process, virtual time) has no channels; "
                           "name the interface too (e.g. --interface socketcan --channel vcan0)")

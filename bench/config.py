@@ -15,7 +15,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bench.bus import VIRTUAL, is_virtual
+from bench.bus import EMBEDDED, is_embedded
 from bench.busopts import BusOptions, positive_int
 from bench.contract import Requirement, load_requirements
 from bench.e2e.config import PARAMETERS as E2E_PARAMETERS
@@ -385,7 +385,7 @@ def _positive(where: str, key: str, value: Any) -> float:
 class RunSettings:
     """How one run reaches its bus; the same for `bench run`, `bench plant` and plain pytest."""
 
-    interface: str = VIRTUAL
+    interface: str = EMBEDDED
     channel: str | None = None
     external: list[str] = field(default_factory=list)
     vehicle: str | None = None
@@ -393,4 +393,4 @@ class RunSettings:
 
     @property
     def virtual_time(self) -> bool:
-        return is_virtual(self.interface)
+        return is_embedded(self.interface)

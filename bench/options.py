@@ -88,13 +88,14 @@ FAULT_HELP = ("inject a fault: KIND:TARGET[:PARAM]@[case+]START[-END] in s from 
 
 OPTIONS: tuple[OptionSpec, ...] = (
     # -- bus ---------------------------------------------------------------------------------------------
-    OptionSpec("interface", "python-can interface (pcan, kvaser, vector, socketcan, udp_multicast, ...), or "
-                            "'virtual' for the in-process virtual-time bus (default: {default})",
-               default="virtual", group="bus", short="-i"),
-    OptionSpec("channel", "channel (e.g. PCAN_USBBUS1, 0, can0, a multicast group); not for the virtual bus",
+    OptionSpec("interface", "'embedded' for the bench's own bus (in process, virtual time), or a python-can "
+                            "interface (pcan, kvaser, vector, socketcan, udp_multicast, virtual: python-can's "
+                            "in-process bus, real time, ...) (default: {default})",
+               default="embedded", group="bus", short="-i"),
+    OptionSpec("channel", "channel (e.g. PCAN_USBBUS1, 0, can0, a multicast group); not for the embedded bus",
                group="bus", short="-c"),
     OptionSpec("bitrate", "nominal bitrate (default: [bus] bitrate of bench.toml, else the databases' Baudrate "
-                          "attribute, the contract's bus); the virtual bus ignores it",
+                          "attribute, the contract's bus); the embedded bus ignores it",
                type=positive_bitrate, metavar="BIT/S", group="bus"),
     OptionSpec("fd", "CAN FD (default: [bus] fd, else on when the databases' BusType is CAN FD); "
                      "the no- form: classic CAN even where [bus] or the databases say CAN FD",
@@ -123,7 +124,7 @@ OPTIONS: tuple[OptionSpec, ...] = (
     OptionSpec("force", "write into an existing --out folder that is not empty (its reports are replaced)",
                kind="flag", aliases=("--overwrite",), plugin=False),
     OptionSpec("workers", "run the cases in N processes (pytest-xdist; 'auto' = one per core), each with its own "
-                          "in-process virtual bus and MCAP log; one merged report",
+                          "embedded bus and MCAP log; one merged report",
                short="-n", metavar="N", plugin=False, passthrough="-n"),
     OptionSpec("keyword", "only cases matching this pytest -k expression", short="-k", plugin=False,
                passthrough="-k"),

@@ -24,7 +24,7 @@ from pluggy import Result
 
 from bench import results_io
 from bench import shard as shards
-from bench.bus import check_channel
+from bench.bus import EMBEDDED, check_channel, check_interface, is_embedded
 from bench.busopts import BusOptions
 from bench.case import Case
 from bench.checks import step_values
@@ -92,14 +92,15 @@ def pytest_configure(config: pytest.Config) -> None:
     config.stash[_DESELECTED_KEY] = []
     config.stash[_PENDING_KEY] = []
     try:
+        check_interface(config.getoption("--bench-interface"), "--bench-interface")
         check_channel(config.getoption("--bench-interface"), config.getoption("--bench-channel"), "--bench-channel")
     except BenchError as exc:
         raise pytest.UsageError(str(exc)) from None
     if _xdist_controller(config):
         # Workers inherit the controller's options: decide the one output folder for all of them here.
-        if config.getoption("--bench-interface") not in ("virtual", "bench_virtual"):
-            raise pytest.UsageError("-n (pytest-xdist) runs one in-process virtual bus per worker; a real bus "
-                                    "has one plant and cannot be shared by several runners")
+        if not is_embedded(config.getoption("--bench-interface")):
+            raise pytest.UsageError(f"-n (pytest-xdist) runs one embedded bus per worker (--bench-interface "
+                                    f"{EMBEDDED}); another bus has one plant and cannot be shared by several runners")
         if not config.getoption("--bench-out"):
             try:   # no bench.toml here or above: one line, not a traceback
                 project = load_config(_config_path(config))

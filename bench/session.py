@@ -10,7 +10,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Sequence
 
-from bench.bus import is_virtual, open_bus
+from bench.bus import in_process, open_bus
 from bench.busopts import BusOptions, contract_options
 from bench.clock import Clock, Scheduler, VirtualClock, WallClock
 from bench.codec import Codebook, load_codebook
@@ -64,7 +64,7 @@ class BenchSession:
         self.external = resolve_external(self.codebook, project.stimulus, settings.external)
         self.clock: Clock = VirtualClock() if settings.virtual_time else WallClock()
         channel = settings.channel
-        if is_virtual(settings.interface) and not channel:
+        if in_process(settings.interface) and not channel:
             channel = f"bench-{next(_virtual_channels)}"   # sessions in one process never mix
         self.channel = channel
         self.bus_options = resolve_bus_options(project, settings.bus, self.codebook)

@@ -136,7 +136,7 @@ class Station:
         # socketcan: frames read from the bus's socket without a can.Message each (bench/socketcan_rx.py)
         self._fast = FastReceiver.attach(bus)
         self._send_fast = self._fast is not None and self._fast.native
-        # the in-process virtual bus: frames as bytes, no can.Message each (bench/bus.py send_raw, raw_frames)
+        # the embedded bus: frames as bytes, no can.Message each (bench/bus.py send_raw, raw_frames)
         self._send_raw = getattr(bus, "send_raw", None)
         self._raw_frames = getattr(bus, "raw_frames", None)
         # its pending frames (a deque with `closed`): an empty one costs a tick no poll (most ticks of a plant)

@@ -2,7 +2,7 @@
 
 The sweep: benchmarks/cases/test_sweep_rotation_centres.py, N random rotation centres (full 200, quick 40),
 each checked against docs/spec/formulas.md §2. Measured: wall time of `bench run -n 2 <sweep>` (two workers, each with
-its own in-process virtual-time bus and MCAP log; the controller merges one report); baseline in the same
+its own embedded bus (in process, virtual time) and MCAP log; the controller merges one report); baseline in the same
 run: `bench run <sweep>` (one process, no xdist). Speed-up = baseline wall / measured wall (the whole
 command: start-up, the cases, the reports); with --repeat N the pairs run back to back N times and the median
 pair's ratio is reported. With --with-n1 also `-n 1` (the cost of xdist itself).

@@ -12,7 +12,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from bench.bus import is_virtual
+from bench.bus import EMBEDDED, PYTHON_CAN_VIRTUAL, check_interface
 from bench.busopts import BusOptions
 from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig
@@ -59,11 +59,15 @@ def check_out_dir(out_dir: Path, force: bool) -> None:
         raise ConfigError(f"--out {out_dir}: cannot write there: permission denied")
 
 
-def reject_virtual(interface: str) -> None:
+def reject_in_process(interface: str) -> None:
     """For the commands that share a bus with other processes (plant, monitor, replay)."""
-    if is_virtual(interface):
-        raise ConfigError("--interface virtual: the in-process virtual bus cannot be reached from another "
-                          "process; use udp_multicast, socketcan or a hardware interface")
+    check_interface(interface)
+    if interface == EMBEDDED:
+        raise ConfigError(f"--interface {EMBEDDED}: the embedded bus (in process, virtual time) cannot be reached "
+                          "from another process; use udp_multicast, socketcan or a hardware interface")
+    if interface == PYTHON_CAN_VIRTUAL:
+        raise ConfigError(f"--interface {PYTHON_CAN_VIRTUAL}: python-can's virtual bus cannot be reached from "
+                          "another process; use udp_multicast, socketcan or a hardware interface")
 
 
 def bus_options_for(project: ProjectConfig, args: argparse.Namespace) -> tuple[BusOptions, Codebook]:

@@ -28,7 +28,7 @@ from rich.table import Table
 from rich.text import Text
 
 from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
-from bench.cli.common import add_bus_options, bus_options_for, reject_virtual
+from bench.cli.common import add_bus_options, bus_options_for, reject_in_process
 from bench.codec import MessageCodec
 from bench.config import load_config
 from bench.errors import BenchError, ConfigError
@@ -257,7 +257,7 @@ def render(live: LiveMonitor, now: float, source: str, elapsed: float) -> Group:
 
 # -- command ---------------------------------------------------------------------------------------------
 def run(args: argparse.Namespace) -> int:
-    reject_virtual(args.interface)
+    reject_in_process(args.interface)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration: {args.duration} is not a positive number of seconds")
     if not (math.isfinite(args.window) and 0.05 <= args.window <= 600):

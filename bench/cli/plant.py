@@ -13,7 +13,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from bench.cli.common import add_bus_options, add_node_options, given_bus_options, reject_virtual
+from bench.cli.common import add_bus_options, add_node_options, given_bus_options, reject_in_process
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError, Inconclusive
 from bench.faults import CASE, CASE_PREFIX, Fault, parse_fault
@@ -80,7 +80,7 @@ def plant_faults(specs: list[str]) -> list[Fault]:
 
 def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True)
-    reject_virtual(args.interface)
+    reject_in_process(args.interface)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration: {args.duration} is not a positive number of seconds")
     project = load_config(Path(args.config) if args.config else None)

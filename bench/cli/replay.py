@@ -22,7 +22,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
-from bench.cli.common import add_bus_options, bus_options_for, reject_virtual
+from bench.cli.common import add_bus_options, bus_options_for, reject_in_process
 from bench.config import load_config
 from bench.errors import ConfigError, LogError
 from bench.log.logread import MAGIC, read_frames
@@ -44,7 +44,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True, soft_wrap=True)
-    reject_virtual(args.interface)
+    reject_in_process(args.interface)
     if not (math.isfinite(args.speed) and args.speed > 0):
         raise ConfigError(f"--speed: {args.speed} is not a positive number")
     project = load_config(Path(args.config) if args.config else None)

@@ -11,14 +11,13 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-import can
 import pytest
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
 from bench import options, shard
-from bench.bus import check_channel, is_virtual, probe_bus
+from bench.bus import EMBEDDED, check_channel, check_interface, is_embedded, probe_bus
 from bench.busopts import BusOptions
 from bench.cli.common import (
     BUS_OPTIONS,
@@ -61,9 +60,9 @@ DIST = "worksteal"
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser("run", help="run the test cases and write a report",
-                            description="Run the test cases (default: testcases/ on the in-process "
-                                        "virtual-time bus) and write report.html, run.mcap, junit.xml.")
-    add_bus_options(parser, "virtual")
+                            description="Run the test cases (default: testcases/ on the embedded bus, in "
+                                        "process and in virtual time) and write report.html, run.mcap, junit.xml.")
+    add_bus_options(parser, EMBEDDED)
     add_node_options(parser)
     add_cli_options(parser, RUN_OPTIONS)
     parser.add_argument("paths", nargs="*", help="test files or folders (default: the project's testcases)")
@@ -183,17 +182,16 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
     unknown = [n for n in split_names(args.dut) if n not in codebook.nodes]
     if unknown:
         problems.append(f"--dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(codebook.nodes)})")
-    interface_known = is_virtual(args.interface) or args.interface in can.interfaces.VALID_INTERFACES
-    if not interface_known:
-        problems.append(f"--interface: unknown python-can interface {args.interface!r} "
-                        f"(known: virtual, {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
+    before = len(problems)
+    check(check_interface, args.interface)
+    interface_known = len(problems) == before
     check(check_channel, args.interface, args.channel)
     if args.workers is not None and not _workers_ok(args.workers):
         problems.append(f"-n {args.workers}: not a number of worker processes (a whole number, or auto: one "
                         "per core)")
-    elif args.workers and not is_virtual(args.interface):
-        problems.append("-n: parallel workers each need their own in-process virtual bus; "
-                        f"--interface {args.interface} is one shared bus")
+    elif args.workers and not is_embedded(args.interface):
+        problems.append(f"-n: parallel workers each run their own embedded bus (--interface {EMBEDDED}, virtual "
+                        f"time); --interface {args.interface} is not it")
     options = check(resolve_bus_options, project, given_bus_options(args), codebook)
     problems.extend(validate_faults(args.fault, codebook))
     problems.extend(shard.check(args.shard, args.durations, project.path.parent))

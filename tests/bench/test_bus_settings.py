@@ -191,8 +191,8 @@ def test_bad_bus_table(tmp_path: Path, table: str, words: list[str]) -> None:
     assert str(config) in str(info.value) and all(w in str(info.value) for w in words), info.value
 
 
-def test_virtual_bus_ignores_bus_settings() -> None:
-    bus = open_bus("virtual", None, BusOptions(bitrate=125000, fd=True, data_bitrate=2000000))
+def test_embedded_bus_ignores_bus_settings() -> None:
+    bus = open_bus("embedded", None, BusOptions(bitrate=125000, fd=True, data_bitrate=2000000))
     try:
         assert isinstance(bus, VirtualTimeBus)
     finally:

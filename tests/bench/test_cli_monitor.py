@@ -140,7 +140,7 @@ def test_time_base_maps_the_host_clock_onto_frame_stamps() -> None:
 
 
 @pytest.mark.parametrize(("argv", "needle"), [
-    (["--interface", "virtual"], "in-process virtual bus"),
+    (["--interface", "embedded"], "embedded bus"),
     (["--duration", "-1"], "--duration"),
     (["--window", "nan"], "--window"),
 ])

@@ -79,7 +79,7 @@ def test_header_without_a_channel_names_only_the_interface(
     folder, _ = user_run
     html = (folder / "out" / "report.html").read_text(encoding="utf-8")
     header = re.search(r"<dt>Interface</dt><dd>(.*?)</dd>", html, re.S)
-    assert header is not None and "virtual" in header.group(1) and "channel" not in header.group(1)
+    assert header is not None and "embedded" in header.group(1) and "channel" not in header.group(1)
 
 
 def test_progress_counts_the_cases_with_workers(tmp_path: Path) -> None:
@@ -154,7 +154,7 @@ def test_pytest_only_options_are_handed_to_pytest_itself() -> None:
     args = build_parser().parse_args(["run", "-k", "pivot and not slow", "-n", "2", "--force"])
     handed = options.pytest_args(args, HANDED_TO_PYTEST)
     assert handed[-4:] == ["-k", "pivot and not slow", "-n", "2"]
-    assert handed[:2] == ["--bench-interface", "virtual"] and "--force" not in handed
+    assert handed[:2] == ["--bench-interface", "embedded"] and "--force" not in handed
 
 
 @pytest.mark.parametrize("command", ["plant", "monitor", "replay"])

@@ -336,12 +336,15 @@ def test_plant_duration_not_a_number(capsys: pytest.CaptureFixture[str]) -> None
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--interface", "virtual"], ["--interface virtual", "another process"]),
+    (["--interface", "embedded"], ["--interface embedded", "another process"]),
+    (["--interface", "virtual"], ["--interface virtual", "python-can's virtual bus", "another process"]),
+    (["--interface", "bench_virtual"], ["--interface bench_virtual", "renamed to embedded"]),
     (["--interface", "no_such_interface", "--channel", "x"], ["no_such_interface"]),
     (["--external", "BOGUS"], ["--external", "BOGUS", "nodes:"]),
     (["--external", "VCU,NOPE"], ["--external", "NOPE"]),
     (["--vehicle", "NOPE"], ["NOPE", "EV4WIS"]),
-], ids=["virtual", "unknown-interface", "unknown-node", "unknown-node-in-list", "unknown-vehicle"])
+], ids=["embedded", "python-can-virtual", "old-name", "unknown-interface", "unknown-node", "unknown-node-in-list",
+        "unknown-vehicle"])
 def test_plant_bad_values(capsys: pytest.CaptureFixture[str], argv: list[str], words: list[str]) -> None:
     assert main(["plant", *argv, "--duration", "0.1"]) == 2
     captured = capsys.readouterr()

@@ -344,7 +344,7 @@ def case(name: str, outcome: str, duts: list[str], reqs: list[str]) -> CaseResul
 
 
 def sample_run() -> RunResult:
-    run = RunResult(started="2026-01-01T00:00:00", interface="virtual", channel="", time_mode="virtual",
+    run = RunResult(started="2026-01-01T00:00:00", interface="embedded", channel="", time_mode="virtual",
                     external=["VCU"], requirements=catalogue())
     run.cases = [case("t_pass", "passed", ["VCU"], ["VCU-A-01", "COM-E2E-01"]),
                  case("t_fail", "failed", ["VCU"], ["VCU-A-02"]),
@@ -392,7 +392,7 @@ def test_parametrized_cases_take_one_line_and_failures_are_named() -> None:
 
 
 def test_no_contract_and_no_marks_means_no_section() -> None:
-    run = RunResult(started="x", interface="virtual", channel="", time_mode="virtual",
+    run = RunResult(started="x", interface="embedded", channel="", time_mode="virtual",
                     cases=[case("t", "passed", [], [])])
     assert build_conformance(run) is None and 'id="conformance"' not in render_html(run)
 

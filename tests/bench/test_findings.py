@@ -113,7 +113,7 @@ def test_findings_of_workers_merge(tmp_path: Path) -> None:
     """pytest-xdist parts: the same warning in two workers is one finding with the counts summed."""
     parts = []
     for worker, count in (("gw0", 2), ("gw1", 3)):
-        part = RunResult(started="2026-01-01T00:00:00", interface="virtual", channel="", time_mode="virtual",
+        part = RunResult(started="2026-01-01T00:00:00", interface="embedded", channel="", time_mode="virtual",
                          findings=[Finding("bench.station", "warning", "x", 0.5, count)])
         dump(part, tmp_path / f"{worker}.json")
         parts.append((worker, load(tmp_path / f"{worker}.json")))

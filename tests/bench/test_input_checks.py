@@ -1,4 +1,4 @@
-"""Bad input is stopped before the first case (issue 16, findings 1 and 2, and `--channel` on the virtual bus).
+"""Bad input is stopped before the first case (issue 16, findings 1 and 2, and `--channel` on the embedded bus).
 
 Each problem is one line naming the input (`bench run: error: ...`), exit 2, no traceback, and nothing of a
 run is written: no case runs, no report appears, an existing folder keeps its contents.
@@ -50,13 +50,13 @@ def test_plain_pytest_stops_once_when_the_bus_cannot_be_opened(tmp_path: Path) -
     assert "assert self.session is not None" not in output and "passed" not in output
 
 
-def test_channel_on_the_virtual_bus_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_channel_on_the_embedded_bus_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     [line] = errors(capsys, ["--channel", "vcan0", "--out", str(tmp_path / "out")])
-    assert line.startswith("bench run: error: --channel vcan0:") and "virtual bus" in line
-    assert main(["plant", "--channel", "x", "--interface", "virtual"]) == 2   # plant never takes the virtual bus
+    assert line.startswith("bench run: error: --channel vcan0:") and "embedded bus" in line
+    assert main(["plant", "--channel", "x", "--interface", "embedded"]) == 2   # plant never takes the embedded bus
 
 
-def test_channel_on_the_virtual_bus_in_plain_pytest(tmp_path: Path) -> None:
+def test_channel_on_the_embedded_bus_in_plain_pytest(tmp_path: Path) -> None:
     result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(MINI),
                              "--bench-channel", "vcan0", "--bench-out", str(tmp_path / "out")],
                             cwd=ROOT, capture_output=True, text=True, timeout=300)

@@ -93,7 +93,7 @@ def test_speed_and_direction(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("argv", "needle"), [
-    (["--interface", "virtual"], "in-process virtual bus"),
+    (["--interface", "embedded"], "embedded bus"),
     (["--speed", "0"], "--speed"),
     (["--speed", "inf"], "--speed"),
 ])

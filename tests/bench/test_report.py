@@ -56,7 +56,7 @@ def make_run(mcap: str = f"logs/run {QUOTE}.mcap") -> RunResult:
     skipped = CaseResult(nodeid="testcases/test_abs.py::test_split_mu", name="test_split_mu",
                          outcome="skipped", message="needs a real ECU")
     return RunResult(
-        started="2025-03-01T10:00:00+01:00", interface="virtual", channel=f"vcan0 {SCRIPT}",
+        started="2025-03-01T10:00:00+01:00", interface="embedded", channel=f"vcan0 {SCRIPT}",
         time_mode="virtual", external=[f"ECU {IMG}"], cases=[passed, failed, skipped],
         mcap_path=mcap, wall_time=3.5, sim_time=8.0, frames=12000,
         invalid_frames=3, tables=[Table("run figures", ["k", "v"], [["frames", "12000"]])],
@@ -249,7 +249,7 @@ def test_bad_data_does_not_cost_the_report(tmp_path: Path, monkeypatch: pytest.M
     case = CaseResult("t.py::t", "t", "passed", plots=[
         Plot("inf", "t", "v", [Series("s", [0.0, 1.0, 2.0], [0.0, inf, 1.0]),
                                Series("short", [0.0, 1.0, 2.0], [1.0])])])
-    run = RunResult("2025-01-01T00:00:00", "virtual", "vcan0", "virtual", cases=[case])
+    run = RunResult("2025-01-01T00:00:00", "embedded", "vcan0", "virtual", cases=[case])
     assert write_html(run, tmp_path / "a.html").read_text(encoding="utf-8").count("<svg") == 1
 
     def boom(self: Plotter, plot: Plot, prefix: str = "p", spans: object = None) -> None:

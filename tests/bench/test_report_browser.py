@@ -117,7 +117,7 @@ def hostile_run() -> RunResult:
     )
     ok = CaseResult(nodeid="testcases/test_x.py::test_b", name="test_b", outcome="passed",
                     steps=[Step("fine", 1.0, 1.0, "±0.1", "pass", 0.1)])
-    return RunResult(started="2025-03-01T10:00:00", interface="virtual", channel="vcan0",
+    return RunResult(started="2025-03-01T10:00:00", interface="embedded", channel="vcan0",
                      time_mode="virtual", external=[IMG], cases=[case, ok], frames=10,
                      mcap_path=f'run" onmouseover="{JS}.mcap')
 

@@ -44,7 +44,7 @@ def _campaign() -> RunResult:
               for k in range(3)]
     requirements = [RequirementInfo("VCU-MODE-01", "Modes", "docs/contract/vcu.md", 10),
                     RequirementInfo("SBW-CTL-01", "Control", "docs/contract/sbw.md", 20)]
-    return RunResult("2026-11-27T10:00:00", "virtual", "", "virtual", cases=[*cases, failing], tables=tables,
+    return RunResult("2026-11-27T10:00:00", "embedded", "", "virtual", cases=[*cases, failing], tables=tables,
                      requirements=requirements, frames=724330, wall_time=28.4, sim_time=476.3)
 
 

@@ -28,7 +28,7 @@ def _run() -> RunResult:
                                  x0=10.0)])
     broken = CaseResult("testcases/test_y.py::test_broken", "test_broken", "error",
                         message="Traceback ...\nBenchError: the plant did not acknowledge scenario 3")
-    return RunResult("2026-01-01T00:00:00", "virtual", "", "virtual", cases=[*ok[:30], bad, *ok[30:], broken],
+    return RunResult("2026-01-01T00:00:00", "embedded", "", "virtual", cases=[*ok[:30], bad, *ok[30:], broken],
                      faults=list(bad.faults))
 
 

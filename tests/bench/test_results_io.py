@@ -35,7 +35,7 @@ def _run() -> RunResult:
                       plots=[plot], tables=[Table("t", ["a", "b"], [["1", "2"]])], notes=["n"], message="m",
                       duts=["VCU"], reqs=["VCU-FLT-03"], faults=[fault], invalid_frames=2,
                       invalid=[["WHL_Status_FL", "E2E counter", "2"]])
-    run = RunResult("2026-11-24T21:00:00+00:00", "virtual", "", "virtual", external=["SBW"], cases=[case],
+    run = RunResult("2026-11-24T21:00:00+00:00", "embedded", "", "virtual", external=["SBW"], cases=[case],
                     mcap_path="run-gw0.mcap", wall_time=9.5, sim_time=134.8, frames=269504,
                     requirements=[RequirementInfo("VCU-FLT-03", "Priority between faults", "docs/contract/vcu.md", 40)],
                     deselected=[CaseRef("t.py::test_b", "test_b", ["ABS"], [])], faults=[fault],

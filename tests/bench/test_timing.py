@@ -214,7 +214,7 @@ def test_tables_reach_the_html_report(codebook: Codebook) -> None:
     assert cycle.rows[1][3] == "100"
     assert latency_.rows[0][2:12] == ["0.05", "1", "1", "43.00", "43.00", "43.00", "43.00", "0", "1", "0"]
     assert "Angel" in latency_.rows[1][-1]
-    run = RunResult(started="2026-01-01T00:00:00", interface="virtual", channel="", time_mode="virtual",
+    run = RunResult(started="2026-01-01T00:00:00", interface="embedded", channel="", time_mode="virtual",
                     tables=tables)
     page = render_html(run)
     assert "Timing: cycle time per message" in page and "Timing: command → status latency" in page

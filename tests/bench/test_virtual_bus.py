@@ -1,6 +1,7 @@
-"""bench_virtual (bench.bus.VirtualTimeBus) where python-can's own tests do not look (scripts/python-can-suite
-runs those): recv(timeout) sleeps instead of polling, a dropped bus is collected and stops receiving, each
-receiver gets its own copy with its own channel, a shut-down bus raises, and the sender's (virtual) time is kept."""
+"""The embedded bus (`embedded`, bench.bus.VirtualTimeBus) where python-can's own tests do not look
+(scripts/python-can-suite runs those): recv(timeout) sleeps instead of polling, a dropped bus is collected and
+stops receiving, each receiver gets its own copy with its own channel, a shut-down bus raises, and the sender's
+(virtual) time is kept."""
 
 from __future__ import annotations
 

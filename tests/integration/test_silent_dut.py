@@ -3,7 +3,7 @@ naming the silent message ("no SBW_HandWheel from the external SBW in 2.0 s"), a
 
 Before: `bench run --external SBW --dut SBW` ended every SBW case in a traceback of the case's arithmetic on empty
 arrays (testcases/sbw/oracle.py:130: IndexError), and `--external ABS --dut ABS` passed the noise sweep of an ABS
-that sent nothing. Here nothing plays the node: the in-process virtual bus, the node declared external.
+that sent nothing. Here nothing plays the node: the embedded bus, the node declared external.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Loaded by scripts/python-can-suite (`-p tests.pycan_compat.plugin`). The test files stay as python-can ships
 them: they open buses by the interface name "virtual", which this plugin points at the bench's
-`bench_virtual` (bench.bus:VirtualTimeBus); python-can's own virtual bus cannot be opened at all while it runs,
+`embedded` (bench.bus:VirtualTimeBus); python-can's own virtual bus cannot be opened at all while it runs,
 so a test that silently ran on it would fail, not pass. The `.mcap` format comes in through
 mcap_format.py (a ReaderWriterTest subclass, as python-can declares its formats).
 """
@@ -14,22 +14,22 @@ from typing import Any
 import pytest
 
 SWAPPED = "virtual"
-BENCH_INTERFACE = "bench_virtual"
+BENCH_INTERFACE = "embedded"
 
 #: The one list of skips: test id (file::Class::test) -> why the bench differs (one line, printed by -rs).
 SKIPS: dict[str, str] = {
     "back2back_test.py::Back2BackTestCase::test_timestamp_is_absolute":
-        "bench_virtual keeps the sender's (virtual) timestamp; it never stamps the wall clock",
+        "the embedded bus keeps the sender's (virtual) timestamp; it never stamps the wall clock",
     "back2back_test.py::TestThreadSafeBus::test_timestamp_is_absolute":
-        "bench_virtual keeps the sender's (virtual) timestamp; it never stamps the wall clock",
+        "the embedded bus keeps the sender's (virtual) timestamp; it never stamps the wall clock",
     "back2back_test.py::Back2BackTestCase::test_sub_second_timestamp_resolution":
-        "bench_virtual keeps the sender's (virtual) timestamp; it never stamps the wall clock",
+        "the embedded bus keeps the sender's (virtual) timestamp; it never stamps the wall clock",
     "back2back_test.py::TestThreadSafeBus::test_sub_second_timestamp_resolution":
-        "bench_virtual keeps the sender's (virtual) timestamp; it never stamps the wall clock",
+        "the embedded bus keeps the sender's (virtual) timestamp; it never stamps the wall clock",
     "back2back_test.py::Back2BackTestCase::test_timestamp":
-        "bench_virtual keeps the sender's (virtual) timestamp; it never stamps the wall clock",
+        "the embedded bus keeps the sender's (virtual) timestamp; it never stamps the wall clock",
     "back2back_test.py::TestThreadSafeBus::test_timestamp":
-        "bench_virtual keeps the sender's (virtual) timestamp; it never stamps the wall clock",
+        "the embedded bus keeps the sender's (virtual) timestamp; it never stamps the wall clock",
 }
 
 #: Test files whose classes other than these are python-can's own interfaces (socketcan, udp_multicast, etas):
@@ -39,7 +39,7 @@ BENCH_CLASSES = {"back2back_test.py": {"Back2BackTestCase", "TestThreadSafeBus"}
 
 def _not_the_bench(*args: object, **kwargs: object) -> Any:
     """Stands in for python-can's virtual bus class while the plugin runs: opening it is an error."""
-    raise AssertionError("python-can's own virtual bus was opened; the swap to bench_virtual missed it")
+    raise AssertionError("python-can's own virtual bus was opened; the swap to the embedded bus missed it")
 
 
 opened = 0   # bench buses opened during the run: none means the swap did not happen
