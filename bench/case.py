@@ -245,16 +245,17 @@ class Case:
         nor simulated in this process (`bench plant` in another process, another ECU), on the receive stamps of
         their valid frames (the runner's history): a frame later than its cycle by more than LATE_CYCLES cycles
         leaves its receivers (the DUT among them) a timeout that the DUT did not cause. Such a gap counts against
-        its bound only when a message of another node gapped at the same time (a stalled process: `bench plant`
-        plays many nodes); one node silent alone is taken as meant (a sensor fault the case asked the plant for)
-        and shown as a figure only. The worst per message."""
+        its bound only when another message gapped past its own bound at the same time, of any node (a stalled
+        process: `bench plant` plays many nodes, and a stall gaps every message it sends, several of one node
+        among them: the plant's 5 ms bench I/O); one message silent alone is taken as meant (a fault the case
+        asked the plant for) and shown as a figure only. The worst per message."""
         duts = set(self.result.duts)
         if not duts:
             return []
         session = self.session
         own = set(session.codebook.nodes) - session.external   # simulated here: timed as they are sent
         worst: dict[str, Late] = {}
-        over: list[tuple[float, float, frozenset[str], Late]] = []   # gaps past their bound: (from, to, nodes, figure)
+        over: list[tuple[float, float, str, Late]] = []   # gaps past their bound: (from, to, message, figure)
         for name, state in self._monitor.by_name.items():
             cycle, senders = state.codec.cycle_time, frozenset(state.codec.senders)
             if not cycle or not senders or senders & duts or senders & own:
@@ -269,11 +270,10 @@ class Case:
             if lates[i] > LATE_FLOOR:
                 worst[name] = Late(what, float(lates[i]), float(times[i]) + cycle, math.inf)   # a figure, first
             for j in np.nonzero(lates > bound)[0][:MAX_INPUT_GAPS]:
-                over.append((float(times[j]), float(times[j + 1]), senders,
+                over.append((float(times[j]), float(times[j + 1]), name,
                              Late(what, float(lates[j]), float(times[j]) + cycle, bound)))
-        for t0, t1, nodes, late in over:
-            if any(u0 < t1 and t0 < u1 and not (nodes & others) for u0, u1, others, _ in over):
-                name = late.what.split(" ", 2)[1]
+        for t0, t1, name, late in over:
+            if any(u0 < t1 and t0 < u1 and other != name for u0, u1, other, _ in over):
                 current = worst[name]
                 if math.isinf(current.bound) or late.late > current.late:
                     worst[name] = late

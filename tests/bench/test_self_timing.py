@@ -225,6 +225,30 @@ def test_a_stalled_process_of_other_nodes_is_no_failure_of_the_dut(
     assert "WHL_Status_FL" not in judged.bench_verdict()
 
 
+def test_a_stalled_plant_gapping_only_its_own_io_is_no_failure_of_the_dut(
+        realtime_runner: tuple[BenchSession, TimingCollector]) -> None:
+    """`bench plant` stalled 23.3 ms: its three 5 ms SBW I/O messages (all from PLANT) came 18.3 ms late, past
+    LATE_CYCLES x 5 ms = 10 ms (and past the SBW's 15 ms I/O timeout), while its 10 ms messages stayed within
+    their 20 ms bound. One node, three messages at once: a stall, so an SBW case that failed under it is
+    inconclusive, not failed (it was failed before: "one node silent alone" took the stall as meant)."""
+    session, _ = realtime_runner
+    case = _case(session, duts=["SBW"])
+    restbus = Restbus(session.codebook, {"PLANT"})
+    cycle, stall = 0.005, 0.0233
+    for k, message in enumerate(("IO_SbwHandWheel", "IO_SbwPinion", "IO_SbwCurrents")):
+        codec = session.codebook[message]
+        assert codec.cycle_time == cycle and tuple(codec.senders) == ("PLANT",)
+        slot = restbus.periodic[message]
+        times = [case.start + 0.001 * k + cycle * i for i in range(1, 11)]
+        times += [times[-1] + stall + cycle * i for i in range(10)]
+        for t in times:
+            session.monitor.on_frame(t, codec.frame_id, restbus.build(slot), "rx")
+    line = case.bench_verdict()
+    bound = LATE_CYCLES * cycle
+    assert line.startswith(f"a sender other than the DUT late by {(stall - cycle) * 1000:.1f} ms on input IO_Sbw"), line
+    assert f"(bound {bound * 1000:g} ms)" in line and "and 2 more" in line, line
+
+
 def test_one_node_silent_alone_is_taken_as_meant(realtime_runner: tuple[BenchSession, TimingCollector]) -> None:
     """One node's message silent while every other sender goes on (a sensor fault the case asked the plant for)
     is a figure on the record, not a reason to call the case inconclusive."""
