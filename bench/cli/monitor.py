@@ -6,17 +6,18 @@ counter, length and range errors) and the timeout state; above it the totals (fr
 unknown identifiers). Every frame goes through `bench.monitor.Monitor`, the same checks as a bench run.
 
 Frame times are the interface's receive timestamps (the kernel's on socketcan and udp_multicast), so the
-measured cycle times do not depend on when this process gets to read or draw; a receive thread only
-queues frames. Works on any python-can interface; it only listens.
+measured cycle times do not depend on when this process gets to read or draw; python-can's `Notifier` reads
+the bus in its own thread and only queues frames (a `can.BufferedReader`). Works on any python-can interface;
+it only listens.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import threading
 import time
 from collections import Counter, deque
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -91,25 +92,45 @@ class TimeBase:
 
 
 # -- receiving -------------------------------------------------------------------------------------------
-class Receiver(threading.Thread):
-    """Reads the bus and queues (host time, message); nothing else, so it keeps up while the screen is drawn."""
+class _Arrivals(can.Listener):
+    """The host time each frame arrived (the Notifier calls it just before the BufferedReader, in its thread), and
+    the first error of the bus."""
 
-    def __init__(self, bus: can.BusABC, clock: Any) -> None:
-        super().__init__(name="bench-monitor-rx", daemon=True)
-        self.bus = bus
+    def __init__(self, clock: Callable[[], float]) -> None:
         self.clock = clock
-        self.queue: deque[tuple[float, can.Message]] = deque()
-        self.stopping = threading.Event()
-        self.error: BaseException | None = None
+        self.times: deque[float] = deque()
+        self.error: Exception | None = None
 
-    def run(self) -> None:
-        try:
-            while not self.stopping.is_set():
-                msg = self.bus.recv(0.1)
-                if msg is not None:
-                    self.queue.append((self.clock(), msg))
-        except Exception as exc:  # noqa: BLE001 - reported by the main thread as a clear error
+    def on_message_received(self, msg: can.Message) -> None:
+        self.times.append(self.clock())
+
+    def on_error(self, exc: Exception) -> None:
+        if self.error is None:
             self.error = exc
+        time.sleep(0.05)   # the Notifier goes on reading after a handled error: no busy loop until the view stops
+
+
+class Reception:
+    """The bus read by python-can's `Notifier` in its thread into a `can.BufferedReader`, each frame with the host
+    time it arrived; nothing else happens there, so it keeps up while the screen is drawn."""
+
+    def __init__(self, bus: can.BusABC, clock: Callable[[], float], source: str) -> None:
+        self.source = source
+        self.reader = can.BufferedReader()
+        self._arrivals = _Arrivals(clock)
+        # the arrival time first: the frame is in the reader only once its time is in the list
+        self.notifier = can.Notifier(bus, [self._arrivals, self.reader], timeout=0.1)
+
+    def drain(self) -> Iterator[tuple[float, can.Message]]:
+        """(host time, message) of every frame received so far; MonitorError once the bus failed."""
+        times = self._arrivals.times
+        while (msg := self.reader.get_message(0)) is not None:
+            yield times.popleft(), msg
+        if self._arrivals.error is not None:
+            raise MonitorError(f"{self.source}: receiving failed: {self._arrivals.error}")
+
+    def stop(self) -> None:
+        self.notifier.stop(timeout=1.0)
 
 
 class LiveMonitor:
@@ -273,19 +294,15 @@ def run(args: argparse.Namespace) -> int:
     def host() -> float:
         return time.monotonic() - host0
 
-    receiver = Receiver(bus, host)
-    receiver.start()
+    reception = Reception(bus, host, f"{args.interface} {args.channel or ''}".strip())
     console = Console()
     end = args.duration if args.duration is not None else math.inf
     try:
         with Live(render(live, 0.0, source, 0.0), console=console, auto_refresh=False,
                   vertical_overflow="crop") as screen:
             while True:
-                queue = receiver.queue
-                while queue:
-                    live.feed(*queue.popleft())
-                if receiver.error is not None:
-                    raise MonitorError(f"{args.interface} {args.channel or ''}: receiving failed: {receiver.error}")
+                for host_time, msg in reception.drain():
+                    live.feed(host_time, msg)
                 elapsed = host()
                 now = live.tick(elapsed)
                 screen.update(render(live, now, source, elapsed), refresh=True)
@@ -295,7 +312,6 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        receiver.stopping.set()
-        receiver.join(timeout=1.0)
+        reception.stop()
         bus.shutdown()
     return 0

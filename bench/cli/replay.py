@@ -2,8 +2,9 @@
 
 Why: to feed a real ECU or another bench process exactly what a run saw (a fault found in the field,
 a campaign's stimulus) without the plant. Every raw frame is sent as logged, invalid ones included
-(a replayed fault must stay a fault); error frames cannot be sent and are skipped. Frame i leaves at
-(t_i - t_0) / speed after the first, t being the log time; a frame that is late (the host was busy)
+(a replayed fault must stay a fault), with its CAN FD flags; error frames cannot be sent and are skipped.
+The log is read through python-can's registered ".mcap" reader (bench.log.canio) and timed by python-can's
+`MessageSync`: frame i leaves at (t_i - t_0) / speed after the start; a frame that is late (the host was busy)
 goes at once, so delays never add up. Reading is streamed, so a log of any length (or a killed run's)
 starts at once.
 """
@@ -13,7 +14,8 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +27,8 @@ from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 from bench.cli.common import add_bus_options, bus_options_for, reject_in_process
 from bench.config import load_config
 from bench.errors import ConfigError, LogError
-from bench.log.logread import MAGIC, read_frames
+from bench.log.canio import log_reader
+from bench.log.format import MAGIC
 
 DIRECTIONS = ("tx", "rx", "all")
 
@@ -42,6 +45,13 @@ def register(sub: Any) -> None:
     parser.set_defaults(handler=run)
 
 
+@dataclass
+class Counts:
+    sent: int = 0
+    skipped: int = 0     # error frames: they cannot be sent
+    failed: int = 0      # a full queue or bus-off
+
+
 def run(args: argparse.Namespace) -> int:
     console = Console(stderr=True, soft_wrap=True)
     reject_in_process(args.interface)
@@ -49,49 +59,64 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--speed: {args.speed} is not a positive number")
     project = load_config(Path(args.config) if args.config else None)
     options, _ = bus_options_for(project, args)
-    frames = read_frames(args.file)
-    first = next(frames, None)                 # a missing or non-MCAP file fails here, before the bus opens
-    if first is None:
-        cut = "" if log_is_complete(args.file) else " (the log ends early: a killed run's, or cut)"
-        raise LogError(f"{args.file}: no frames to replay{cut}")
-    bus = open_bus(args.interface, args.channel, options)
-    sent = skipped = failed = 0
+    reader = log_reader(args.file)             # a missing or non-MCAP file fails here, before the bus opens
+    counts = Counts()
     wall0 = time.perf_counter()
     interrupted = False
     try:
-        t0: float | None = None
-        for frame in _chain(first, frames):
-            if args.direction != "all" and frame.direction != args.direction:
-                continue
-            if frame.is_error:
-                skipped += 1
-                continue
-            if t0 is None:
-                t0, wall0 = frame.t, time.perf_counter()
-            _wait_until(wall0 + (frame.t - t0) / args.speed)
-            message = can.Message(arbitration_id=frame.arbitration_id, data=frame.data, dlc=len(frame.data),
-                                  is_extended_id=frame.is_extended, is_remote_frame=frame.is_remote,
-                                  is_fd=len(frame.data) > 8, check=False)
-            try:
-                bus.send(message)
-                sent += 1
-            except can.CanError:
-                failed += 1            # a full queue or bus-off: counted and reported, the replay goes on
-    except KeyboardInterrupt:
-        interrupted = True
+        messages = iter(reader)
+        first = next(messages, None)
+        if first is None:
+            cut = "" if log_is_complete(args.file) else " (the log ends early: a killed run's, or cut)"
+            raise LogError(f"{args.file}: no frames to replay{cut}")
+        bus = open_bus(args.interface, args.channel, options)
+        try:
+            wall0 = time.perf_counter()
+            play(_chain(first, messages), bus, args.speed, args.direction, counts)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            bus.shutdown()
     finally:
-        bus.shutdown()
+        reader.stop()
     took = time.perf_counter() - wall0
     state = "interrupted" if interrupted else "done"
-    extra = f", {skipped} error frames skipped" if skipped else ""
-    extra += f", [red]{failed} failed to send[/]" if failed else ""
-    console.print(f"bench replay: {state}, sent {sent} frames in {took:.2f} s{extra}", highlight=False)
+    extra = f", {counts.skipped} error frames skipped" if counts.skipped else ""
+    extra += f", [red]{counts.failed} failed to send[/]" if counts.failed else ""
+    console.print(f"bench replay: {state}, sent {counts.sent} frames in {took:.2f} s{extra}", highlight=False)
     if not interrupted and not log_is_complete(args.file):
         console.print(f"[yellow]bench replay: warning:[/] {escape(str(args.file))} ends early (no footer: a killed "
                       "run's log, or cut); its frames up to the cut were sent", highlight=False)
     if interrupted:
         return 130
-    return 1 if failed else 0
+    return 1 if counts.failed else 0
+
+
+def play(messages: Iterable[can.Message], bus: can.BusABC, speed: float, direction: str, counts: Counts) -> None:
+    """Send the messages of a log (as python-can's readers give them) with their recorded timing, `speed` times
+    as fast, only those of `direction` (tx, rx or all); a late frame goes at once."""
+    # skip=inf: MessageSync's default shortens a pause longer than 60 s; a replay keeps every pause
+    for message in can.MessageSync(_sendable(messages, speed, direction, counts), timestamps=True, skip=math.inf):
+        try:
+            bus.send(message)
+            counts.sent += 1
+        except can.CanError:
+            counts.failed += 1            # a full queue or bus-off: counted and reported, the replay goes on
+
+
+def _sendable(messages: Iterable[can.Message], speed: float, direction: str, counts: Counts
+              ) -> Iterator[can.Message]:
+    """The messages to send, their times divided by `speed`, their channel the bus's own (python-can's socketcan
+    would send on the logged channel's name)."""
+    for message in messages:
+        if direction != "all" and ("rx" if message.is_rx else "tx") != direction:
+            continue
+        if message.is_error_frame:
+            counts.skipped += 1
+            continue
+        message.timestamp /= speed
+        message.channel = None
+        yield message
 
 
 def log_is_complete(path: Path) -> bool:
@@ -108,15 +133,6 @@ def log_is_complete(path: Path) -> bool:
         return False
 
 
-def _chain(first: Any, rest: Iterator[Any]) -> Iterator[Any]:
-    if first is not None:
-        yield first
+def _chain(first: can.Message, rest: Iterator[can.Message]) -> Iterator[can.Message]:
+    yield first
     yield from rest
-
-
-def _wait_until(deadline: float) -> None:
-    """Sleep until `deadline` (perf_counter time). No busy wait: the host is shared with the plant, and
-    the kernel's sleep overshoot (~0.1 ms) is small against CAN cycle times."""
-    remaining = deadline - time.perf_counter()
-    if remaining > 0:
-        time.sleep(remaining)

@@ -41,7 +41,9 @@ NO_CHANNEL = ""       # the channel label of frames whose bus gives none (read b
 
 
 def frame_to_message(frame: LoggedFrame) -> can.Message:
-    """A logged frame as a python-can message: log time, direction (is_rx), flags and channel kept."""
+    """A logged frame as a python-can message: log time, direction (is_rx), flags (remote, error, CAN FD, BRS,
+    ESI) and channel kept. The one conversion of the bench: the .mcap reader, `bench log export` and
+    `bench replay` (through the reader) all give frames this way."""
     channel: Any = frame.channel_number if frame.channel_number is not None else (frame.channel or None)
     return can.Message(   # a remote frame's record holds as many (zero) bytes as it requests: its DLC, no data
         timestamp=frame.t, arbitration_id=frame.arbitration_id, data=b"" if frame.is_remote else frame.data,
@@ -146,6 +148,20 @@ class MCAPWriter(BinaryIOMessageWriter):
     def file_size(self) -> int:
         """Bytes on disk so far (python-can's size-rotating logger asks); the open chunk is not counted."""
         return self.file.tell()
+
+
+def log_reader(path: str | os.PathLike[str]) -> MCAPReader:
+    """A run log's reader: python-can's one registered for ".mcap", so what `bench replay` reads is what
+    `can.LogReader` and `python -m can.player` read; a file named otherwise is read as a run log all the same
+    (MCAPReader). A missing or foreign file is a LogError here."""
+    if Path(path).suffix.lower() == ".mcap":
+        reader = can.LogReader(path)
+        if not isinstance(reader, MCAPReader):   # another package registered ".mcap": not a bench log reader
+            reader.stop()
+            raise LogError(f"{path}: python-can reads .mcap with {type(reader).__name__}, not the bench's "
+                           "MCAPReader (bench.log.canio); is the bench installed (pip install -e .)?")
+        return reader
+    return MCAPReader(path)
 
 
 class MCAPReader(BinaryIOMessageReader):

@@ -185,3 +185,50 @@ def test_the_view_shows_e2e_errors_unknown_ids_and_timeouts(codebook: Codebook) 
     console.print(render(live, live.tick(1.5), "udp_multicast 239.1.2.3", 1.5))   # 0.5 s of silence: timed out
     row = {r["Message"]: r for r in table_rows(console.export_text())}["WHL_Status_FL"]
     assert row["Timeout"].startswith("TIMEOUT")
+
+
+def test_reception_queues_each_frame_with_its_arrival_time() -> None:
+    """`bench monitor` reads the bus through python-can's Notifier into a BufferedReader: every frame comes out, in
+    order, with the host time it arrived (taken in the Notifier's thread, not when the view drains the queue)."""
+    import can
+
+    from bench.cli.monitor import Reception
+
+    channel = f"monitor-{random.randrange(1 << 30)}"
+    clock = iter(range(1, 1000))
+    with can.Bus(interface="virtual", channel=channel) as sender, can.Bus(interface="virtual", channel=channel) as bus:
+        reception = Reception(bus, lambda: float(next(clock)), "virtual test")
+        try:
+            for i in range(5):
+                sender.send(can.Message(arbitration_id=0x100 + i, data=[i], is_extended_id=False))
+            got: list[tuple[float, can.Message]] = []
+            deadline = time.monotonic() + 5.0
+            while len(got) < 5 and time.monotonic() < deadline:
+                got += reception.drain()
+                time.sleep(0.01)
+        finally:
+            reception.stop()
+    assert [msg.arbitration_id for _, msg in got] == [0x100 + i for i in range(5)]
+    assert [host for host, _ in got] == [1.0, 2.0, 3.0, 4.0, 5.0]   # one clock read per frame, in arrival order
+
+
+def test_a_failing_bus_is_one_monitor_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A bus that fails while read (python-can's virtual bus, its recv made to raise) ends the view with one line."""
+    import can
+
+    from bench.cli.monitor import MonitorError, Reception
+
+    def pulled(timeout: float | None = None) -> can.Message | None:
+        raise can.CanOperationError("cable pulled")
+
+    with can.Bus(interface="virtual", channel=f"monitor-{random.randrange(1 << 30)}") as bus:
+        monkeypatch.setattr(bus, "recv", pulled)
+        reception = Reception(bus, time.monotonic, "broken0")
+        try:
+            deadline = time.monotonic() + 5.0
+            with pytest.raises(MonitorError, match=r"^broken0: receiving failed: cable pulled$"):
+                while time.monotonic() < deadline:
+                    list(reception.drain())
+                    time.sleep(0.01)
+        finally:
+            reception.stop()

@@ -109,3 +109,41 @@ def test_bad_options_are_one_line_errors(tmp_path: Path, argv: list[str], needle
 def test_missing_log_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["replay", str(tmp_path / "none.mcap"), "--channel", group()]) == 2
     assert "none.mcap" in capsys.readouterr().err
+
+
+def test_replay_keeps_the_can_fd_flags(tmp_path: Path) -> None:
+    """A replayed frame is the logged one: CAN FD (also at 8 bytes or fewer), BRS, ESI, a remote frame's length,
+    extended ids; not a classic frame made of every frame of 8 bytes or fewer (issue 28). Played through
+    bench replay's loop onto python-can's own virtual bus, in process, and received on a second handle."""
+    import can
+
+    from bench.cli.replay import Counts, play
+    from bench.log.canio import log_reader
+
+    logged = [   # (id, data, extended, fd, brs, esi, remote dlc)
+        (0x101, bytes(range(12)), False, True, True, False, None),
+        (0x102, bytes([1, 2, 3]), False, True, False, True, None),      # FD at 3 bytes
+        (0x1ABCDE, bytes(range(64)), True, True, True, True, None),
+        (0x103, bytes([9] * 8), False, False, False, False, None),      # classic
+        (0x104, b"", False, False, False, False, 6),                     # remote, asks for 6 bytes
+    ]
+    log = tmp_path / "fd.mcap"
+    with Recorder(log, []) as recorder:
+        for i, (frame_id, data, extended, fd, brs, esi, dlc) in enumerate(logged):
+            recorder.frame(1.0 + i * 0.001, frame_id, data, channel="can0", direction="tx", is_extended=extended,
+                           is_fd=fd, bitrate_switch=brs, error_state_indicator=esi, is_remote=dlc is not None,
+                           dlc=dlc)
+    channel = f"replay-fd-{random.randrange(1 << 30)}"
+    with can.Bus(interface="virtual", channel=channel, receive_own_messages=False) as sender, \
+            can.Bus(interface="virtual", channel=channel) as receiver:
+        counts = Counts()
+        reader = log_reader(log)
+        try:
+            play(reader, sender, 100.0, "all", counts)
+        finally:
+            reader.stop()
+        got = [receiver.recv(1.0) for _ in logged]
+    assert counts.sent == len(logged) and counts.failed == counts.skipped == 0
+    assert all(m is not None for m in got)
+    assert [(m.arbitration_id, bytes(m.data), m.is_extended_id, m.is_fd, m.bitrate_switch, m.error_state_indicator,
+             m.dlc if m.is_remote_frame else None) for m in got if m is not None] == logged
