@@ -12,9 +12,10 @@ SBW_Pinion.SbwFault value table of dbc/chassis.dbc; issues 4, 26).
   - hand-wheel sensor offset 1000° (beyond ±900°): HANDWHEEL_RANGE (SBW-FLT-01);
   - hand-wheel sensor stuck while the robot turns the hand wheel 15° on: HANDWHEEL_STUCK (SBW-FLT-02);
   - pinion sensor offset 30° (more than 20° from the actuator's rotor angle): PINION_RANGE (SBW-FLT-03).
-  Each: SbwFault within 0.05 s of the condition, held while it lasts, the substitute on the bus within 0.1° of
-  the truth, the pinion target = the hand wheel (no feedback), steering on (true |θ_h − θ_p| ≤ 0.5°), SbwFault 0
-  once the sensor is healthy. The cases select the reference SBW's YAW_RATE mode (BENCH_SbwConfig, which a real
+  Each: SbwFault within 0.05 s of the condition, held while it lasts, the substitute on the bus within
+  substitute_error_max of the truth (0.1007°, its coding chain), the pinion target = the hand wheel (no
+  feedback; one LSB, counted in whole LSB), steering on (true |θ_h − θ_p| ≤ 0.5°), SbwFault 0 once the sensor
+  is healthy. The cases select the reference SBW's YAW_RATE mode (BENCH_SbwConfig, which a real
   SBW ignores) so that "feedback off" is a real check on the reference; a real SBW without feedback passes it
   trivially.
 - IMU_Motion dropped for 300 ms in YAW_RATE mode: the bench times it out; the ECU flags INPUT_TIMEOUT, the
@@ -37,6 +38,7 @@ HAND_WHEEL = 20.0      # deg held during the faults
 CONTRACT_RANGE = 900.0  # deg, SBW_HandWheel.HandWheelAngle range (dbc/chassis.dbc)
 STUCK_TURN = 15.0      # deg the robot turns the hand wheel on while its sensor is stuck (> stuck_motion)
 PINION_OFFSET = 30.0   # deg added to the pinion sensor (> sensor_plausibility, within the ±600° range)
+ANGLE_LSB = 0.1        # deg, resolution of SBW_HandWheel.HandWheelAngle and SBW_Pinion.PinionAngle(Target)
 
 
 def _first_time(t: np.ndarray, mask: np.ndarray) -> float:
@@ -139,13 +141,16 @@ def _sensor_fault(bench, lim: Limits, *, fault: str, offset: float, code: str, c
     else:
         substitute = float(np.max(np.abs(hw_bus[window] - np.interp(th[window], tt, hw_true))))
         what = "SBW_HandWheel.HandWheelAngle = column estimate of the true hand wheel (max error)"
-    bench.expect(f"reaction: {what}", substitute, 0.0, abs_tol=0.1, unit="deg",
-                 detail="one LSB of the angle (0.1°)")
+    lim.at_most(f"reaction: {what}", "substitute_error_max", substitute,
+                detail="the coding chain: output, I/O channel, torsion bar and truth, half an LSB each")
     tp, target = signal(bench, "SBW_Pinion", "PinionAngleTarget", t_inject)
     in_fault = (tp > t_from) & (tp <= t_to)
-    ratio_error = float(np.max(np.abs(target[in_fault] - np.interp(tp[in_fault], th, hw_bus))))
+    # both on the SBW's 0.1° grid: the difference in whole LSB (20.1 − 20.0 is 0.10000000000000142 in floats)
+    lsb_diff = np.round(np.abs(target[in_fault] - np.interp(tp[in_fault], th, hw_bus)) / ANGLE_LSB, 6)
+    ratio_error = float(np.max(lsb_diff)) * ANGLE_LSB
     bench.expect("reaction: no feedback, pinion target = hand wheel (max difference)", ratio_error, 0.0,
-                 abs_tol=0.1, unit="deg", detail="ratio 1 of the mechanical car; one LSB of the angles")
+                 abs_tol=ANGLE_LSB, unit="deg", detail="ratio 1 of the mechanical car; one LSB of the angles, "
+                                                       "counted in whole LSB")
     window_true = (tt > t_from) & (tt <= t_to)
     lim.at_most("reaction: steering continues, max |hand wheel − pinion| (truth)", "fault_tracking_error_max",
                 float(np.max(np.abs(hw_true[window_true] - pin_true[window_true]))))
