@@ -249,7 +249,9 @@ class ActuatorEmulation:
 
     Steering actuator: a position servo with the request's rate as feed-forward. The k-th frame, applied at t_k,
     gives θ_k and w_k = (θ_k − θ_{k−1}) / (n · IO_CYCLE) (n the AliveCounter steps between the two frames; w = 0
-    for the first frame after none or a timeout); the reference is r = θ_k + w_k · min(t − t_k, IO_CYCLE) with
+    for the first frame after none or a timeout): the SBW sends one frame per 5 ms I/O sample, so the counter,
+    not the receive times, gives the rate, and bunched or late frames keep it right (several in one tick: the
+    last is applied; a late one: the reference holds after IO_CYCLE of extrapolation); the reference is r = θ_k + w_k · min(t − t_k, IO_CYCLE) with
     rate ṙ. The servo imposes θ̈_p = ω_n² (r − θ_p) + 2 ζ ω_n (ṙ − θ̇_p) by computed torque: the pinion's inertia
     (J_p + J_M r_M²) times that acceleration plus the load the rig knows (viscous and dry friction, the aligning
     torque), as a target current limited to the motor's current limit. Road-feel motor: target current

@@ -127,6 +127,50 @@ def test_a_ramp_request_is_followed_without_steady_error_and_a_held_request_exac
     assert abs(rig.mech.i_M - (-rig.mech.aligning_torque / 0.8)) <= 0.4 / 0.8 + 0.01
 
 
+def test_bunched_and_late_frames_take_their_rate_from_the_counter_not_the_receive_times() -> None:
+    """One frame per 5 ms sample (AliveCounter +1 each, PLANT-IO-SBW-03), but sent irregularly: every other
+    frame 4 ms late, so pairs arrive 1 ms apart with 9 ms between them (bunched), and every 8th 12 ms late
+    (the reference holds after 5 ms of extrapolation, within the 15 ms timeout; the frames behind it follow
+    1 ms apart). The rig's rate is
+    Δθ / (n · 5 ms) by the counter, whatever the spacing: the pinion follows the documented servo fed with
+    that rule's reference, and the rule by receive times (Δθ / spacing: 5 times the rate for a bunched frame)
+    would be far off."""
+    rig = Rig(50.0, external=("SBW",))
+    sbw = Sbw(rig)
+    # send tick of sample k (in order, at most one per 1 ms tick): its own 5k ms plus a delay, after the last one
+    send, last = {}, -1
+    for k in range(200):
+        last = send[k] = max(5 * k + (12 if k % 8 == 0 else 4 if k % 2 == 0 else 0), last + 1)
+    due_at = {tick: k for k, tick in send.items()}
+    pinion = []
+    for _ in range(1000):
+        k = due_at.get(rig.tick)
+        if k is not None:
+            sbw.send(30.0 * math.sin(2 * math.pi * 5 * k * DT))
+        rig.run(DT)
+        pinion.append(rig.mech.theta_p / RAD)
+    spacings = {round(b[0] - a[0], 3) for a, b in zip(sbw.applied, sbw.applied[1:], strict=False)}
+    assert {0.001, 0.009} <= spacings and max(spacings) >= 0.012                # bunched and late, as meant
+    model = documented_servo(sbw.applied, 0.0, 1.0)
+    worst = max(abs(pinion[i] - model((i + 1) * DT)) for i in range(500, 1000))
+    assert worst <= ABS_TOL + REL_TOL * 30.0
+    # the same frames with the rate by receive times: a different pinion, beyond the servo's tolerance
+    by_time = [(t, a) for t, a in sbw.applied]
+    frames = [(t, a, (a - by_time[i - 1][1]) / (t - by_time[i - 1][0]) if i else 0.0)
+              for i, (t, a) in enumerate(by_time)]
+    k, theta, omega, t, h, off = -1, model(0.5), 0.0, 0.5, 1e-5, 0.0
+    while t < 1.0:
+        while k + 1 < len(frames) and frames[k + 1][0] <= t + 1e-12:
+            k += 1
+        tk, ak, wk = frames[k]
+        r, rate = (ak + wk * (t - tk), wk) if t - tk < CYCLE else (ak + wk * CYCLE, 0.0)
+        omega += h * (WN * WN * (r - theta) + 2 * ZETA * WN * (rate - omega))
+        theta += h * omega
+        t += h
+        off = max(off, abs(theta - model(t)))
+    assert off > 2 * (ABS_TOL + REL_TOL * 30.0)
+
+
 def test_without_frames_the_actuator_holds_the_centre_and_the_road_feel_torque_is_zero() -> None:
     rig = Rig(50.0, external=("SBW",))
     rig.robot(ANGLE, 40.0)
