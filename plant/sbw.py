@@ -251,9 +251,10 @@ class ActuatorEmulation:
     gives θ_k and w_k = (θ_k − θ_{k−1}) / (n · IO_CYCLE) (n the AliveCounter steps between the two frames; w = 0
     for the first frame after none or a timeout): the SBW sends one frame per 5 ms I/O sample, so the counter,
     not the receive times, gives the rate, and bunched or late frames keep it right (several in one tick: the
-    last is applied; a late one: the reference holds after IO_CYCLE of extrapolation); the reference is r = θ_k + w_k · min(t − t_k, IO_CYCLE) with
-    rate ṙ. The servo imposes θ̈_p = ω_n² (r − θ_p) + 2 ζ ω_n (ṙ − θ̇_p) by computed torque: the pinion's inertia
-    (J_p + J_M r_M²) times that acceleration plus the load the rig knows (viscous and dry friction, the aligning
+    last is applied; a late one: the reference holds after IO_CYCLE of extrapolation); the reference is
+    r = θ_k + w_k · min(t − t_k, IO_CYCLE) with rate ṙ. The servo imposes
+    θ̈_p = ω_n² (r − θ_p) + 2 ζ ω_n (ṙ − θ̇_p) by computed torque: the pinion's inertia (J_p + J_M r_M²) times
+    that acceleration plus the load the rig knows (viscous and dry friction, the aligning
     torque), as a target current limited to the motor's current limit. Road-feel motor: target current
     RoadFeelTorqueRequest / (K_m r_m), limited likewise. Both currents follow their targets as first-order lags
     of `rig_current_time_constant`: the voltage of each substep is the one that, held over h, moves the motor's
