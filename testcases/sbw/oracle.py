@@ -182,3 +182,26 @@ def is_monotonic_increasing(x: np.ndarray, y: np.ndarray, bin_width: float,
             means.append((0.5 * (lo + hi), float(np.mean(y[sel]))))
     ok = len(means) >= 2 and all(b[1] > a[1] - slack for a, b in zip(means, means[1:]))
     return ok, means
+
+
+# -- the steering robot (docs/contract/sbw.md, plant.md PLANT-IO-SBW-07), restated --------------------------------
+ROBOT_RATE_LIMIT = 400.0       # deg/s, RobotAngle is rate limited to this first
+ROBOT_NATURAL_FREQUENCY = 60.0  # rad/s, then a critically damped second-order filter
+ROBOT_ANGLE_PERIOD = 0.01      # s, BENCH_SteeringRobot's cycle: RobotAngle is a staircase of this step
+ROBOT_SUBSTEP = 0.25e-3        # s, the plant integrates the robot at its 4 kHz substep (PLANT-IO-SBW-07)
+
+
+def robot_sine_amplitude(amplitude: float, frequency: float) -> float:
+    """Amplitude (deg) of the hand wheel the robot imposes for a RobotAngle sine of `amplitude` deg at `frequency`
+    Hz sent every ROBOT_ANGLE_PERIOD: the staircase's fundamental, A sin(ωT/2) / (ωT/2) (a zero-order hold of T),
+    through the filter ω_n² / (s + ω_n)², |H(jω)| = 1 / (1 + (ω/ω_n)²), integrated at ROBOT_SUBSTEP h, which
+    lowers it by ω² h / ω_n more (first order in h). The rate limit leaves the sine itself alone while its peak
+    rate 2π f A stays below it (ValueError otherwise: the response is then no longer linear); it only ramps each
+    step of the staircase (sbw.md SBW-CTL-03 bounds that in the tolerance)."""
+    w = 2.0 * math.pi * frequency
+    if w * amplitude >= ROBOT_RATE_LIMIT:
+        raise ValueError(f"a {amplitude:g} deg sine at {frequency:g} Hz turns at {w * amplitude:.0f} deg/s, "
+                         f"beyond the robot's rate limit {ROBOT_RATE_LIMIT:g} deg/s")
+    half = w * ROBOT_ANGLE_PERIOD / 2.0
+    integration = 1.0 - w * w * ROBOT_SUBSTEP / ROBOT_NATURAL_FREQUENCY
+    return amplitude * (math.sin(half) / half) / (1.0 + (w / ROBOT_NATURAL_FREQUENCY) ** 2) * integration

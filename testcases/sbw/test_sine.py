@@ -3,9 +3,12 @@
 The robot steers a sine at the hand wheel (RobotAngle every 10 ms). Over the whole periods after the first:
 the pinion's phase lag behind the hand wheel (least-squares sine fit of SBW_HandWheel and SBW_Pinion at the
 steering frequency) ≤ 5°, and the RMS and peak tracking error (hand wheel − pinion, the pinion interpolated
-onto the hand-wheel frames). The yaw rate and lateral acceleration are shown next to the linear 2-DOF model
-(docs/spec/formulas.md §5) driven by the measured hand wheel through a mechanical 15:1 steering, with their amplitudes
-and phases side by side. Limits: testcases/sbw/limits.toml [sbw].
+onto the hand-wheel frames). Two steps make sure something moved (they fail when every signal stays at 0):
+the true hand wheel's amplitude (PLANT_SbwAngles) against the steering robot's documented dynamics (judges the
+plant) and SBW_HandWheel's amplitude against the same model (judges the SBW; a plant that did not move fails
+both, and the case is inconclusive, not a pass). The yaw rate and lateral acceleration are shown next to the
+linear 2-DOF model (docs/spec/formulas.md §5) driven by the measured hand wheel through a mechanical 15:1
+steering, with their amplitudes and phases side by side. Limits: testcases/sbw/limits.toml [sbw].
 """
 
 from __future__ import annotations
@@ -65,6 +68,20 @@ def test_sbw_sine_50kmh(bench, frequency: float) -> None:
     a_hw, _ = oracle.sine_fit(th, hw, frequency)
     a_pin, _ = oracle.sine_fit(tp, pin, frequency)
     lim.condition("hand-wheel amplitude (SBW_HandWheel, sine fit)", "sine_amplitude", a_hw)
+    # something moved: the true hand wheel as the robot's documented dynamics turn it (the plant's step), and the
+    # SBW's reading of it (the SBW's): both fail when the signals stay at 0
+    tt, hw_true = signal(bench, "PLANT_SbwAngles", "HandWheelAngle", since)
+    a_true, _ = oracle.sine_fit(tt, hw_true, frequency)
+    a_robot = oracle.robot_sine_amplitude(amplitude, frequency)
+    lim.at_most("hand wheel turned as the robot's documented dynamics: |amplitude − model| (PLANT_SbwAngles)",
+                "robot_amplitude_tol", abs(a_true - a_robot), node="PLANT",
+                detail=f"true {a_true:.4f}°, model {a_robot:.4f}° (10 ms staircase, 60 rad/s critically damped, "
+                       f"0.25 ms integration)")
+    # against the model, not the truth: a plant that did not move fails both steps, so the case is inconclusive
+    # (README.md: a simulated node's failure and the DUT's together), never a pass of an SBW that reads 0
+    lim.at_most("SBW_HandWheel.HandWheelAngle follows the hand wheel: |amplitude − model|",
+                "handwheel_amplitude_tol", abs(a_hw - a_robot),
+                detail=f"SBW {a_hw:.4f}°, model {a_robot:.4f}°, true {a_true:.4f}°")
     rows = [["hand-wheel amplitude", "", a_hw, "deg"],
             ["pinion amplitude", a_hw, a_pin, "deg"],
             ["pinion phase lag", 0.0, lag, "deg"],
