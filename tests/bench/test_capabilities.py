@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import socket
 import uuid
-from typing import Any
 
 import can
 import pytest
@@ -15,10 +14,7 @@ import pytest
 from bench import capabilities
 from bench.bus import UDP_MULTICAST_HOP_LIMIT, VirtualTimeBus, open_bus
 from bench.socketcan_rx import plain_socketcan
-
-
-def _group() -> str:
-    return f"239.255.{uuid.uuid4().int % 250 + 1}.{uuid.uuid4().int % 250 + 1}"
+from tests.fakes import FakeBus, ipv4_group
 
 
 class _FakeCanSocket:
@@ -32,28 +28,11 @@ class _FakeCanSocket:
         return self.own
 
 
-class _Bus(can.BusABC):
-    """Any class name at all: only what it has counts."""
-
-    def __init__(self, sock: Any = None, **attributes: Any) -> None:
-        super().__init__(channel="fake")
-        if sock is not None:
-            self.socket = sock
-        for name, value in attributes.items():
-            setattr(self, name, value)
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        pass
-
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        return None, False
-
-
 # -- "does this bus deliver my own frames back to me?" ------------------------------------------------------
 def test_udp_multicast_loops_its_own_frames_back_and_says_so() -> None:
     """python-can's udp_multicast: its socket has IP_MULTICAST_LOOP on (whatever receive_own_messages says);
     the answer is checked against what the bus really does."""
-    bus = open_bus("udp_multicast", _group())
+    bus = open_bus("udp_multicast", ipv4_group())
     try:
         assert capabilities.delivers_own_frames(bus)
         bus.send(can.Message(arbitration_id=0x123, data=b"\x01\x02", is_extended_id=False))
@@ -78,33 +57,33 @@ def test_virtual_buses_say_what_they_were_told() -> None:
 
 
 def test_socketcan_is_asked_through_its_socket_option() -> None:
-    assert not capabilities.delivers_own_frames(_Bus(_FakeCanSocket(own=0)))
-    assert capabilities.delivers_own_frames(_Bus(_FakeCanSocket(own=1)))
+    assert not capabilities.delivers_own_frames(FakeBus(socket=_FakeCanSocket(own=0)))
+    assert capabilities.delivers_own_frames(FakeBus(socket=_FakeCanSocket(own=1)))
     # the socket outranks an attribute that says otherwise
-    assert capabilities.delivers_own_frames(_Bus(_FakeCanSocket(own=1), receive_own_messages=False))
+    assert capabilities.delivers_own_frames(FakeBus(socket=_FakeCanSocket(own=1), receive_own_messages=False))
 
 
 def test_a_bus_that_says_nothing_does_not_loop() -> None:
-    assert not capabilities.delivers_own_frames(_Bus())
+    assert not capabilities.delivers_own_frames(FakeBus())
 
 
 # -- "does it have a raw SocketCAN socket I can read directly?" ----------------------------------------------
 def test_raw_can_socket_needs_family_af_can_and_a_raw_socket() -> None:
     raw = _FakeCanSocket()
-    assert capabilities.raw_can_socket(_Bus(raw)) is raw
-    assert capabilities.raw_can_socket(_Bus(_FakeCanSocket(kind=socket.SOCK_DGRAM))) is None     # CAN_BCM, ISO-TP
+    assert capabilities.raw_can_socket(FakeBus(socket=raw)) is raw
+    assert capabilities.raw_can_socket(FakeBus(socket=_FakeCanSocket(kind=socket.SOCK_DGRAM))) is None   # BCM, ISO-TP
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as tcp:                     # socketcand's TCP link
-        assert capabilities.raw_can_socket(_Bus(tcp)) is None
-    assert capabilities.raw_can_socket(_Bus()) is None
+        assert capabilities.raw_can_socket(FakeBus(socket=tcp)) is None
+    assert capabilities.raw_can_socket(FakeBus()) is None
     # python-can filters of the bus's own: the bench must not read around them
-    assert plain_socketcan(_Bus(raw))
-    filtered = _Bus(raw)
+    assert plain_socketcan(FakeBus(socket=raw))
+    filtered = FakeBus(socket=raw)
     filtered.set_filters([{"can_id": 0x100, "can_mask": 0x7FF}])
     assert not plain_socketcan(filtered)
 
 
 def test_udp_multicast_and_virtual_buses_have_no_raw_can_socket() -> None:
-    bus = open_bus("udp_multicast", _group())
+    bus = open_bus("udp_multicast", ipv4_group())
     ours = VirtualTimeBus(channel=f"cap-{uuid.uuid4()}")
     try:
         assert capabilities.raw_can_socket(bus) is None and capabilities.raw_can_socket(ours) is None
@@ -121,7 +100,7 @@ def test_takes_hop_limit_from_the_interface_class(interface: str, expected: bool
 
 
 def test_open_bus_pins_the_hop_limit_of_a_multicast_bus() -> None:
-    bus = open_bus("udp_multicast", _group())
+    bus = open_bus("udp_multicast", ipv4_group())
     try:
         with socket.socket(fileno=os.dup(bus.fileno())) as sock:
             assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == UDP_MULTICAST_HOP_LIMIT

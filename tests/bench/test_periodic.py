@@ -26,6 +26,7 @@ from bench.faults import FaultPlan, parse_fault
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import Station
+from tests.fakes import FakeBus
 from tests.integration.vcan import IN_LANE, has_vcan
 from tests.reference import COUNTER_VALUES, counter_of, intact
 
@@ -134,14 +135,14 @@ class FakeTask:
         self.alive = False
 
 
-class SocketcanBus(can.BusABC):
-    """Like python-can's: a raw SocketCAN socket in `socket`, so that bench.periodic takes it for socketcan."""
+class SocketcanBus(FakeBus):
+    """Like python-can's: a raw SocketCAN socket in `socket`, so that bench.periodic takes it for socketcan; what
+    it sends and receives goes through the fake kernel."""
 
     def __init__(self, kernel: FakeKernel) -> None:
-        super().__init__(channel="vcan0")
+        super().__init__("vcan0", socket=FakeRawSocket(kernel))
         self.channel = "vcan0"
         self.kernel = kernel
-        self.socket = FakeRawSocket(kernel)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self.kernel.deliver(msg.arbitration_id, bytes(msg.data), "raw", self.socket)

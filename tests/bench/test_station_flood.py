@@ -7,43 +7,17 @@ in start_scenario.
 
 from __future__ import annotations
 
-from collections import deque
-
-import can
-import pytest
-
-from bench.codec import load_codebook
-from bench.config import load_config
 from bench.faults import FaultPlan, parse_fault
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import Station
-
-
-class UdpMulticastBus(can.BusABC):
-    """Like python-can's UDP multicast bus: every frame sent comes back to the sender's own socket (it says so
-    with `receive_own_messages`, which bench.capabilities asks of a bus without a socket)."""
-
-    receive_own_messages = True
-
-    def __init__(self) -> None:
-        self.queue: deque[can.Message] = deque()
-        super().__init__(channel="loop")
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        self.queue.append(msg)
-
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        return (self.queue.popleft() if self.queue else None), False
-
-
-@pytest.fixture(scope="module")
-def codebook():
-    return load_codebook(load_config().databases)
+from tests.fakes import FakeBus
 
 
 def test_a_flood_on_a_looping_bus_is_sent_and_its_echoes_are_recognised(codebook) -> None:
-    bus = UdpMulticastBus()
+    # like python-can's udp_multicast: every frame sent comes back to the sender's own socket, and the bus says
+    # so with `receive_own_messages` (what bench.capabilities asks of a bus without a socket)
+    bus = FakeBus("loop", receive_own_messages=True)
     station = Station("runner", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), lambda: 0.0, ())
     assert station.loops_back
     plan = FaultPlan(codebook)
@@ -51,12 +25,12 @@ def test_a_flood_on_a_looping_bus_is_sent_and_its_echoes_are_recognised(codebook
     station.faults, station.babbles = plan, True
 
     station.tick(0, 0.0, 0.001)           # 8 frames of identifier 0 at 8 frames/ms, no KeyError
-    sent_floods = [m for m in bus.queue if m.arbitration_id == 0]
+    sent_floods = [m for m in bus.inbox if m.arbitration_id == 0]
     assert len(sent_floods) == 8
     unknown_before = station.monitor.unknown_frames   # the station logged its own 8 flood frames (tx)
     assert unknown_before == 8
 
     station.poll(0.0)                     # the echoes come back: recognised as our own, not counted again
     assert station.monitor.unknown_frames == unknown_before
-    assert not any(m.arbitration_id == 0 for m in bus.queue)
+    assert not any(m.arbitration_id == 0 for m in bus.inbox)
     bus.shutdown()

@@ -7,7 +7,6 @@ bus's intervals, not its own lateness.
 
 from __future__ import annotations
 
-import random
 import time
 
 import can
@@ -15,33 +14,15 @@ import pytest
 
 from bench.bus import open_bus
 from bench.clock import STAMP_WINDOW, WallClock
-from bench.codec import load_codebook
-from bench.config import load_config
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import POLL_BATCH, Station
+from tests.fakes import FakeBus, flood, ipv4_group
 
 
-@pytest.fixture(scope="module")
-def codebook():
-    return load_codebook(load_config().databases)
-
-
-class FloodBus(can.BusABC):
+def flood_bus(frame: can.Message, budget: int | None = None) -> FakeBus:
     """A bus that always has another frame: `budget` frames, or without end when budget is None."""
-
-    def __init__(self, frame: can.Message, budget: int | None = None) -> None:
-        self.frame, self.budget, self.read = frame, budget, 0
-        super().__init__(channel="flood")
-
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        if self.budget is not None and self.read >= self.budget:
-            return None, False
-        self.read += 1
-        return self.frame, False
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        pass
+    return FakeBus("flood", incoming=flood(frame, budget))
 
 
 def _frame(codebook, name: str, timestamp: float = 0.0) -> can.Message:
@@ -57,7 +38,7 @@ def _station(codebook, bus: can.BusABC, clock: WallClock | None = None) -> Stati
 
 
 def test_poll_takes_at_most_a_batch_and_leaves_the_rest_in_the_socket(codebook) -> None:
-    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=POLL_BATCH + 10)
+    bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=POLL_BATCH + 10)
     station = _station(codebook, bus)
     assert station.poll() == POLL_BATCH
     assert station.monitor.frames == POLL_BATCH
@@ -69,7 +50,7 @@ def test_poll_takes_at_most_a_batch_and_leaves_the_rest_in_the_socket(codebook) 
 @pytest.mark.realtime
 def test_wall_clock_keeps_its_deadline_on_a_bus_that_never_goes_quiet(codebook) -> None:
     clock = WallClock()
-    station = _station(codebook, FloodBus(_frame(codebook, "VCU_WheelCmd_FL")), clock)
+    station = _station(codebook, flood_bus(_frame(codebook, "VCU_WheelCmd_FL")), clock)
     clock.start()
     clock.wait_until(0.05, [station])
     late = clock.now() - 0.05
@@ -84,7 +65,7 @@ def test_a_frame_is_timed_by_its_receive_timestamp(codebook) -> None:
     time.sleep(0.05)
     received = clock.epoch_ns / 1e9 + 0.01       # the kernel received it 10 ms after start (the clock's own
                                                  # epoch: a time.time() after start() was late under load)
-    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL", timestamp=received), budget=1)
+    bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL", timestamp=received), budget=1)
     station = _station(codebook, bus, clock)
     station.poll()
     seen = station.monitor.state("VCU_WheelCmd_FL").last_seen
@@ -96,7 +77,7 @@ def test_a_timestamp_of_another_time_base_gets_the_time_of_reading(codebook) -> 
     clock.start()
     time.sleep(0.02)
     # Some interfaces stamp with the device's uptime: nothing like this host's epoch time.
-    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL", timestamp=123.456), budget=1)
+    bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL", timestamp=123.456), budget=1)
     station = _station(codebook, bus, clock)
     before = clock.now()
     station.poll()
@@ -106,10 +87,9 @@ def test_a_timestamp_of_another_time_base_gets_the_time_of_reading(codebook) -> 
 
 
 @pytest.mark.realtime
-def test_a_late_reader_measures_the_intervals_the_bus_had() -> None:
+def test_a_late_reader_measures_the_intervals_the_bus_had(codebook) -> None:
     """Over udp_multicast (loopback, hop limit 0): 20 frames 10 ms apart, read in one go 0.3 s later."""
-    codebook = load_codebook(load_config().databases)
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    group = ipv4_group()
     sender, receiver = open_bus("udp_multicast", group), open_bus("udp_multicast", group)
     try:
         clock = WallClock()
@@ -185,7 +165,7 @@ def test_a_late_runner_goes_to_the_wall_clock_a_late_plant_replays_every_tick(co
             def step(self, io: object, t: float, dt: float) -> None:
                 self.steps.append(t)
 
-        bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
+        bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
         station = Station("s", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, [Counting(steps)],
                           clock.stamp, every_tick=every_tick)
         scheduler = Scheduler([station], clock)
@@ -205,7 +185,7 @@ def test_a_real_time_run_reads_what_waits_before_it_returns(codebook) -> None:
     from bench.clock import CATCH_UP_FRAMES, Scheduler
 
     clock = WallClock()
-    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=5 * POLL_BATCH)
+    bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=5 * POLL_BATCH)
     station = Station("runner", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, (),
                       clock.stamp, every_tick=False)
     scheduler = Scheduler([station], clock)
@@ -213,7 +193,7 @@ def test_a_real_time_run_reads_what_waits_before_it_returns(codebook) -> None:
     time.sleep(0.01)
     scheduler.run_until(0.001)            # one tick, one batch; then the rest before returning
     assert station.monitor.frames == 5 * POLL_BATCH
-    flood = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"))   # without end: bounded all the same
+    flood = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"))   # without end: bounded all the same
     station = Station("runner", flood, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, (),
                       clock.stamp, every_tick=False)
     Scheduler([station], clock).run_until(0.0)
@@ -271,7 +251,7 @@ def test_behaviours_see_the_tick_s_time_and_a_plant_tick_reads_the_clock_about_o
             seen.append((t, io.now))
 
     clock = WallClock()
-    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
+    bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
     station = Station("plant", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, [Asking()],
                       clock.stamp)
     scheduler = Scheduler([station], clock)
@@ -290,7 +270,7 @@ def test_a_late_plant_reads_the_clock_once_per_tick(codebook, monkeypatch: pytes
     from bench.clock import Scheduler
 
     clock = WallClock()
-    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
+    bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
     station = Station("plant", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), clock.now, (), clock.stamp)
     scheduler = Scheduler([station], clock)
     clock.start()
@@ -305,7 +285,7 @@ def test_a_late_plant_reads_the_clock_once_per_tick(codebook, monkeypatch: pytes
 
 def test_a_tick_after_a_wait_that_found_the_socket_empty_reads_no_more(codebook) -> None:
     clock = WallClock()
-    bus = FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=3)
+    bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=3)
     station = _station(codebook, bus, clock)
     polls: list[float] = []
     real_poll = station.poll
@@ -339,7 +319,7 @@ def test_a_station_with_stamped_batches_sleeps_to_the_deadline_and_reads_at_its_
     receiver.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
     try:
         clock = WallClock()
-        station = _station(codebook, FloodBus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0), clock)
+        station = _station(codebook, flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0), clock)
         station._fast = FastReceiver(receiver)
         assert station.stamped_batches
         frame_id = codebook["VCU_WheelCmd_FL"].frame_id
