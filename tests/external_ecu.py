@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import ast
 import json
-import random
 import re
 import shutil
 import subprocess
@@ -26,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tests.child import Child
+from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
 BENCH = [sys.executable, "-m", "bench"]
@@ -50,7 +50,7 @@ class Campaign:
 
 def judge_example(example: Path, node: str, out: Path, *, min_ran: int, seconds: float = 1200.0) -> Campaign:
     """Run the campaign of `node` against `example` (module docstring) and check what a passing example shows."""
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    group = ipv4_group()
     bus = ["--interface", "udp_multicast", "--channel", group]
     priority = _realtime_priority()
     plant = Child([*priority, *BENCH, "plant", *bus, "--external", node, "--duration", str(int(seconds) + 60)], ROOT)

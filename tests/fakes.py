@@ -21,7 +21,7 @@ import pytest
 
 from bench.bus import open_bus
 from bench.errors import ConfigError
-from bench.recorder import Recorder
+from bench.log.recorder import Recorder
 
 
 class FakeBus(can.BusABC):

@@ -18,7 +18,6 @@ import subprocess
 import sys
 import threading
 import time
-import uuid
 from collections.abc import Callable, Iterator
 
 import can
@@ -27,8 +26,8 @@ import pytest
 from bench.bus import open_bus
 from bench.busopts import BusOptions
 from bench.config import RunSettings, load_config
-from bench.errors import ConfigError
 from bench.session import BenchSession
+from tests.fakes import ipv4_group, ipv6_available, ipv6_group
 from tests.repo import ROOT
 
 OPENS = 100
@@ -47,31 +46,13 @@ while time.monotonic() < end:
 """
 
 
-def _ipv4_group() -> str:
-    return f"239.255.{uuid.uuid4().int % 250 + 1}.{uuid.uuid4().int % 250 + 1}"
-
-
-def _ipv6_group() -> str:
-    """A link-local (scope 2), transient IPv6 group."""
-    return f"ff12::b3c:{uuid.uuid4().int % 0xFFFF:x}:{uuid.uuid4().int % 0xFFFF:x}"
-
-
-def _ipv6_available() -> None:
-    """Skip, with the error, only where this host has no IPv6 multicast at all (no IPv6, no route for ff00::/8)."""
-    try:
-        with open_bus("udp_multicast", _ipv6_group()) as bus:
-            bus.send(can.Message(arbitration_id=0x001, data=b"", is_extended_id=False))
-    except (ConfigError, can.CanError) as exc:
-        pytest.skip(f"IPv6 multicast is not available on this host: {exc}")
-
-
 @pytest.fixture(params=["IPv4", "IPv6"])
 def group(request: pytest.FixtureRequest) -> Callable[[], str]:
     """A maker of fresh groups of one family."""
     if request.param == "IPv6":
-        _ipv6_available()
-        return _ipv6_group
-    return _ipv4_group
+        ipv6_available()
+        return ipv6_group
+    return ipv4_group
 
 
 def _two(group: Callable[[], str]) -> tuple[str, str]:
@@ -152,8 +133,8 @@ def test_two_benches_on_two_groups_hear_only_their_own(group: Callable[[], str])
 
 def test_an_ipv4_bench_and_an_ipv6_bench_hear_only_their_own() -> None:
     """python-can's IPv6 socket is dual-stack on the same port: it must not read the IPv4 group either."""
-    _ipv6_available()
-    _bench_pairs([_ipv4_group(), _ipv6_group()])
+    ipv6_available()
+    _bench_pairs([ipv4_group(), ipv6_group()])
 
 
 @pytest.fixture

@@ -25,13 +25,10 @@ from bench.errors import LogError
 from bench.log.canio import MCAPReader, MCAPWriter
 from bench.log.logread import read_decoded, read_frames
 from bench.log.recorder import Recorder
+from tests.fakes import ipv4_group
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
-
-
-def group() -> str:
-    return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
 
 
 def frames_to_send(count: int) -> list[can.Message]:
@@ -59,7 +56,7 @@ def wait_for_output(process: subprocess.Popen, needle: bytes, timeout: float) ->
 
 @pytest.mark.realtime
 def test_can_logger_records_a_bench_log(tmp_path: Path) -> None:
-    channel = group()
+    channel = ipv4_group()
     # A port of its own: python-can's logger cannot restrict its socket to its group (IP_MULTICAST_ALL), and
     # on the default port it would also hear any other bench on this host.
     port = random.randint(44000, 44999)
@@ -111,7 +108,7 @@ def test_can_logger_records_a_bench_log(tmp_path: Path) -> None:
 
 
 def test_can_player_plays_a_bench_log(tmp_path: Path) -> None:
-    channel = group()
+    channel = ipv4_group()
     log = tmp_path / "run.mcap"
     with Recorder(log, []) as recorder:
         for i in range(30):

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import re
 import time
-import uuid
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -24,6 +23,7 @@ from bench.checks import StepLog
 from bench.config import RunSettings, load_config
 from bench.results import CaseResult, Step
 from bench.session import BenchSession
+from tests.fakes import ipv4_group
 
 BLOCK_S = 0.010    # each tick of the runner blocks this long (a blocking sleep in the runner between ticks)
 LIMIT_S = 0.4      # every check's limit
@@ -33,7 +33,7 @@ LATE_TICKS = 0.2   # s of ticks: about 2 s of the clock at ten times late, far p
 
 @pytest.fixture
 def late_bench() -> Iterator[tuple[BenchSession, Case]]:
-    group = f"239.255.{uuid.uuid4().int % 250 + 1}.{uuid.uuid4().int % 250 + 1}"
+    group = ipv4_group()
     session = BenchSession(load_config(), RunSettings(interface="udp_multicast", channel=group))
     session.start()
     try:

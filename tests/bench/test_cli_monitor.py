@@ -22,6 +22,7 @@ from bench.cli import main
 from bench.cli.monitor import TimeBase, window_stats
 from bench.codec import Codebook
 from bench.monitor import Monitor
+from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
 WIDTH, HEIGHT = 200, 50
@@ -65,7 +66,7 @@ def _kept_cycle(row: dict[str, str]) -> bool:
 @pytest.mark.realtime
 def test_monitor_shows_the_plant_messages_with_their_rates(tmp_path: Path) -> None:
     binary = tmux()
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    group = ipv4_group()
     env = {**os.environ, "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8", "TERM": "xterm-256color"}
     env.pop("TMUX", None)
     plant_log = (tmp_path / "plant.txt").open("w")

@@ -7,13 +7,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tests.bench.test_replay import group, make_log
+from tests.fakes import ipv4_group, make_log
 from tests.repo import ROOT
 
 
 def replay(log: Path) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "bench", "replay", str(log), "--interface", "udp_multicast",
-                           "--channel", group(), "--speed", "10"], cwd=ROOT, capture_output=True, text=True,
+                           "--channel", ipv4_group(), "--speed", "10"], cwd=ROOT, capture_output=True, text=True,
                           timeout=120, env={**os.environ, "COLUMNS": "80"})
 
 

@@ -5,7 +5,6 @@ up to its last chunk (flushed every 0.5 s: tests/bench/test_recorder.py kills a 
 
 from __future__ import annotations
 
-import random
 import subprocess
 import sys
 import time
@@ -15,6 +14,7 @@ import pytest
 
 from bench.bus import open_bus
 from bench.log.logread import read_frames, summarise
+from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
 RUN_SECONDS = 8.0
@@ -22,7 +22,7 @@ RUN_SECONDS = 8.0
 
 @pytest.mark.realtime
 def test_sigkill_keeps_95_percent_of_the_frames_sent(tmp_path: Path) -> None:
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    group = ipv4_group()
     listener = open_bus("udp_multicast", group)   # hop limit 0, and only this group's frames
     try:
         run = subprocess.Popen([sys.executable, "-m", "bench", "run", str(ROOT / "tests/fixtures/cases/test_long.py"),

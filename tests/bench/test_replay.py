@@ -15,26 +15,8 @@ import pytest
 from bench.bus import open_bus
 from bench.cli import main
 from bench.log.recorder import Recorder
+from tests.fakes import SPACING, ipv4_group, make_log
 from tests.repo import ROOT
-
-SPACING = 0.010   # s between the logged tx frames
-
-
-def make_log(path: Path) -> list[tuple[int, bytes]]:
-    """40 tx frames 10 ms apart, rx frames in between and one error frame; returns the tx (id, data)."""
-    sent = []
-    with Recorder(path, []) as recorder:
-        for i in range(40):
-            t = 5.0 + i * SPACING
-            data = bytes([i, 0xA5, i ^ 0xFF])
-            recorder.frame(t, 0x300 + i % 2, data, channel="can0", direction="tx", valid=i != 7,
-                           error="checksum" if i == 7 else "")
-            sent.append((0x300 + i % 2, data))
-            recorder.frame(t + 0.004, 0x400, bytes([i]), channel="can0", direction="rx")
-            if i == 20:
-                recorder.frame(t + 0.005, 0, bytes(8), channel="can0", direction="tx", is_error=True, valid=False,
-                               error="error frame")
-    return sent
 
 
 def replay(log: Path, channel: str, *extra: str, expect: int) -> tuple[list, subprocess.CompletedProcess]:
@@ -64,15 +46,11 @@ def span(stamps: list[float]) -> float:
     return statistics.median(slopes) * (len(stamps) - 1)
 
 
-def group() -> str:
-    return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
-
-
 @pytest.mark.realtime
 def test_replay_sends_the_logged_frames_with_their_spacing(tmp_path: Path) -> None:
     log = tmp_path / "run.mcap"
     sent = make_log(log)
-    got, result = replay(log, group(), "--direction", "tx", expect=len(sent))
+    got, result = replay(log, ipv4_group(), "--direction", "tx", expect=len(sent))
     assert result.returncode == 0, result.stderr
     assert [(m.arbitration_id, bytes(m.data)) for m in got] == sent      # invalid frames too; no error frame
     stamps = [m.timestamp for m in got]                                    # kernel receive times
@@ -86,7 +64,7 @@ def test_replay_sends_the_logged_frames_with_their_spacing(tmp_path: Path) -> No
 def test_speed_and_direction(tmp_path: Path) -> None:
     log = tmp_path / "run.mcap"
     make_log(log)
-    got, result = replay(log, group(), "--direction", "rx", "--speed", "2", expect=40)
+    got, result = replay(log, ipv4_group(), "--direction", "rx", "--speed", "2", expect=40)
     assert result.returncode == 0, result.stderr
     assert [m.arbitration_id for m in got] == [0x400] * 40
     assert span([m.timestamp for m in got]) == pytest.approx(39 * SPACING / 2, abs=0.04)
@@ -107,7 +85,7 @@ def test_bad_options_are_one_line_errors(tmp_path: Path, argv: list[str], needle
 
 
 def test_missing_log_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["replay", str(tmp_path / "none.mcap"), "--channel", group()]) == 2
+    assert main(["replay", str(tmp_path / "none.mcap"), "--channel", ipv4_group()]) == 2
     assert "none.mcap" in capsys.readouterr().err
 
 

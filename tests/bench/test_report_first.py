@@ -18,7 +18,7 @@ from bench.config import load_config
 from bench.pytest_plugin import _catalogue
 from bench.report import write_html
 from bench.results import CaseResult, Plot, RequirementInfo, RunResult, Series, Step, Table
-from tests.bench.test_report_browser import problems, run_browser
+from tests.browser import problems, run_browser
 from tests.repo import ROOT
 
 SCREEN = (1280, 900)

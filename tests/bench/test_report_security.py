@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tests.bench.test_report_browser import IMG, SCRIPT, dump, problems
+from tests.browser import IMG, SCRIPT, dump, problems
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 CASES = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"

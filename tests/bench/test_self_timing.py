@@ -34,13 +34,10 @@ from bench.results import CaseResult
 from bench.session import BenchSession
 from bench.station import LATE_CYCLES, Station
 from bench.timing import Late, SelfTiming, TimingCollector
+from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
 STIMULUS = "DRV_Pedals"     # 10 ms, sent by the runner (the stimulus node DRIVER)
-
-
-def _group() -> str:
-    return f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
 
 
 def _case(session: BenchSession, duts: list[str] | None = None) -> Case:
@@ -85,7 +82,7 @@ def realtime_runner() -> Iterator[tuple[BenchSession, TimingCollector]]:
     """The runner alone (every other node external) on udp_multicast, its frames into a timing collector."""
     project = load_config()
     timing = TimingCollector(())
-    session = BenchSession(project, RunSettings(interface="udp_multicast", channel=_group(), external=["all"]),
+    session = BenchSession(project, RunSettings(interface="udp_multicast", channel=ipv4_group(), external=["all"]),
                            sink=timing)
     session.start()
     try:
@@ -360,7 +357,7 @@ def test_bench_run_reports_an_inconclusive_case_apart_and_exits_3(tmp_path: Path
     (tmp_path / "test_user.py").write_text(USER_CASES, encoding="utf-8")
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "bench", "run", str(tmp_path / "test_user.py"), "--interface",
-                          "udp_multicast", "--channel", _group(), "--out", str(out)],
+                          "udp_multicast", "--channel", ipv4_group(), "--out", str(out)],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == EXIT_INCONCLUSIVE, run.stdout + run.stderr
     assert "inconclusive test_user::test_late: bench late by " in run.stdout, run.stdout

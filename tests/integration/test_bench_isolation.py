@@ -22,7 +22,7 @@ import pytest
 from bench.codec import load_codebook
 from bench.config import load_config
 from bench.log.logread import read_frames
-from tests.bench.test_bus_groups import _ipv4_group, _ipv6_available, _ipv6_group
+from tests.fakes import ipv4_group, ipv6_available, ipv6_group
 from tests.repo import ROOT
 
 CASE = '''
@@ -40,8 +40,8 @@ def test_side_by_side(bench):
 @pytest.mark.parametrize("family", ["IPv4", "IPv6"])
 def test_two_benches_side_by_side_log_no_frame_of_each_other(family: str, tmp_path: Path) -> None:
     if family == "IPv6":
-        _ipv6_available()
-    make = _ipv6_group if family == "IPv6" else _ipv4_group
+        ipv6_available()
+    make = ipv6_group if family == "IPv6" else ipv4_group
     groups = [make(), make()]
     while groups[1] == groups[0]:
         groups[1] = make()

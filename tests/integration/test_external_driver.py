@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import math
-import random
 import subprocess
 import sys
 
 import pytest
 
 from tests.child import Child
+from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
 # docs/spec/vehicles.md A ([P0] §3): 2K = 1.11 m, 2L = 2.76 m, r = 0.281 m
@@ -34,7 +34,7 @@ def expected(x: float, y: float, v_o: float) -> dict[str, tuple[float, float]]:
 
 @pytest.mark.realtime
 def test_plant_answers_a_foreign_driver_per_formulas() -> None:
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    group = ipv4_group()
     plant = Child([sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast", "--channel", group,
                    "--external", "DRIVER", "--duration", "60"], ROOT)
     try:

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from tests import repo
-from tests.bench.test_report_browser import problems, run_browser
+from tests.browser import problems, run_browser
 
 ROOT = repo.ROOT
 BUDGET = 3_000_000               # bytes: the whole campaign's report.html

@@ -4,7 +4,6 @@ two processes over udp_multicast, and crash safety (SIGKILL, SIGINT)."""
 from __future__ import annotations
 
 import json
-import random
 import signal
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from tests.child import Child
+from tests.fakes import ipv4_group
 from tests.reference import COUNTER_VALUES, counter_of, crc8_j1850_p11, intact
 from tests.repo import ROOT
 
@@ -80,7 +80,7 @@ def test_two_runs_give_the_same_frame_sequence(first_run: Path, tmp_path: Path) 
 @pytest.mark.realtime
 def test_plant_and_runner_in_two_processes_over_udp_multicast(tmp_path: Path) -> None:
     # An administratively scoped group, random per test run; hop limit 0 keeps it on this host.
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
+    group = ipv4_group()
     plant = Child([*BENCH, "plant", "--interface", "udp_multicast", "--channel", group, "--duration", "120"], ROOT)
     try:
         plant.wait_for("simulating", 60)      # its bus is open: the runner's first frame finds it listening

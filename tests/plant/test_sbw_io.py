@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from plant.driver import ANGLE
 from plant.sbw import SensorFault
 from plant.vehicles import load_parameters
-from tests.plant.test_sbw_model import DT, Rig
+from tests.plant.sbw_rig import DT, Rig
 
 RAD = math.pi / 180.0
 P = load_parameters("SBW")
