@@ -15,7 +15,7 @@ from mcap.stream_reader import StreamReader
 
 import bench.log.mcapfast
 import bench.log.recorder
-from bench.codec import Codebook, load_codebook, load_dbc
+from bench.codec import Codebook, load_dbc
 from bench.errors import BenchError
 from bench.log.logread import read_decoded, read_frames
 from bench.log.recorder import Recorder
@@ -23,11 +23,6 @@ from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 ORIGIN_NS = 1_764_000_000_123_456_789
 Frame = tuple[float, int, Any, str, bool, str]
-
-
-@pytest.fixture(scope="module")
-def codebook() -> Codebook:
-    return load_codebook([CHASSIS_DBC, BENCH_DBC])
 
 
 def frames_of(codebook: Codebook, count: int, seed: int) -> list[Frame]:

@@ -46,7 +46,8 @@ Series = list[tuple[float, float]]
 
 
 @pytest.fixture(scope="module")
-def codebook() -> Codebook:
+def timing_codebook() -> Codebook:
+    """The two messages of DBC above (not the project's codebook of tests/conftest.py)."""
     return Codebook([("timing.dbc", cantools.database.load_string(DBC, "dbc"))])
 
 
@@ -77,9 +78,9 @@ def grid(start: float, end: float, step: float = 0.01) -> list[float]:
 
 
 # -- cycle times ---------------------------------------------------------------------------------------------
-def test_cycle_statistics_of_known_intervals(codebook: Codebook) -> None:
+def test_cycle_statistics_of_known_intervals(timing_codebook: Codebook) -> None:
     times = [0.0, 0.010, 0.020, 0.031, 0.041, 0.051, 0.081]     # intervals 10, 10, 11, 10, 10, 30 ms
-    stats = cycles(codebook, [(t, 0.0) for t in times])
+    stats = cycles(timing_codebook, [(t, 0.0) for t in times])
     cmd = stats["Cmd"]
     assert cmd.cycle == 0.010 and cmd.intervals == 6
     assert cmd.p50 == pytest.approx(0.010)                      # median of 10 10 10 10 11 30
@@ -91,10 +92,10 @@ def test_cycle_statistics_of_known_intervals(codebook: Codebook) -> None:
     assert stats["Sts"].intervals == 0 and stats["Sts"].within_limits is None
 
 
-def test_a_single_gap_shows_in_max_and_gaps_not_in_the_verdict(codebook: Codebook) -> None:
+def test_a_single_gap_shows_in_max_and_gaps_not_in_the_verdict(timing_codebook: Codebook) -> None:
     # 200 intervals of 10 ms, one of 29 ms (below the timeout) and one of 310 ms (a deliberate silence)
     times = grid(0.0, 1.0) + [1.029] + [1.029 + 0.01 * k for k in range(1, 101)] + [2.029 + 0.31]
-    cmd = cycles(codebook, [(t, 0.0) for t in times])["Cmd"]
+    cmd = cycles(timing_codebook, [(t, 0.0) for t in times])["Cmd"]
     assert cmd.intervals == 202 and cmd.gaps == 1 and cmd.max == pytest.approx(0.31)
     assert cmd.p50 == pytest.approx(0.010) and cmd.p99 < 0.015
     assert cmd.within_limits is True
@@ -102,13 +103,13 @@ def test_a_single_gap_shows_in_max_and_gaps_not_in_the_verdict(codebook: Codeboo
 
 @settings(max_examples=40, deadline=None)
 @given(intervals=st.lists(st.integers(min_value=1, max_value=5000), min_size=1, max_size=300))
-def test_histogram_percentiles_match_numpy(codebook: Codebook, intervals: list[int]) -> None:
+def test_histogram_percentiles_match_numpy(timing_codebook: Codebook, intervals: list[int]) -> None:
     """Intervals on the histogram's 10 µs grid: p50/p99/max equal numpy's on the same values."""
     import numpy as np
     times = [0.0]
     for n in intervals:
         times.append(times[-1] + n * 1e-5)
-    cmd = cycles(codebook, [(t, 0.0) for t in times])["Cmd"]
+    cmd = cycles(timing_codebook, [(t, 0.0) for t in times])["Cmd"]
     values = np.diff(times)
     assert cmd.intervals == len(intervals)
     assert cmd.p50 == pytest.approx(float(np.percentile(values, 50)), abs=1e-9)
@@ -117,46 +118,46 @@ def test_histogram_percentiles_match_numpy(codebook: Codebook, intervals: list[i
 
 
 # -- latency -------------------------------------------------------------------------------------------------
-def test_steps_give_their_known_latencies(codebook: Codebook) -> None:
+def test_steps_give_their_known_latencies(timing_codebook: Codebook) -> None:
     # command: 0, a step to +5 deg at t = 0.50, a step to -2 deg at t = 1.20 (frames every 10 ms)
     cmd = [(t, 0.0 if t < 0.5 else 5.0 if t < 1.2 else -2.0) for t in grid(0.0, 2.0)]
     # status frames 3 ms after each command frame; it starts to move at 0.543 (+43 ms) and at 1.263 (+63 ms)
     sts = [(t, 0.0 if t < 0.543 else 5.0 if t < 1.263 else -2.0) for t in grid(0.003, 2.003)]
-    stats = latency(codebook, cmd, sts)
+    stats = latency(timing_codebook, cmd, sts)
     assert stats.threshold == 0.05                    # default: one step of the coarser signal (Sts, 0.05 deg)
     assert stats.latencies == pytest.approx([0.043, 0.063])
     assert stats.events == 2 and stats.not_followed == 0 and not stats.error
 
 
-def test_a_ramp_is_one_event_and_a_silent_status_is_not_followed(codebook: Codebook) -> None:
+def test_a_ramp_is_one_event_and_a_silent_status_is_not_followed(timing_codebook: Codebook) -> None:
     # command ramps +0.2 deg per frame from t = 0.30 to 0.50, holds, then steps at 1.00; the status follows the
     # ramp from 0.333 (+33 ms after the ramp's onset) and never follows the step
     cmd = [(t, 0.0 if t < 0.3 else min(4.0, 0.2 * round((t - 0.29) / 0.01)) if t < 1.0 else 9.0)
            for t in grid(0.0, 2.5)]
     sts = [(t, 0.0 if t < 0.333 else min(4.0, 0.2 * round((t - 0.323) / 0.01))) for t in grid(0.003, 2.503)]
-    stats = latency(codebook, cmd, sts, LatencyPair("p", ("Cmd", "Angle"), ("Sts", "Angle"), threshold=0.1,
+    stats = latency(timing_codebook, cmd, sts, LatencyPair("p", ("Cmd", "Angle"), ("Sts", "Angle"), threshold=0.1,
                                                     window=0.5))
     assert stats.latencies == pytest.approx([0.033])
     assert stats.not_followed == 1
 
 
-def test_a_reversal_supersedes_the_pending_event(codebook: Codebook) -> None:
+def test_a_reversal_supersedes_the_pending_event(timing_codebook: Codebook) -> None:
     # +3 at 0.20 and back to 0 at 0.25, before the status moved: the reversal supersedes the first event; the
     # status never goes below 0, and the second +3 at 0.40 supersedes the reversal. The status moves at 0.423:
     # one event followed, after 23 ms, none counted as not followed.
     cmd = [(t, 3.0 if 0.2 <= t < 0.25 or t >= 0.4 else 0.0) for t in grid(0.0, 1.0)]
     sts = [(t, 0.0 if t < 0.423 else 3.0) for t in grid(0.003, 1.003)]
-    stats = latency(codebook, cmd, sts)
+    stats = latency(timing_codebook, cmd, sts)
     assert stats.latencies == pytest.approx([0.023])
     assert stats.not_followed == 0
 
 
-def test_a_change_while_the_status_travels_is_not_timed(codebook: Codebook) -> None:
+def test_a_change_while_the_status_travels_is_not_timed(timing_codebook: Codebook) -> None:
     """A rate-limited status on its way to -90 when the target changes to -70 shows no reaction to it (it keeps
     travelling down at 1.2 deg per frame): counted as "status moving", never as a latency."""
     cmd = [(t, 0.0 if t < 0.10 else -90.0 if t < 0.30 else -70.0) for t in grid(0.0, 1.5)]
     sts = [(t, max(-70.0, -1.2 * (round((t - 0.103) / 0.01) + 1)) if t >= 0.103 else 0.0) for t in grid(0.003, 1.503)]
-    stats = latency(codebook, cmd, sts)
+    stats = latency(timing_codebook, cmd, sts)
     assert stats.latencies == pytest.approx([0.003])             # the first step, from rest
     assert stats.moving == 1 and stats.not_followed == 0
 
@@ -189,26 +190,27 @@ def test_a_delayed_copy_has_latency_between_delay_and_delay_plus_a_cycle(delay: 
         assert delay - 1e-9 <= value <= delay + cycle + 1e-9
 
 
-def test_unknown_names_are_reported_not_raised(codebook: Codebook) -> None:
+def test_unknown_names_are_reported_not_raised(timing_codebook: Codebook) -> None:
     cmd = [(t, 0.0) for t in grid(0.0, 0.5)]
-    stats = latency(codebook, cmd, cmd, LatencyPair("bad", ("Cmd", "Angel"), ("Sts", "Angle")))
+    stats = latency(timing_codebook, cmd, cmd, LatencyPair("bad", ("Cmd", "Angel"), ("Sts", "Angle")))
     assert "Angel" in stats.error and "bench.toml [timing]" in stats.error
-    stats = latency(codebook, cmd, cmd, LatencyPair("bad", ("Nope", "Angle"), ("Sts", "Angle")))
+    stats = latency(timing_codebook, cmd, cmd, LatencyPair("bad", ("Nope", "Angle"), ("Sts", "Angle")))
     assert "Nope" in stats.error
 
 
-def test_waiting_for_a_message_that_never_comes_stays_bounded(codebook: Codebook) -> None:
-    collector = bus(codebook, [PAIR], cmd=[(t, float(int(t * 10))) for t in grid(0.0, 30.0)])
+def test_waiting_for_a_message_that_never_comes_stays_bounded(timing_codebook: Codebook) -> None:
+    collector = bus(timing_codebook, [PAIR], cmd=[(t, float(int(t * 10))) for t in grid(0.0, 30.0)])
     assert all(len(w) <= 64 for w in collector._waiting)
-    (stats,) = collector.latency_stats(codebook)
+    (stats,) = collector.latency_stats(timing_codebook)
     assert stats.events == 0 and stats.threshold == 0.05
 
 
 # -- the report ----------------------------------------------------------------------------------------------
-def test_tables_reach_the_html_report(codebook: Codebook) -> None:
+def test_tables_reach_the_html_report(timing_codebook: Codebook) -> None:
     cmd = [(t, 0.0 if t < 0.5 else 5.0) for t in grid(0.0, 1.0)]
     sts = [(t, 0.0 if t < 0.543 else 5.0) for t in grid(0.003, 1.003)]
-    tables = bus(codebook, [PAIR, LatencyPair("bad", ("Cmd", "Angel"), ("Sts", "Angle"))], cmd, sts).tables(codebook)
+    bad = LatencyPair("bad", ("Cmd", "Angel"), ("Sts", "Angle"))
+    tables = bus(timing_codebook, [PAIR, bad], cmd, sts).tables(timing_codebook)
     cycle, latency_ = tables
     assert cycle.rows[0] == ["Cmd", "0x10", "10", "100", "10.00", "10.00", "10.00", "+0.0", "0", "yes"]
     assert cycle.rows[1][3] == "100"
@@ -221,7 +223,7 @@ def test_tables_reach_the_html_report(codebook: Codebook) -> None:
     assert "43.00" in page
 
 
-def test_timing_tables_never_raise(codebook: Codebook) -> None:
+def test_timing_tables_never_raise(timing_codebook: Codebook) -> None:
     tables = TimingCollector([]).tables(None)  # type: ignore[arg-type]
     assert tables[0].title == "Timing" and "could not be computed" in tables[0].rows[0][0]
 
