@@ -1,14 +1,18 @@
-"""`bench plant --fault`: a case+ window, which counts from each case's start, is refused with one line (exit 2);
-bench plant runs no cases, so such a fault would never act (it dropped nothing)."""
+"""`bench plant`: a case+ --fault window, which counts from each case's start, is refused with one line (exit 2);
+bench plant runs no cases, so such a fault would never act (it dropped nothing). Its status lines say why frames
+were invalid, not only how many."""
 
 from __future__ import annotations
 
 import pytest
+from rich.console import Console
 
 from bench.cli import main
-from bench.cli.plant import plant_faults
+from bench.cli.plant import INVALID_SHOWN, _report_invalid, plant_faults
+from bench.codec import Codebook
 from bench.errors import ConfigError
 from bench.faults import RUN
+from bench.monitor import Monitor
 
 SPEC = "drop:IMU_Motion@case+3.5-3.8"
 
@@ -39,3 +43,21 @@ def test_help_says_so(capsys: pytest.CaptureFixture[str]) -> None:
         main(["plant", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "from bench plant's start" in text and "refuses it" in text
+
+
+def test_new_invalid_frames_are_described_once(codebook: Codebook) -> None:
+    monitor = Monitor(codebook)
+    codec = codebook["BENCH_Control"]
+    console = Console(record=True, width=200)
+    for t in (0.1, 0.2):
+        monitor.on_frame(t, codec.frame_id, bytes(codec.length - 1), "rx")   # one byte short
+    shown = _report_invalid(console, monitor, 0)
+    text = console.export_text()
+    assert shown == 2
+    assert text.count(f"BENCH_Control (0x{codec.frame_id:X}): length {codec.length - 1}, DBC says {codec.length}") == 2
+    assert _report_invalid(console, monitor, shown) == 2 and console.export_text() == ""   # nothing new
+    for i in range(INVALID_SHOWN + 2):
+        monitor.on_frame(1.0 + i, 0x7FF, b"", "rx")   # unknown identifier
+    _report_invalid(console, monitor, shown)
+    text = console.export_text()
+    assert text.count("unknown identifier") == INVALID_SHOWN and "... and 2 more" in text
