@@ -290,6 +290,8 @@ class Scheduler:
         self.stations = list(stations)
         self.clock = clock
         self.dt = dt
+        for station in self.stations:   # the scheduler owns the tick: its restbuses count in it (or refuse it)
+            station.restbus.set_tick(dt)
         self.tick = 0
         self.skipped = 0   # ticks left out because the wall clock had passed them (see run_until)
         self.self_timing: SelfTiming | None = None   # real time: where the tick loop's lateness goes

@@ -16,21 +16,22 @@ import heapq
 from collections.abc import Collection, Iterator, Mapping
 
 from bench.codec import Codebook, MessageCodec
-from bench.errors import SignalError
+from bench.errors import ConfigError, SignalError
 
-TICKS_PER_MS = 1  # the restbus is scheduled on the plant's 1 ms tick
+#: How far a cycle time may lie from a whole number of ticks (relative): float noise, never a real offset.
+TICK_FIT = 1e-6
 
 
 class _Periodic:
     __slots__ = ("codec", "values", "period", "next_due", "counter", "enabled", "sent_values", "payload", "frames",
                  "order", "modulo")
 
-    def __init__(self, codec: MessageCodec, period_ticks: int, phase: int, order: int) -> None:
+    def __init__(self, codec: MessageCodec, order: int) -> None:
         self.codec = codec
         self.order = order           # its place among the restbus' messages: frames due together go in this order
         self.values: dict[str, float | int | str] = dict(codec.start_values())
-        self.period = period_ticks
-        self.next_due = phase
+        self.period = 0              # ticks, and the first due tick: set with the scheduler's tick (Restbus.set_tick)
+        self.next_due = 0
         self.counter = 0
         self.enabled = True
         # The cache of unchanged values (fast codecs only: equal values give equal raw numbers there; cantools'
@@ -47,24 +48,54 @@ def _order(slot: _Periodic) -> int:
 
 
 class Restbus:
-    """The periodic transmitter of one bus handle."""
+    """The periodic transmitter of one bus handle.
+
+    It counts in the ticks of the scheduler that drives it, and the scheduler owns their length: it gives its dt
+    (`set_tick`, bench.clock.Scheduler; a station ticked by hand gives the dt of its first tick), and every
+    message's period in ticks follows from that dt and the message's DBC cycle time. Why: with a tick length of
+    its own the restbus would silently send every message at another cycle whenever the scheduler's dt changed."""
 
     def __init__(self, codebook: Codebook, nodes: Collection[str]) -> None:
         self.codebook = codebook
         self.nodes = frozenset(nodes)
         self.periodic: dict[str, _Periodic] = {}
         for codec in sorted(codebook.sent_by(self.nodes), key=lambda c: c.frame_id):
-            if codec.cycle_time is None:
-                continue
-            period = max(1, round(codec.cycle_time * 1000 * TICKS_PER_MS))
-            # Spread messages of equal cycle over the period so the bus load is even (deterministic).
-            self.periodic[codec.name] = _Periodic(codec, period, codec.frame_id % period, len(self.periodic))
+            if codec.cycle_time is not None:
+                self.periodic[codec.name] = _Periodic(codec, len(self.periodic))
+        self.dt: float | None = None   # s per tick, from the scheduler; None: no tick yet, nothing scheduled
         # The schedule: (next due tick, order, message), so a tick looks at the messages due then, not at all of
         # them; a stopped message that falls due waits aside (parked) until it is resumed. Read-only for others:
-        # schedule[0][0] is the next due tick (a station skips `due` before it).
-        self.schedule: list[tuple[int, int, _Periodic]] = [(p.next_due, p.order, p) for p in self.periodic.values()]
-        heapq.heapify(self.schedule)
+        # schedule[0][0] is the next due tick (a station skips `due` before it). Filled in place by `set_tick`.
+        self.schedule: list[tuple[int, int, _Periodic]] = []
         self._parked: dict[int, _Periodic] = {}
+
+    def set_tick(self, dt: float) -> None:
+        """Schedule every message on ticks of `dt` seconds: its period is its DBC cycle time in ticks, its first
+        frame at tick `frame id mod period` (messages of equal cycle spread over the period, so the bus load is
+        even; deterministic). ConfigError, naming the message, when a cycle time is no whole number of ticks: the
+        message could not keep its cycle. Called before the first tick; again with another dt, it schedules anew."""
+        if dt == self.dt:
+            return
+        if not dt > 0:
+            raise ConfigError(f"restbus: a tick of {dt!r} s is no tick (it must be a positive number of seconds)")
+        periods: list[tuple[_Periodic, int]] = []
+        for slot in self.periodic.values():
+            cycle = slot.codec.cycle_time
+            assert cycle is not None
+            ticks = cycle / dt
+            period = round(ticks)
+            if period < 1 or abs(ticks - period) > TICK_FIT * ticks:
+                raise ConfigError(f"{slot.codec.name}: its cycle time of {cycle * 1000:g} ms is no whole number of "
+                                  f"the scheduler's {dt * 1000:g} ms ticks, so it cannot be sent at its cycle "
+                                  "(choose a tick that divides every cycle time)")
+            periods.append((slot, period))
+        self.dt = dt
+        for slot, period in periods:
+            slot.period = period
+            slot.next_due = slot.codec.frame_id % period
+        self._parked.clear()
+        self.schedule[:] = [(p.next_due, p.order, p) for p in self.periodic.values()]
+        heapq.heapify(self.schedule)
 
     def set(self, message: str, **signals: float | int | str) -> None:
         """Set values of a message this restbus sends (checked now: for test code)."""

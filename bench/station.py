@@ -225,6 +225,8 @@ class Station:
             msg = bus.recv(0.0)
 
     def tick(self, tick: int, t: float, dt: float) -> None:
+        if dt != self.restbus.dt:   # the restbus counts in the ticks of whoever ticks it (bench.restbus.Restbus)
+            self.restbus.set_tick(dt)
         self._t_before = self.t   # the previous tick's time: a frame due before it was parked then (_flush)
         self.t = t
         if self.drained:   # the clock's wait just found the socket empty (bench.clock.WallClock.wait_until)

@@ -167,6 +167,8 @@ def test_the_schedule_sends_what_a_scan_of_every_message_sent(node: str, steps: 
     if not any(CODEBOOK.sent_by(nodes)):
         return
     ours, theirs = Restbus(CODEBOOK, nodes), Restbus(CODEBOOK, nodes)
+    ours.set_tick(0.001)     # the scheduler's tick, given as a scheduler gives it
+    theirs.set_tick(0.001)
     names = sorted(ours.periodic)
     tick = 0
     for skip, action, pick in steps:
