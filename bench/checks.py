@@ -6,6 +6,8 @@ import math
 import re
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from bench.results import Step
 
 LOG_INFO, LOG_ERROR = 2, 4   # foxglove.Log levels
@@ -76,14 +78,11 @@ def step_values(step: Step) -> tuple[str, str]:
 
 
 def percentile(values: Sequence[float], q: float) -> float:
-    """Percentile by linear interpolation (numpy's default), without needing numpy here."""
-    if not values:
+    """The q-th percentile by linear interpolation between order statistics: numpy's, the bench's one percentile
+    (bench.timing's histograms use it too); NaN of no values."""
+    if not len(values):
         return math.nan
-    ordered = sorted(values)
-    pos = (len(ordered) - 1) * q / 100.0
-    lo = math.floor(pos)
-    hi = min(lo + 1, len(ordered) - 1)
-    return ordered[lo] + (ordered[hi] - ordered[lo]) * (pos - lo)
+    return float(np.percentile(values, q))
 
 
 class StepLog:

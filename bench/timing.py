@@ -118,18 +118,11 @@ class CycleAccumulator:
 
 
 def _percentiles(bins: Counter[int], count: int, qs: Sequence[float]) -> list[float]:
-    """Percentiles of binned values by linear interpolation between order statistics (numpy's default)."""
+    """Percentiles of binned values: numpy's percentile (bench.checks.percentile's) over the values the bins hold."""
     keys = sorted(bins)
-    cumulative = np.cumsum([bins[k] for k in keys])
-    out = []
-    for q in qs:
-        pos = (count - 1) * q / 100.0
-        lo = math.floor(pos)
-        hi = min(lo + 1, count - 1)
-        v_lo = keys[int(np.searchsorted(cumulative, lo, side="right"))] * BIN
-        v_hi = keys[int(np.searchsorted(cumulative, hi, side="right"))] * BIN
-        out.append(v_lo + (v_hi - v_lo) * (pos - lo))
-    return out
+    values = np.repeat(np.asarray(keys, dtype=float) * BIN, [bins[k] for k in keys])
+    assert len(values) == count
+    return [float(v) for v in np.percentile(values, qs)]
 
 
 # -- latency -------------------------------------------------------------------------------------------------
