@@ -17,6 +17,7 @@ needed, values inside the DBC range). `tests/bench/test_codec.py` (the contract'
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -476,8 +477,35 @@ def load_dbc(path: Path | str) -> Database:
         raise DatabaseError(f"{path}: {exc}") from None
 
 
+#: Codebooks loaded in this process (load_codebook), the most recent last; a few, for a process that loads others.
+_LOADED: dict[tuple[object, ...], Codebook] = {}
+LOADED_KEPT = 4
+
+
+def _file_key(path: Path) -> tuple[object, ...]:
+    """What identifies a database file's content cheaply: its name as given, where it is, its size and its time."""
+    try:
+        stat = path.stat()
+    except OSError:
+        return (path.name, str(path), None, None)       # not there: load_dbc says so
+    return (path.name, str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+
+
 def load_codebook(paths: Iterable[Path | str],
                   e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> Codebook:
     """The databases' messages; `e2e_overrides` is bench.toml's [e2e] table (message -> AUTOSAR parameters), given
-    by every caller that loads a project's databases so that each process applies the same protection."""
-    return Codebook(((Path(p).name, load_dbc(p)) for p in paths), e2e_overrides)
+    by every caller that loads a project's databases so that each process applies the same protection.
+
+    Parsed once per process: the same files (path, size, modification time) with the same overrides give the same
+    Codebook again (it does not change once built). Why: `bench run`'s checks, the pytest plugin (twice) and the
+    session each asked for the project's databases, and cantools parsed them every time (3 to 5 times a run);
+    the log process, a program of its own, parses them once in its own process."""
+    files = [Path(p) for p in paths]
+    key = (tuple(_file_key(p) for p in files), json.dumps(e2e_overrides or {}, sort_keys=True, default=repr))
+    codebook = _LOADED.pop(key, None)
+    if codebook is None:
+        codebook = Codebook(((p.name, load_dbc(p)) for p in files), e2e_overrides)
+    _LOADED[key] = codebook
+    while len(_LOADED) > LOADED_KEPT:
+        del _LOADED[next(iter(_LOADED))]
+    return codebook
