@@ -2,17 +2,20 @@
 
 The toy vehicle TOY (code 3) is a car that coasts down from BENCH_Control.InitialSpeed with a time constant from its
 toml: one behaviour (node PLANT) and one network message (PLANT_Motion, besides the scenario protocol's
-PLANT_Status). A temporary project holds exactly what the recipe in docs/architecture.md ("Adding a vehicle")
-names: `plant/assemblies/toy.py` with `toy.toml` beside it (found through the plant's extended package path),
-copies of the databases whose two `VAL_ ... Vehicle` lines gain `3 "TOY"`, a bench.toml and one case. Nothing of
-the repository is changed. `bench run` then runs the case on the virtual bus; the case judges the coast-down
-against the closed form v0·exp(−t/τ), so it fails when the toy, its parameters or the plumbing are wrong.
+PLANT_Status). A temporary project holds a copy of the plant package (as a project holds its own plant; the bench
+finds it through the entry point `bench.plants: chassis = plant.factory:build`, the project's copy first on the
+import path) and what the recipe in docs/architecture.md ("Adding a vehicle") adds to it: `plant/assemblies/toy.py`
+with `toy.toml` beside it, copies of the databases whose two `VAL_ ... Vehicle` lines gain `3 "TOY"`, a bench.toml
+and one case. Nothing of the repository is changed. `bench run` then runs the case on the virtual bus; the case
+judges the coast-down against the closed form v0·exp(−t/τ), so it fails when the toy, its parameters or the plumbing
+are wrong.
 """
 
 from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -128,8 +131,8 @@ def project(tmp_path: Path) -> Path:
     (tmp_path / "db").mkdir()
     (tmp_path / "db" / "chassis.dbc").write_bytes(CHASSIS_DBC.read_bytes())
     (tmp_path / "db" / "bench.dbc").write_text(_with_toy(BENCH_DBC.read_text(encoding="utf-8")), encoding="utf-8")
+    shutil.copytree(ROOT / "plant", tmp_path / "plant", ignore=shutil.ignore_patterns("__pycache__"))
     vehicle = tmp_path / "plant" / "assemblies"
-    vehicle.mkdir(parents=True)
     (vehicle / "toy.py").write_text(DECLARATION, encoding="utf-8")
     (vehicle / "toy.toml").write_text(PARAMETERS, encoding="utf-8")
     (tmp_path / "bench.toml").write_text(BENCH_TOML, encoding="utf-8")
