@@ -95,7 +95,7 @@ def _read_calibration(mark: pytest.Mark, marks: CaseMarks) -> None:
     nodes = _strings(mark, "node name", marks.problems)
     if len(nodes) != 1 or not mark.kwargs:
         marks.problems.append(f"@pytest.mark.calibration: give one node and its names with units, e.g. "
-                              f"calibration(\"ABS\", v_l0=\"km/h\"), got {mark.args!r} {mark.kwargs!r}")
+                              f"calibration(\"ECU\", v_max=\"km/h\"), got {mark.args!r} {mark.kwargs!r}")
         return
     for name, unit in mark.kwargs.items():
         if not isinstance(unit, str) or not unit:

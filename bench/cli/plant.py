@@ -24,7 +24,7 @@ STATUS_PERIOD = 5.0   # s between status lines
 INVALID_SHOWN = 3     # invalid frames described per status line
 #: --fault's help here: bench plant runs no cases, so its windows count from its own start only
 FAULT_HELP = ("inject a fault into the frames the plant sends: KIND:TARGET[:PARAM]@START[-END], START and END in s "
-              "from bench plant's start (an open END lasts until it stops), e.g. drop:IMU_Motion@3.5-3.8; "
+              "from bench plant's start (an open END lasts until it stops), e.g. drop:SOME_MESSAGE@3.5-3.8; "
               f"not {CASE_PREFIX}: bench plant runs no cases and refuses it (docs/reliability.md)")
 
 
