@@ -46,7 +46,30 @@ OWN_ECHO_FRAMES = 16     # a received copy of one of the station's last 16 frame
 FOREIGN_CYCLES = 3       # a frame received within this many cycles of this station's own frame of the
 FOREIGN_S = 1.0          # identifier (FOREIGN_S without a cycle time) comes from another sender
 
-FrameSink = Callable[[float, int, bytes, str, bool, str, "MessageCodec | None", "Mapping[str, float] | None"], None]
+
+class CheckedFrame:
+    """A frame as the monitor judged it, handed to its sink (the run's log and timing): one object, its fields
+    by name, rather than eight positional arguments every sink had to list in order."""
+
+    __slots__ = ("t", "arbitration_id", "data", "direction", "valid", "reason", "codec", "values")
+
+    def __init__(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
+                 codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
+        self.t = t                            # bench time, s
+        self.arbitration_id = arbitration_id
+        self.data = data
+        self.direction = direction            # "rx" or "tx"
+        self.valid = valid                    # False: rejected (reason says why), never applied
+        self.reason = reason
+        self.codec = codec                    # None: an unknown identifier or an error frame
+        self.values = values                  # decoded values of a valid frame, else None
+
+    def __repr__(self) -> str:
+        return (f"CheckedFrame(t={self.t!r}, arbitration_id=0x{self.arbitration_id:X}, data={self.data!r}, "
+                f"direction={self.direction!r}, valid={self.valid!r}, reason={self.reason!r})")
+
+
+FrameSink = Callable[[CheckedFrame], None]
 
 
 @dataclass(slots=True)
@@ -156,7 +179,7 @@ class Monitor:
             self._invalid(InvalidFrame(t, arbitration_id, "error frame" if is_error else
                                        f"0x{arbitration_id:X}", reason))
             if sink:
-                sink(t, arbitration_id, data, direction, False, reason, None, None)
+                sink(CheckedFrame(t, arbitration_id, data, direction, False, reason, None, None))
             return False
         codec = state.codec
         last_valid = state.last_valid
@@ -212,13 +235,13 @@ class Monitor:
             state.last_invalid = True
             self._invalid(InvalidFrame(t, arbitration_id, codec.name, reason))
             if sink:
-                sink(t, arbitration_id, data, direction, False, reason, codec, None)
+                sink(CheckedFrame(t, arbitration_id, data, direction, False, reason, codec, None))
             return False
         assert values is not None
         if starting:   # a valid frame (so logged), not applied: the E2E state machine is not VALID yet
             state.starting += 1
             if sink:
-                sink(t, arbitration_id, data, direction, True, "", codec, values)
+                sink(CheckedFrame(t, arbitration_id, data, direction, True, "", codec, values))
             return False
         state.latest = values
         state.last_valid = t
@@ -231,7 +254,7 @@ class Monitor:
             if length > 2 * HISTORY_CAP and length > state.history_limit:
                 self._trim_history(state)
         if sink:
-            sink(t, arbitration_id, data, direction, True, "", codec, values)
+            sink(CheckedFrame(t, arbitration_id, data, direction, True, "", codec, values))
         return True
 
     def _trim_history(self, state: MessageState) -> None:

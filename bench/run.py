@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Mapping
 from datetime import datetime
 from pathlib import Path
 
@@ -14,13 +13,13 @@ import pytest
 from bench import e2e, results_io
 from bench.case import Case
 from bench.checks import LOG_ERROR, LOG_INFO, StepLog, step_values
-from bench.codec import Codebook, MessageCodec
+from bench.codec import Codebook
 from bench.config import ProjectConfig, RunSettings
 from bench.errors import BenchError, Inconclusive
 from bench.faults import Fault
 from bench.findings import FindingCollector
 from bench.log.logproc import LogProcess
-from bench.monitor import DuplicateSender, Monitor
+from bench.monitor import CheckedFrame, DuplicateSender, Monitor
 from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
 from bench.session import BenchSession
 from bench.stop import STOP
@@ -65,10 +64,9 @@ class BenchRun:
         self.recorder = log = LogProcess(self.mcap_path, project.databases, label, project.e2e)
         self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
 
-        def sink(t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
-                 codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
-            log.frame(t, arbitration_id, data, direction, valid, reason)
-            timing(t, arbitration_id, data, direction, valid, reason, codec, values)
+        def sink(frame: CheckedFrame) -> None:
+            log.frame(frame.t, frame.arbitration_id, frame.data, frame.direction, frame.valid, frame.reason)
+            timing(frame)
 
         self._project, self._sink = project, sink
 

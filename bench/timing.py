@@ -40,8 +40,9 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,6 +50,9 @@ from bench.codec import Codebook, MessageCodec
 from bench.config import LatencyPair
 from bench.errors import BenchError
 from bench.results import Table
+
+if TYPE_CHECKING:
+    from bench.monitor import CheckedFrame
 
 #: The bounds of `Case.check_cycle_times` (fractions of the DBC cycle time); MAX_MAX x is the timeout.
 P50_BAND, P99_MAX, MAX_MAX = 0.05, 1.5, 3.0
@@ -219,7 +223,7 @@ def follow_latencies(t_cmd: Sequence[float], cmd: Sequence[float], t_sts: Sequen
 
 # -- the collector -------------------------------------------------------------------------------------------
 class TimingCollector:
-    """Called with every frame the runner's monitor checks (the monitor's FrameSink signature); makes the
+    """Called with every frame the runner's monitor checks (a bench.monitor.CheckedFrame, its sink); makes the
     report's timing tables at the end. Never raises on frames: bad pair names are reported in the table.
 
     A pair without a threshold gets one step of the coarser of its two signals, known once a frame of each
@@ -238,14 +242,16 @@ class TimingCollector:
             self._by_message.setdefault(pair.command[0], []).append((i, True, pair.command[1]))
             self._by_message.setdefault(pair.status[0], []).append((i, False, pair.status[1]))
 
-    def __call__(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
-                 codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
+    def __call__(self, frame: CheckedFrame) -> None:
+        codec = frame.codec
         if codec is None:
             return                                           # unknown identifiers and error frames
-        acc = self.cycles.get(arbitration_id)
+        t = frame.t
+        acc = self.cycles.get(frame.arbitration_id)
         if acc is None:
-            acc = self.cycles[arbitration_id] = CycleAccumulator(codec)
+            acc = self.cycles[frame.arbitration_id] = CycleAccumulator(codec)
         acc.add(t)
+        values = frame.values
         if values is None:
             return
         for i, is_command, signal in self._by_message.get(codec.name, ()):

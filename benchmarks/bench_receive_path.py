@@ -87,10 +87,11 @@ def bench_path(frames, project, codebook, path: Path) -> tuple[float, float, int
 
     recorder = Recorder(path, [load_dbc(p) for p in project.databases], attachments=list(project.databases))
 
-    def sink(t, arbitration_id, data, direction, valid, reason, codec, values):   # as bench/run.py's sink
-        recorder.frame(t, arbitration_id, data, channel=CHANNEL, direction=direction, valid=valid, error=reason)
-        if values is not None and codec is not None:
-            recorder.decoded(t, codec.name, values)
+    def sink(frame):   # a bench.monitor.CheckedFrame, as bench/run.py's sink gets it
+        recorder.frame(frame.t, frame.arbitration_id, frame.data, channel=CHANNEL, direction=frame.direction,
+                       valid=frame.valid, error=frame.reason)
+        if frame.values is not None and frame.codec is not None:
+            recorder.decoded(frame.t, frame.codec.name, frame.values)
 
     monitor = Monitor(codebook, keep_history=True, sink=sink)
     on_frame = monitor.on_frame

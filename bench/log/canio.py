@@ -31,11 +31,11 @@ from typing import Any, BinaryIO, TypedDict
 import can
 from can.io.generic import BinaryIOMessageReader, BinaryIOMessageWriter
 
-from bench.codec import MessageCodec, load_codebook
+from bench.codec import load_codebook
 from bench.errors import LogError
 from bench.log.logread import LoggedFrame, read_frames
 from bench.log.recorder import Recorder
-from bench.monitor import Monitor
+from bench.monitor import CheckedFrame, Monitor
 
 NO_CHANNEL = ""       # the channel label of frames whose bus gives none (read back as None)
 
@@ -132,13 +132,13 @@ class MCAPWriter(BinaryIOMessageWriter):
         self._extra = extra
         self.monitor.on_frame(t, msg.arbitration_id, data, direction, msg.is_extended_id, msg.is_error_frame)
 
-    def _sink(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
-              codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
+    def _sink(self, frame: CheckedFrame) -> None:
         if self._extra is None:   # the monitor calls back only from on_frame, which sets the keywords first
             raise RuntimeError("MCAPWriter: a frame from the monitor before any was received")
-        self.recorder.frame(t, arbitration_id, data, direction=direction, valid=valid, error=reason, **self._extra)
-        if values is not None and codec is not None:
-            self.recorder.decoded(t, codec.name, values)
+        self.recorder.frame(frame.t, frame.arbitration_id, frame.data, direction=frame.direction, valid=frame.valid,
+                            error=frame.reason, **self._extra)
+        if frame.values is not None and frame.codec is not None:
+            self.recorder.decoded(frame.t, frame.codec.name, frame.values)
 
     def stop(self) -> None:
         """Write the log's summary and footer and close the file (idempotent)."""

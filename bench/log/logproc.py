@@ -1,9 +1,9 @@
 """The run's MCAP log, written by a child process.
 
-Logging every frame (JSON of the raw frame and of its decoded values, then mcap's chunking and
-compression) cost about 13 µs of CPU per frame, a fifth of a campaign's CPU; the child writes each run of
-frames with `Recorder.frames` (the texts of a repeated frame built once), about half that (docs/performance.md,
-2026-11-24, issue 18). In a child process it runs on the machine's other core while the simulation goes on.
+Why a child: logging every frame (JSON of the raw frame and of its decoded values, then mcap's chunking and
+compression) is a large part of a campaign's CPU (docs/performance.md, "the log package" and issue 18's
+sections); in a child process it runs on the machine's other core while the simulation goes on, and the child
+writes each run of frames with `Recorder.frames` (the texts of a repeated frame built once).
 The simulation hands over raw frames in batches (no decoded values: the child decodes them again
 with the same codec, which is cheaper than pickling them), each batch's frames as one list and its few other
 items (steps, metadata, the time origin) apart with their place among the frames. The child
@@ -11,9 +11,9 @@ ignores SIGINT/SIGTERM and finishes the file when the run closes the pipe, or wh
 a run killed with SIGKILL still leaves a complete log of every frame handed over before the kill
 (at most BATCH_SECONDS of wall time of frames are lost).
 
-In a User-mode Linux guest (the vcan lane, docs/vcan-lane.md) a clock read is a system call of about 55 us: the
-child reads the clock once per batch (its chunk flushes, FLUSH_SECONDS), not once per record as the Recorder's own
-interval would, and it runs at a lower priority (LOG_NICE): it has no deadline, the simulation has.
+In a User-mode Linux guest (the vcan lane, docs/vcan-lane.md) a clock read is a system call: the child reads the
+clock once per batch (its chunk flushes, FLUSH_SECONDS), not once per record as the Recorder's own interval
+would, and it runs at a lower priority (LOG_NICE): it has no deadline, the simulation has.
 """
 
 from __future__ import annotations

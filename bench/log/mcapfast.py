@@ -19,6 +19,7 @@ import operator
 import struct
 from collections import deque
 from collections.abc import Callable
+from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -30,6 +31,7 @@ SUPPORTED = ("1.6.",)   # mcap releases (version prefixes) whose writer state th
 RECORD_OVERHEAD = 31  # bytes of an MCAP Message record besides its data
 
 
+@cache
 def supported() -> bool:
     """Whether the installed mcap is a release the fast path was checked against."""
     try:

@@ -119,3 +119,26 @@ def test_long_runs_keep_memory_bounded_and_say_so(codebook: Codebook, monkeypatc
     from bench.errors import BenchError
     with pytest.raises(BenchError, match="only the last"):
         monitor.history("VCU_WheelCmd_FL", "SteerAngleCmd", since=0.0)
+
+
+def test_the_sink_gets_each_frame_as_one_object_with_its_verdict(codebook: Codebook) -> None:
+    """The sink (the run's log and timing) gets a CheckedFrame per frame: its fields by name, slotted (no per-frame
+    dict); an unknown identifier and a short frame come rejected with their reason, a valid one with its values."""
+    from bench.monitor import CheckedFrame
+
+    got: list[CheckedFrame] = []
+    monitor = Monitor(codebook, sink=got.append)
+    codec = codebook["VCU_WheelCmd_FL"]
+    frames = _frames(codebook, "VCU_WheelCmd_FL", 2, SteerAngleCmd=12.34)
+    monitor.on_frame(0.0, codec.frame_id, frames[0], "rx")
+    monitor.on_frame(0.01, codec.frame_id, frames[1], "tx")
+    monitor.on_frame(0.02, 0x7FE, b"\x01", "rx")                       # no message of the databases
+    monitor.on_frame(0.03, codec.frame_id, frames[1][:2], "rx")        # shorter than the DBC says
+    assert [(f.t, f.arbitration_id, f.direction, f.valid) for f in got] == [
+        (0.0, codec.frame_id, "rx", True), (0.01, codec.frame_id, "tx", True), (0.02, 0x7FE, "rx", False),
+        (0.03, codec.frame_id, "rx", False)]
+    assert got[1].data == frames[1] and got[1].codec is codec and got[1].values is not None
+    assert got[1].values["SteerAngleCmd"] == 12.34
+    assert got[2].codec is None and got[2].values is None and got[2].reason == "unknown identifier"
+    assert got[3].values is None and got[3].reason.startswith("length 2")
+    assert not hasattr(got[0], "__dict__")

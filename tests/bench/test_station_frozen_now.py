@@ -17,7 +17,7 @@ def _received_times(codebook: Codebook, frozen: bool) -> tuple[list[float], int]
                      lambda: 0.0)
     reads = itertools.count()
     times: list[float] = []
-    monitor = Monitor(codebook, sink=lambda t, *rest: times.append(t))
+    monitor = Monitor(codebook, sink=lambda frame: times.append(frame.t))
     receiver = Station("runner", VirtualTimeBus(channel="frozen-now"), Restbus(codebook, {"DRIVER"}), monitor,
                        lambda: float(next(reads)), frozen_now=frozen)
     try:
