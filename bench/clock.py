@@ -159,7 +159,7 @@ class WallClock:
 
     def _probe(self, stations: Sequence[Station]) -> list[Station]:
         """One poll() over every station's sockets: a station whose bus socket is empty is `drained` (its tick
-        reads nothing), an empty echo socket is skipped once (bench.periodic.KernelPeriodic.echo_idle).
+        reads nothing), an empty echo socket is skipped once (bench.transport.periodic.KernelPeriodic.echo_idle).
         Returns the stations with frames waiting. Most sockets are empty at most ticks, and in a UML guest
         each read that finds nothing is a system call of about 61 us (docs/vcan-lane.md)."""
         fds = [station.socket_fds() for station in stations]
@@ -260,18 +260,15 @@ class WallClock:
             remaining = t - self.now()
 
     def _bus_fds(self, stations: Sequence[Station]) -> list[int] | None:
-        """The descriptor of each station's bus (python-can's `fileno()`), registered in one poll() object; None
+        """The descriptor of each station's bus (its transport's `fileno()`), registered in one poll() object; None
         when a bus has none (then wait_until looks at the stations every 0.2 ms)."""
         key = tuple(id(station.bus) for station in stations)
         if key == self._bus_key:
             return self._bus_fd_list
         fds: list[int] | None = []
         for station in stations:
-            try:
-                fd = int(station.bus.fileno())
-            except (NotImplementedError, AttributeError, OSError, ValueError, TypeError):
-                fd = -1
-            if fd < 0:
+            fd = station.transport.fileno()
+            if fd is None:
                 fds = None
                 break
             assert fds is not None

@@ -15,11 +15,11 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bench.bus import EMBEDDED, is_embedded
-from bench.busopts import BusOptions, positive_int
 from bench.contract import Requirement, load_requirements
 from bench.e2e.config import PARAMETERS as E2E_PARAMETERS
 from bench.errors import ConfigError, SignalError, did_you_mean
+from bench.transport import EMBEDDED, is_embedded
+from bench.transport.busopts import BusOptions, positive_int
 
 if TYPE_CHECKING:
     from bench.codec import Codebook

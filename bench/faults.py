@@ -193,8 +193,8 @@ class FaultPlan:
     def any(self) -> bool:
         """Whether a fault was ever added (or case+ ones wait). It stays true after a window ends: on socketcan
         it keeps a message on the tick scheduler, so no frame of a later fault's window can still come from the
-        kernel's broadcast manager, which a fault cannot reach (bench/periodic.py stops a task only at its next
-        quiet moment)."""
+        kernel's broadcast manager, which a fault cannot reach (bench/transport/periodic.py stops a task only at its
+        next quiet moment)."""
         return bool(self.faults or self.templates)
 
     # -- applied by stations ----------------------------------------------------------------------

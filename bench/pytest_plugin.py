@@ -24,8 +24,6 @@ from pluggy import Result
 
 from bench import results_io
 from bench import shard as shards
-from bench.bus import EMBEDDED, check_channel, check_interface, is_embedded
-from bench.busopts import BusOptions
 from bench.case import Case
 from bench.checks import step_values
 from bench.clock import settle_heap
@@ -49,6 +47,8 @@ from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 from bench.session import resolve_external
 from bench.shard import apply_shard
 from bench.stop import STOP
+from bench.transport import EMBEDDED, check_channel, check_interface, is_embedded
+from bench.transport.busopts import BusOptions
 
 _RUN_KEY = pytest.StashKey["BenchRun | None"]()
 _CASE_KEY = pytest.StashKey[Case]()

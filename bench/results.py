@@ -172,7 +172,7 @@ class Finding:
     """Something that went wrong without stopping the run: a warning the bench or the plant logged
     (bench.findings), e.g. frames the driver could not send."""
 
-    source: str                  # the logger: "bench.station", "bench.periodic", "plant...."
+    source: str                  # the logger: "bench.station", "bench.transport.periodic", "plant...."
     level: str                   # "warning", "error" or "critical"
     message: str
     time: float | None = None    # bench time of the first occurrence, s; None before the clock ran

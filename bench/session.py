@@ -10,8 +10,6 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Sequence
 
-from bench.bus import in_process, open_bus
-from bench.busopts import BusOptions, contract_options
 from bench.clock import Clock, Scheduler, VirtualClock, WallClock
 from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig, RunSettings
@@ -23,6 +21,8 @@ from bench.plugins import load_plant
 from bench.restbus import Restbus
 from bench.station import Station
 from bench.timing import SelfTiming
+from bench.transport import in_process, open_bus
+from bench.transport.busopts import BusOptions, contract_options
 
 ALL = "all"
 _virtual_channels = itertools.count(1)
@@ -135,6 +135,6 @@ class BenchSession:
     def close(self) -> None:
         for station in self.stations:
             try:
-                station.bus.shutdown()
+                station.transport.shutdown()
             except Exception as exc:  # a bus that fails to close must not hide the run's result
                 raise BenchError(f"closing the {station.name} bus failed: {exc}") from None

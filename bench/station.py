@@ -2,25 +2,24 @@
 
 It owns the restbus of its simulated nodes, their behaviours, and a monitor of everything it
 sends and receives. The test runner is one station; `bench plant` is another; on the embedded
-default both run in one process on the virtual-time bus.
+default both run in one process on the embedded bus. It reaches its bus through one transport
+(bench.transport), picked once when it is made.
 """
 
 from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import can
 
-from bench.capabilities import delivers_own_frames
 from bench.faults import FaultPlan
 from bench.monitor import Monitor
 from bench.node import Behaviour
-from bench.periodic import KernelPeriodic
 from bench.restbus import Restbus
-from bench.socketcan_rx import FastReceiver, RawFrame
+from bench.transport import ReceivedFrame, Transport, transport_for
 
 if TYPE_CHECKING:
     from bench.restbus import _Periodic
@@ -94,12 +93,14 @@ class _StationIO:
 
 
 class Station:
-    def __init__(self, name: str, bus: can.BusABC, restbus: Restbus, monitor: Monitor,
+    def __init__(self, name: str, bus: can.BusABC | Transport, restbus: Restbus, monitor: Monitor,
                  now: Callable[[], float], behaviours: Sequence[Behaviour] = (),
                  stamp: Callable[[float], float] | None = None, *, every_tick: bool = True,
                  recent_monotonic: Callable[[], float] | None = None, frozen_now: bool = False) -> None:
         self.name = name
-        self.bus = bus
+        # the one choice of how to reach the bus (a bus given as is gets its kind's adapter)
+        self.transport: Transport = transport_for(bus) if isinstance(bus, can.BusABC) else bus
+        self.bus = self.transport.bus
         self.restbus = restbus
         self.monitor = monitor
         self.now = now
@@ -108,7 +109,7 @@ class Station:
         # Real time: bench time of a received frame from its receive timestamp (bench.clock.WallClock.stamp,
         # checked against the clock's latest read), so a late station still measures the bus's timing, not its
         # own lateness, and a frame costs no clock read. None: the time of reading.
-        self.stamp = stamp
+        self.stamp = stamp if self.transport.receive_stamped else None
         self._last_rx = float("-inf")
         # `now` does not move during a poll (the virtual clock: bench time is the tick's): without a stamp, a
         # frame gets the time read once per poll instead of a read of its own (the same number).
@@ -117,7 +118,7 @@ class Station:
         # ticks when late (bench.clock.Scheduler).
         self.every_tick = every_tick
         self.behaviours = list(behaviours)
-        self.loops_back = delivers_own_frames(bus)   # asked of the bus (bench/capabilities.py)
+        self.loops_back = self.transport.loops_back
         self.io = _StationIO(self)
         self.sent = 0
         self.send_errors = 0
@@ -129,18 +130,13 @@ class Station:
         # it reaches the monitor (which will flag its counter). Bounded: only the last few are kept.
         self._echoes: dict[int, deque[bytes]] = {
             p.codec.frame_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
-        # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (bench/periodic.py)
-        self.kernel = KernelPeriodic.attach(bus, restbus)
+        # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (periodic sending
+        # offered by the transport, bench/transport/periodic.py)
+        self.kernel = self.transport.periodic(restbus)
         if self.kernel is not None and recent_monotonic is not None:
             self.kernel.clock = recent_monotonic   # its per-tick look uses the clock's latest read
-        # socketcan: frames read from the bus's socket without a can.Message each (bench/socketcan_rx.py)
-        self._fast = FastReceiver.attach(bus)
-        self._send_fast = self._fast is not None and self._fast.native
-        # the embedded bus: frames as bytes, no can.Message each (bench/bus.py send_raw, raw_frames)
-        self._send_raw = getattr(bus, "send_raw", None)
-        self._raw_frames = getattr(bus, "raw_frames", None)
-        # its pending frames (a deque with `closed`): an empty one costs a tick no poll (most ticks of a plant)
-        self._raw_inbox = getattr(bus, "queue", None) if self._raw_frames is not None else None
+        self._frames = self.transport.frames
+        self._send = self.transport.send
         self._schedule = restbus.schedule   # the restbus' heap: a tick with nothing due does not call `due`
         # Real time (set by the session): the bench's own timing (bench.timing.SelfTiming). A frame it sends is
         # logged with the clock read after the tick's frames went to the driver (`send_clock`), not the tick's
@@ -159,31 +155,23 @@ class Station:
     @property
     def stamped_batches(self) -> bool:
         """Whether its frames carry the kernel's receive time and one call reads a batch of them (socketcan,
-        bench/socketcan_rx.py): then a wall-clock wait may sleep and read at its end (bench.clock.WallClock)."""
-        return self._fast is not None and self._fast.native and self.stamp is not None
+        bench/transport/socketcan_rx.py): then a wall-clock wait may sleep and read at its end
+        (bench.clock.WallClock)."""
+        return self.transport.stamped_batches and self.stamp is not None
 
     def socket_fds(self) -> tuple[int, int | None]:
         """The descriptors of its bus socket and of its kernel echo socket (None while no kernel task runs), for
         one poll() over every station's sockets; only for a station with `stamped_batches`."""
-        assert self._fast is not None
+        fd = self.transport.fileno()
+        assert fd is not None
         kernel = self.kernel
-        return self._fast.fileno(), kernel.echo.fileno() if kernel is not None and kernel.tasks else None
+        return fd, kernel.echo.fileno() if kernel is not None and kernel.tasks else None
 
     def poll(self, timeout: float = 0.0, limit: int = POLL_BATCH) -> int:
         """Receive up to `limit` pending frames into the monitor (the first recv may wait up to timeout).
         Returns how many were read: `limit` means more may be waiting."""
+        frames: Iterable[ReceivedFrame] = self._frames(timeout, limit)
         monitor, echoes, stamp, now = self.monitor, self._echoes, self.stamp, self.now
-        fast = self._fast
-        frames: Iterator[RawFrame | can.Message]
-        if fast is not None:
-            frames = fast.frames(timeout, limit)
-        elif self._raw_frames is not None:
-            inbox = self._raw_inbox
-            if inbox is not None and not inbox and timeout <= 0.0 and not inbox.closed:
-                return 0   # nothing pending, nothing to wait for: what raw_frames would find
-            frames = self._raw_frames(timeout, limit)
-        else:
-            frames = self._recv(timeout, limit)
         count = 0
         frozen = self.frozen_now
         t_poll: float | None = None
@@ -212,18 +200,6 @@ class Station:
             self.self_timing.add("receive path", max(0.0, self.recent() - t_first), t_first)
         return count
 
-    def _recv(self, timeout: float, limit: int) -> Iterator[can.Message]:
-        """Up to `limit` frames through python-can's recv (every interface)."""
-        bus = self.bus
-        msg = bus.recv(timeout)
-        count = 0
-        while msg is not None:
-            yield msg
-            count += 1
-            if count >= limit:
-                return      # not one recv more: a frame read here would be lost
-            msg = bus.recv(0.0)
-
     def tick(self, tick: int, t: float, dt: float) -> None:
         if dt != self.restbus.dt:   # the restbus counts in the ticks of whoever ticks it (bench.restbus.Restbus)
             self.restbus.set_tick(dt)
@@ -240,7 +216,7 @@ class Station:
         if faults is not None and (faults.any or self._delayed):
             self._tick_faults(faults, t, dt)
         kernel = self.kernel
-        if kernel is not None:   # bench/periodic.py
+        if kernel is not None:   # the transport's periodic sending (bench/transport/periodic.py)
             stamp = self.stamp
             for frame_id, data, timestamp in kernel.echoes():   # what the kernel sent for this station: tx
                 self.sent += 1
@@ -308,13 +284,10 @@ class Station:
 
     def _transmit(self, t: float, frame_id: int, data: bytes, is_error: bool = False, due: float | None = None) -> None:
         try:
-            if self._send_fast and not is_error and self._fast is not None:
-                self._fast.send_frame(frame_id, data)     # one send(): no can.Message, no select, no clock read
-            elif self._send_raw is not None and not is_error:
-                self._send_raw(t, frame_id, data)
+            if is_error:
+                self.transport.send_error(t, frame_id, data)
             else:
-                self.bus.send(can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
-                                          is_fd=False, is_error_frame=is_error))
+                self._send(t, frame_id, data)   # the transport's fastest way for its bus
         except can.CanError as exc:
             self.send_errors += 1   # a full queue or bus-off: the frame never reached the bus
             if self.send_errors == 1:   # the first one now; the count at the end of the run (bench.run)

@@ -1,6 +1,6 @@
 """Target 3: real-time periodic sending on udp_multicast — period error of every restbus message.
 
-`bench plant --interface udp_multicast --channel <random 239.255.x.y>` (hop limit 0, set by bench.bus) sends
+`bench plant --interface udp_multicast --channel <random 239.255.x.y>` (hop limit 0, set by bench.transport.bus) sends
 every message of the simulated nodes at its DBC cycle time for 60 s (quick: 10 s) after a 2 s warm-up; a
 receiver in this process (python-can `can.Bus(interface="udp_multicast", hop_limit=0)`, receive buffer
 enlarged as the bench does) records the kernel's receive time of every frame (SO_TIMESTAMPNS, so this

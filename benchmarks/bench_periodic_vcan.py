@@ -6,13 +6,13 @@ Linux where it runs, docs/vcan-lane.md):
     scripts/vcan-lane --command 'python benchmarks/bench_periodic_vcan.py --json "$LANE_OUT/periodic.json"'
 
 The question (issue 15, acceptance 2): the period error of the bench's two send paths (the tick scheduler and
-the broadcast manager through bench/periodic.py), beside python-can's own `send_periodic` as the baseline,
+the broadcast manager through bench/transport/periodic.py), beside python-can's own `send_periodic` as the baseline,
 measured in the same run. Four senders run at the same time, each in a process of its own, for 20 s (quick:
 6 s) after a 2 s warm-up, while `bench plant` runs on the same bus as load (--no-load: without it):
 - "tick scheduler": a bench station (bench.station, the restbus of node DRIVER: DRV_Steering and DRV_Pedals
   at 10 ms, DRV_MotionRequest at 20 ms) on the wall clock's 1 ms tick, with kernel periodic sending off
-  (what every message of the bench did before bench/periodic.py);
-- "bench + BCM": a bench station with bench/periodic.py on (the restbus of node TESTER: BENCH_SteeringRobot
+  (what every message of the bench did before bench/transport/periodic.py);
+- "bench + BCM": a bench station with bench/transport/periodic.py on (the restbus of node TESTER: BENCH_SteeringRobot
   at 10 ms, BENCH_Control at 20 ms, ...): its steady messages go to the BCM as 16-frame counter cycles;
 - baseline "python-can send_periodic": python-can's `bus.send_periodic(16 frames, period)` (on socketcan a BCM
   task: 0x7E0 at 10 ms, 0x7E1 at 20 ms);
@@ -85,7 +85,7 @@ def run_station(node: str, kernel: bool, seconds: float) -> None:
     if not kernel:
         station.kernel = None
     elif station.kernel is None:
-        raise SystemExit("bench/periodic.py did not attach to this socketcan bus")
+        raise SystemExit("bench/transport/periodic.py did not attach to this socketcan bus")
     scheduler = Scheduler([station], clock)
     clock.start()
     scheduler.run_until(seconds)
@@ -109,7 +109,7 @@ def _protect(frame_id: int, data: bytearray, counter: int) -> None:
 def run_raw_bcm(seconds: float) -> None:
     import can
 
-    from bench.periodic import counter_cycle
+    from bench.transport.periodic import counter_cycle
 
     bus = can.Bus(interface="socketcan", channel=CHANNEL)
     tasks = [bus.send_periodic(counter_cycle(common.protection_of(i), i, bytes(8), 0), period)

@@ -309,7 +309,7 @@ def udp_multicast_users(port: int = UDP_MULTICAST_PORT) -> list[str]:
 
     Why it matters: python-can binds every udp_multicast bus to 0.0.0.0:43113, and Linux delivers a group's
     datagrams to every socket so bound whose process joined any group (IP_MULTICAST_ALL is on by default),
-    so two runs on different groups of one host received each other's frames until bench.bus turned
+    so two runs on different groups of one host received each other's frames until bench.transport.udp turned
     IP_MULTICAST_ALL off. A real-time benchmark still records who else ran meanwhile: they share the CPU."""
     inodes = _udp_inodes(port)
     if not inodes:
@@ -365,7 +365,7 @@ def udp_users_at_start() -> dict[str, Any]:
 
 
 def note_udp_users(result: Result, quiet: dict[str, Any], seen: dict[str, float]) -> None:
-    """Record who else used the udp_multicast port during the measurement. Since bench.bus sets
+    """Record who else used the udp_multicast port during the measurement. Since bench.transport.udp sets
     IP_MULTICAST_ALL = 0 their frames no longer reach our buses (nor ours theirs), but they share the CPU."""
     others = sorted(set(quiet.get("other_users_when_started", [])) | set(seen))
     result.details["other_udp_multicast_users"] = {"wait": quiet, "seen_during_run": seen}
@@ -374,11 +374,11 @@ def note_udp_users(result: Result, quiet: dict[str, Any], seen: dict[str, float]
 
 
 def isolate_group(bus: Any) -> bool:
-    """Make a python-can udp_multicast bus receive only its own group, IPv4 or IPv6 (Linux; bench.bus does it for
-    the bench's own buses: IP_MULTICAST_ALL = 0, and IPV6_MULTICAST_ALL = 0 on an IPv6 socket)."""
+    """Make a python-can udp_multicast bus receive only its own group, IPv4 or IPv6 (Linux; bench.transport.udp does it
+    for the bench's own buses: IP_MULTICAST_ALL = 0, and IPV6_MULTICAST_ALL = 0 on an IPv6 socket)."""
     import socket
 
-    from bench.bus import IP_MULTICAST_ALL, IPV6_MULTICAST_ALL
+    from bench.transport.udp import IP_MULTICAST_ALL, IPV6_MULTICAST_ALL
 
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
     if sock is None or sock.family not in (socket.AF_INET, socket.AF_INET6):

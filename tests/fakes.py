@@ -19,17 +19,17 @@ from typing import Any
 import can
 import pytest
 
-from bench.bus import open_bus
 from bench.errors import ConfigError
 from bench.log.recorder import Recorder
+from bench.transport import open_bus
 
 
 class FakeBus(can.BusABC):
     """A python-can bus as far as the bench asks: what is sent goes to `sent` (and back into `inbox` when the bus
     loops a sender's frames back, `receive_own_messages=True`, as udp_multicast does); `recv` reads `inbox` first,
     then `incoming` (any iterable, e.g. `flood(frame)`). Every keyword in `attributes` becomes an attribute: the
-    bench asks a bus what it has (bench.capabilities), never its class name. `socket`, when given, is the bus's
-    socket (a raw SocketCAN socket is how the bench recognises SocketCAN)."""
+    bench asks a bus what it has (bench.transport.capabilities), never its class name. `socket`, when given, is the
+    bus's socket (a raw SocketCAN socket is how the bench recognises SocketCAN)."""
 
     def __init__(self, channel: str = "fake", *, incoming: Iterable[can.Message] = (), socket: Any = None,
                  **attributes: Any) -> None:

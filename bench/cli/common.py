@@ -12,13 +12,13 @@ import os
 import tempfile
 from pathlib import Path
 
-from bench.bus import EMBEDDED, PYTHON_CAN_VIRTUAL, check_interface
-from bench.busopts import BusOptions
 from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig
 from bench.errors import ConfigError
 from bench.options import add_cli_options
 from bench.session import resolve_bus_options
+from bench.transport import EMBEDDED, PYTHON_CAN_VIRTUAL, check_interface
+from bench.transport.busopts import BusOptions
 
 BUS_OPTIONS = ("interface", "channel", "bitrate", "fd", "data-bitrate", "config")
 NODE_OPTIONS = ("external", "fault")

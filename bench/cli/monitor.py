@@ -28,12 +28,12 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 from bench.cli.common import add_bus_options, bus_options_for, reject_in_process
 from bench.codec import MessageCodec
 from bench.config import load_config
 from bench.errors import BenchError, ConfigError
 from bench.monitor import TIMEOUT_CYCLES, MessageState, Monitor
+from bench.transport import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 
 REFRESH = 0.25          # s between screen updates
 DEFAULT_WINDOW = 2.0    # s of frames the rate and cycle columns are measured over

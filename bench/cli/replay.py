@@ -23,12 +23,12 @@ import can
 from rich.console import Console
 from rich.markup import escape
 
-from bench.bus import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 from bench.cli.common import add_bus_options, bus_options_for, reject_in_process
 from bench.config import load_config
 from bench.errors import ConfigError, LogError
 from bench.log.canio import log_reader
 from bench.log.format import MAGIC
+from bench.transport import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 
 DIRECTIONS = ("tx", "rx", "all")
 

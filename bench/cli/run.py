@@ -17,8 +17,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from bench import options, shard
-from bench.bus import EMBEDDED, check_channel, check_interface, is_embedded, probe_bus
-from bench.busopts import BusOptions
 from bench.cli.common import (
     BUS_OPTIONS,
     NODE_OPTIONS,
@@ -39,6 +37,8 @@ from bench.report.junit import step_summary
 from bench.run import default_out_dir
 from bench.session import resolve_bus_options, resolve_external
 from bench.stop import STOP
+from bench.transport import EMBEDDED, check_channel, check_interface, is_embedded, probe_bus
+from bench.transport.busopts import BusOptions
 
 OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "skipped": "yellow",
                  "aborted": "bold magenta", "inconclusive": "bold yellow"}

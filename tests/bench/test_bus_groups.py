@@ -1,4 +1,4 @@
-"""bench/bus.py: a udp_multicast bus hears its own group only, from its first read on, while another bench
+"""bench/transport/udp.py: a udp_multicast bus hears its own group only, from its first read on, while another bench
 sends on another group of this host (python-can binds every such socket to one port on the wildcard address),
 for IPv4 and IPv6 groups alike (issue 25, acceptance 1).
 
@@ -8,7 +8,7 @@ IP_MULTICAST_ALL = 0 (48 of 200 fresh buses before the fix). On IPv6 groups ever
 port until IPV6_MULTICAST_ALL = 0 (issue 25: `bench monitor` showed another bench's PLANT_Status).
 
 Groups: IPv4 administratively scoped 239.255.x.y and IPv6 link-local ff12::..., all with the bench's hop limit 0
-(bench.bus.UDP_MULTICAST_HOP_LIMIT): nothing leaves this host."""
+(bench.transport.udp.UDP_MULTICAST_HOP_LIMIT): nothing leaves this host."""
 
 from __future__ import annotations
 
@@ -23,10 +23,10 @@ from collections.abc import Callable, Iterator
 import can
 import pytest
 
-from bench.bus import open_bus
-from bench.busopts import BusOptions
 from bench.config import RunSettings, load_config
 from bench.session import BenchSession
+from bench.transport import open_bus
+from bench.transport.busopts import BusOptions
 from tests.fakes import ipv4_group, ipv6_available, ipv6_group
 from tests.repo import ROOT
 
@@ -36,8 +36,7 @@ OPENS = 100
 SENDER = """
 import sys, time
 import can
-from bench.bus import open_bus
-from bench.busopts import BusOptions
+from bench.transport import open_bus
 bus = open_bus("udp_multicast", sys.argv[1])
 end = time.monotonic() + 60.0
 while time.monotonic() < end:

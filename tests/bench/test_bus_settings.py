@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from bench.bus import VirtualTimeBus, open_bus
-from bench.busopts import BusOptions, contract_options
 from bench.codec import load_codebook
 from bench.config import load_config
 from bench.errors import ConfigError
+from bench.transport import VirtualTimeBus, open_bus
+from bench.transport.busopts import BusOptions, contract_options
 from tests.repo import ROOT
 
 CHASSIS_DBC, BENCH_DBC = ROOT / "dbc" / "chassis.dbc", ROOT / "dbc" / "bench.dbc"

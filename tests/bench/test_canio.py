@@ -2,7 +2,7 @@
 
 Issue 7, acceptance 3 (first half): `python -m can.logger -f x.mcap` records from a bus and `bench log info
 x.mcap` reads it. udp_multicast traffic stays on this host: every bus here has hop limit 0 (the logger's
-and player's through `--bus-kwargs hop_limit=0`, the test's through `bench.bus.open_bus`).
+and player's through `--bus-kwargs hop_limit=0`, the test's through `bench.transport.open_bus`).
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ from pathlib import Path
 import can
 import pytest
 
-from bench.bus import open_bus
 from bench.errors import LogError
 from bench.log.canio import MCAPReader, MCAPWriter
 from bench.log.logread import read_decoded, read_frames
 from bench.log.recorder import Recorder
+from bench.transport import open_bus
 from tests.fakes import ipv4_group
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 

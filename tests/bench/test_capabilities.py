@@ -1,4 +1,4 @@
-"""bench/capabilities.py: what a bus can do is asked of the bus, never of its class name. Real python-can
+"""bench/transport/capabilities.py: what a bus can do is asked of the bus, never of its class name. Real python-can
 classes where this host can build them (udp_multicast on loopback with hop limit 0, python-can's virtual bus)
 and the bench's virtual-time bus; SocketCAN does not exist here, so its socket is a fake of the right family."""
 
@@ -11,9 +11,8 @@ import uuid
 import can
 import pytest
 
-from bench import capabilities
-from bench.bus import UDP_MULTICAST_HOP_LIMIT, VirtualTimeBus, open_bus
-from bench.socketcan_rx import plain_socketcan
+from bench.transport import UDP_MULTICAST_HOP_LIMIT, VirtualTimeBus, capabilities, open_bus
+from bench.transport.socketcan_rx import plain_socketcan
 from tests.fakes import FakeBus, ipv4_group
 
 

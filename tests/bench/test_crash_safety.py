@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.bus import open_bus
 from bench.log.logread import read_frames, summarise
+from bench.transport import open_bus
 from tests.fakes import ipv4_group
 from tests.repo import ROOT
 

@@ -177,8 +177,8 @@ def test_the_echo_of_the_stations_own_frame_is_no_second_sender(codebook: Codebo
 def test_two_senders_on_the_virtual_bus(codebook: Codebook) -> None:
     """In process: the bench's VCU and a second VCU on one virtual bus. The runner's monitor (which sends
     neither) shows it by the counters, the first VCU's station by a frame of its own identifier."""
-    from bench.bus import VirtualTimeBus
     from bench.station import Station
+    from bench.transport import VirtualTimeBus
 
     channel = f"dup-{random.randint(0, 1 << 30)}"
     buses = [VirtualTimeBus(channel=channel) for _ in range(3)]

@@ -14,8 +14,6 @@ from typing import Any
 import can
 import pytest
 
-from bench import periodic
-from bench.bus import VirtualTimeBus
 from bench.codec import load_codebook
 from bench.config import RunSettings, load_config
 from bench.findings import MAX_FINDINGS, FindingCollector
@@ -23,6 +21,7 @@ from bench.restbus import Restbus
 from bench.results import Finding, RunResult
 from bench.results_io import dump, load, merge
 from bench.run import BenchRun
+from bench.transport import VirtualTimeBus, periodic
 
 
 def test_collector_keeps_warnings_of_the_bench_and_the_plant() -> None:
@@ -134,7 +133,7 @@ def test_kernel_periodic_fallback_is_a_warning(codebook: object, monkeypatch: py
     restbus = Restbus(codebook, ["TESTER"])   # type: ignore[arg-type]
     with caplog.at_level(logging.WARNING, logger="bench"):
         assert periodic.KernelPeriodic.attach(SimpleNamespace(channel="vcan0"), restbus) is None  # type: ignore[arg-type]
-    [record] = [r for r in caplog.records if r.name == "bench.periodic"]
+    [record] = [r for r in caplog.records if r.name == "bench.transport.periodic"]
     assert "vcan0" in record.getMessage() and "restbus sends every frame itself" in record.getMessage()
 
 
@@ -144,6 +143,6 @@ def test_kernel_periodic_given_up_is_said_once(caplog: pytest.LogCaptureFixture)
     with caplog.at_level(logging.WARNING, logger="bench"):
         kernel._disable("modify_data of X failed: [Errno 105] No buffer space available")
         kernel._disable("stopping the task of X failed: again")
-    records = [r for r in caplog.records if r.name == "bench.periodic"]
+    records = [r for r in caplog.records if r.name == "bench.transport.periodic"]
     assert len(records) == 1 and "No buffer space" in records[0].getMessage()
     assert not kernel.enabled and kernel.error.startswith("stopping")

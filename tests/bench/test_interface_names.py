@@ -19,11 +19,11 @@ import can
 import pytest
 from can.interfaces.virtual import VirtualBus
 
-from bench.bus import EMBEDDED, VirtualTimeBus, check_interface, open_bus
 from bench.cli import main
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError
 from bench.session import BenchSession
+from bench.transport import EMBEDDED, VirtualTimeBus, check_interface, open_bus
 from tests.repo import ROOT
 
 MINI = ROOT / "tests" / "fixtures" / "cases" / "test_mini.py"

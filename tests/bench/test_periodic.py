@@ -1,4 +1,4 @@
-"""bench/periodic.py: restbus messages handed to the kernel's broadcast manager (BCM) on socketcan.
+"""bench/transport/periodic.py: restbus messages handed to the kernel's broadcast manager (BCM) on socketcan.
 
 Two layers. Without CAN in the kernel (this host), a fake kernel stands in for SocketCAN: BCM tasks that send
 their frames in turn on a timer, raw sockets with CAN_RAW_FILTER (inverted, joined) and loopback to the other
@@ -20,12 +20,13 @@ from typing import Any
 import can
 import pytest
 
-from bench import e2e, periodic
+from bench import e2e
 from bench.codec import Codebook
 from bench.faults import FaultPlan, parse_fault
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import Station
+from bench.transport import periodic
 from tests.fakes import FakeBus
 from tests.integration.vcan import IN_LANE, has_vcan
 from tests.reference import COUNTER_VALUES, counter_of, intact
@@ -64,7 +65,7 @@ class FakeKernel:
 
 
 class FakeRawSocket:
-    family, type = socket.AF_CAN, socket.SOCK_RAW      # a raw SocketCAN socket (bench.capabilities asks)
+    family, type = socket.AF_CAN, socket.SOCK_RAW      # a raw SocketCAN socket (bench.transport.capabilities asks)
 
     def __init__(self, kernel: FakeKernel) -> None:
         self.kernel = kernel
@@ -136,8 +137,8 @@ class FakeTask:
 
 
 class SocketcanBus(FakeBus):
-    """Like python-can's: a raw SocketCAN socket in `socket`, so that bench.periodic takes it for socketcan; what
-    it sends and receives goes through the fake kernel."""
+    """Like python-can's: a raw SocketCAN socket in `socket`, so that bench.transport takes it for socketcan; what it
+    sends and receives goes through the fake kernel."""
 
     def __init__(self, kernel: FakeKernel) -> None:
         super().__init__("vcan0", socket=FakeRawSocket(kernel))

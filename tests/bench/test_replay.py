@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from bench.bus import open_bus
 from bench.cli import main
 from bench.log.recorder import Recorder
+from bench.transport import open_bus
 from tests.fakes import SPACING, ipv4_group, make_log
 from tests.repo import ROOT
 

@@ -1,4 +1,4 @@
-"""bench/socketcan_rx.py reads a received frame exactly as python-can's socketcan `capture_message` does.
+"""bench/transport/socketcan_rx.py reads a received frame exactly as python-can's socketcan `capture_message` does.
 
 Both parse the same bytes (struct can_frame / canfd_frame and the SO_TIMESTAMPNS control message, as the
 kernel delivers them) from a socket that replays them; hypothesis picks identifiers, flags, lengths, data and
@@ -20,8 +20,8 @@ from can.interfaces.socketcan.socketcan import capture_message
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench import socketcan_rx
-from bench.socketcan_rx import FastReceiver, MMsgBatch, parse
+from bench.transport import socketcan_rx
+from bench.transport.socketcan_rx import FastReceiver, MMsgBatch, parse
 
 SO_TIMESTAMPNS = 35
 
@@ -79,7 +79,7 @@ def test_frames_stop_at_the_limit_and_when_the_socket_is_empty() -> None:
 
 
 def test_a_bus_with_python_can_filters_keeps_python_can_recv() -> None:
-    class RawSocket:                 # what bench.capabilities asks of a socket: a raw CAN one
+    class RawSocket:                 # what bench.transport.capabilities asks of a socket: a raw CAN one
         family, type = socket.AF_CAN, socket.SOCK_RAW
 
     class SocketcanBus:              # filters are python-can's to apply in recv

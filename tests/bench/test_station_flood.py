@@ -16,7 +16,7 @@ from tests.fakes import FakeBus
 
 def test_a_flood_on_a_looping_bus_is_sent_and_its_echoes_are_recognised(codebook) -> None:
     # like python-can's udp_multicast: every frame sent comes back to the sender's own socket, and the bus says
-    # so with `receive_own_messages` (what bench.capabilities asks of a bus without a socket)
+    # so with `receive_own_messages` (what bench.transport.capabilities asks of a bus without a socket)
     bus = FakeBus("loop", receive_own_messages=True)
     station = Station("runner", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), lambda: 0.0, ())
     assert station.loops_back

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import itertools
 
-from bench.bus import VirtualTimeBus
 from bench.codec import Codebook
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import Station
+from bench.transport import VirtualTimeBus
 
 
 def _received_times(codebook: Codebook, frozen: bool) -> tuple[list[float], int]:

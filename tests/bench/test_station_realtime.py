@@ -12,11 +12,11 @@ import time
 import can
 import pytest
 
-from bench.bus import open_bus
 from bench.clock import STAMP_WINDOW, WallClock
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import POLL_BATCH, Station
+from bench.transport import Transport, open_bus
 from tests.fakes import FakeBus, flood, ipv4_group
 
 
@@ -31,7 +31,7 @@ def _frame(codebook, name: str, timestamp: float = 0.0) -> can.Message:
                        timestamp=timestamp)
 
 
-def _station(codebook, bus: can.BusABC, clock: WallClock | None = None) -> Station:
+def _station(codebook, bus: can.BusABC | Transport, clock: WallClock | None = None) -> Station:
     now = clock.now if clock else (lambda: 0.0)
     return Station("runner", bus, Restbus(codebook, {"DRIVER"}), Monitor(codebook), now, (),
                    clock.stamp if clock else None)
@@ -312,15 +312,16 @@ def test_a_station_with_stamped_batches_sleeps_to_the_deadline_and_reads_at_its_
     import socket
     import struct
 
-    from bench.socketcan_rx import SO_TIMESTAMPNS, FastReceiver
+    from bench.transport.socketcan import SocketcanTransport
+    from bench.transport.socketcan_rx import SO_TIMESTAMPNS, FastReceiver
 
     sender, receiver = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
     receiver.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
     receiver.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
     try:
         clock = WallClock()
-        station = _station(codebook, flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0), clock)
-        station._fast = FastReceiver(receiver)
+        bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)
+        station = _station(codebook, SocketcanTransport(bus, FastReceiver(receiver)), clock)
         assert station.stamped_batches
         frame_id = codebook["VCU_WheelCmd_FL"].frame_id
         clock.start()

@@ -1,4 +1,4 @@
-"""The embedded bus (`embedded`, bench.bus.VirtualTimeBus) where python-can's own tests do not look
+"""The embedded bus (`embedded`, bench.transport.embedded.VirtualTimeBus) where python-can's own tests do not look
 (scripts/python-can-suite runs those): recv(timeout) sleeps instead of polling, a dropped bus is collected and
 stops receiving, each receiver gets its own copy with its own channel, a shut-down bus raises, and the sender's
 (virtual) time is kept."""
@@ -13,7 +13,7 @@ import weakref
 import can
 import pytest
 
-from bench.bus import VirtualTimeBus
+from bench.transport import VirtualTimeBus
 
 
 def test_recv_with_timeout_sleeps_on_a_quiet_bus() -> None:

@@ -5,8 +5,8 @@ Each `bench run` (runner and plant, real time, udp_multicast with the bench's ho
 runner sends (tx) and receives (rx). On its own group only its runner sends the stimulus messages (DRV_*,
 BENCH_*), and its runner's own frames are logged once, as tx; so an rx frame of a stimulus identifier in a log is
 the other bench's. The other bench's plant frames would be invalid frames (a second counter sequence) and "two
-senders"; both runs count 0. Before bench/bus.py limited IPv6 sockets to their group: about 1 000 invalid frames
-in each of two 1 s runs on two IPv6 groups.
+senders"; both runs count 0. Before bench/transport/udp.py limited IPv6 sockets to their group: about 1 000 invalid
+frames in each of two 1 s runs on two IPv6 groups.
 """
 
 from __future__ import annotations

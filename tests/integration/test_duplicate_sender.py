@@ -68,7 +68,7 @@ def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
 
 
 SECOND_VCU_CASE = '''
-from bench.bus import VirtualTimeBus
+from bench.transport import VirtualTimeBus
 from bench.monitor import Monitor
 from bench.restbus import Restbus
 from bench.station import Station

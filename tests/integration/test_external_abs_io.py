@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import statistics
 
-from bench.bus import VirtualTimeBus
 from bench.config import RunSettings, load_config
 from bench.monitor import Monitor
 from bench.node import NodeIO
 from bench.restbus import Restbus
 from bench.session import BenchSession
 from bench.station import Station
+from bench.transport import VirtualTimeBus
 
 WHEELS = ("FL", "FR", "RL", "RR")
 DECREASE = 2

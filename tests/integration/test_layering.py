@@ -190,3 +190,33 @@ def test_no_private_mcap_name_outside_the_fast_path() -> None:
     # the scan sees the fast path's own import and mangled names (else it checks nothing)
     assert any("mcap._chunk_builder" in hit for hit in found)
     assert any("_Writer__chunk_builder" in hit for hit in found)
+
+
+# -- the transport package ------------------------------------------------------------------------------------
+#: What bench/transport/ may import of the bench besides itself: the errors, and, for its types and the kernel's
+#: periodic sending, the restbus it sends and the E2E protection of its frames.
+TRANSPORT_MAY_IMPORT = {"bench", "bench.errors", "bench.restbus", "bench.e2e"}
+
+
+def test_the_transport_package_sits_below_the_station() -> None:
+    """bench/transport/ imports no part of the bench above it (station, session, clock, run, cli, report, pytest
+    plugin) and no pytest: the station reaches its bus through it, never the other way round."""
+    wrong = [f"{file}:{line}: {module}" for file, line, module in imports(BENCH / "transport")
+             if (_top(module) == "bench" and module not in TRANSPORT_MAY_IMPORT
+                 and not module.startswith("bench.transport")
+                 and not any(module.startswith(f"{allowed}.") for allowed in TRANSPORT_MAY_IMPORT - {"bench"}))
+             or _top(module) in {"pytest", "_pytest"}]
+    assert not wrong, ("bench/transport/ imports beyond " + ", ".join(sorted(TRANSPORT_MAY_IMPORT)) + ":\n"
+                       + "\n".join(wrong))
+    assert any(module == "bench.restbus" for _, _, module in imports(BENCH / "transport"))   # the scan sees it
+
+
+def test_only_the_transport_asks_a_bus_what_it_is() -> None:
+    """The station picks its transport once (bench.transport.transport_for): no `getattr(bus, ...)` probing of a
+    bus outside bench/transport/ (issue 28, acceptance 2)."""
+    probing = re.compile(r"getattr\(.*bus")
+    found = [f"{path.relative_to(ROOT)}:{number}: {text.strip()[:80]}"
+             for path in sorted(BENCH.rglob("*.py")) if "transport" not in path.relative_to(BENCH).parts
+             for number, text in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if probing.search(text)]
+    assert not found, "bus probing outside bench/transport/:\n" + "\n".join(found)
+    assert any(probing.search(path.read_text(encoding="utf-8")) for path in (BENCH / "transport").rglob("*.py"))

@@ -2,8 +2,8 @@
 
 Loaded by scripts/python-can-suite (`-p tests.pycan_compat.plugin`). The test files stay as python-can ships
 them: they open buses by the interface name "virtual", which this plugin points at the bench's
-`embedded` (bench.bus:VirtualTimeBus); python-can's own virtual bus cannot be opened at all while it runs,
-so a test that silently ran on it would fail, not pass. The `.mcap` format comes in through
+`embedded` (bench.transport.embedded:VirtualTimeBus); python-can's own virtual bus cannot be opened at all while it
+runs, so a test that silently ran on it would fail, not pass. The `.mcap` format comes in through
 mcap_format.py (a ReaderWriterTest subclass, as python-can declares its formats).
 """
 
@@ -50,13 +50,13 @@ def _swap() -> None:
     import can.interfaces
     import can.interfaces.virtual
 
-    from bench.bus import VirtualTimeBus
+    from bench.transport import VirtualTimeBus
 
     backends = can.interfaces.BACKENDS
-    if backends.get(BENCH_INTERFACE) != ("bench.bus", "VirtualTimeBus"):
+    if backends.get(BENCH_INTERFACE) != ("bench.transport.embedded", "VirtualTimeBus"):
         raise pytest.UsageError(f"python-can does not know the interface {BENCH_INTERFACE!r}: "
                                 "is the bench installed (pip install -e .)?")
-    backends[SWAPPED] = backends[BENCH_INTERFACE]      # interface="virtual" now opens bench.bus:VirtualTimeBus
+    backends[SWAPPED] = backends[BENCH_INTERFACE]      # interface="virtual" now opens the embedded bus
     can.interfaces.virtual.VirtualBus = _not_the_bench   # type: ignore[assignment]  # nothing opens python-can's
     original = VirtualTimeBus.__init__
 

@@ -29,7 +29,7 @@ from typing import Any
 
 import can
 
-from bench.capabilities import raw_can_socket
+from bench.transport.capabilities import raw_can_socket
 
 ENV_SWITCH = "BENCH_FAST_RX"           # "0": every frame through python-can's recv
 CANFD_MTU = 72
@@ -105,7 +105,7 @@ def _frame_at(buffer: bytes | memoryview, base: int, timestamp: float) -> RawFra
 
 def plain_socketcan(bus: can.BusABC) -> bool:
     """A python-can socketcan bus (its raw socket reachable) without python-can filters of its own: one whose
-    socket the bench may read (here) and filter in the kernel (bench/periodic.py) without changing what
+    socket the bench may read (here) and filter in the kernel (bench/transport/periodic.py) without changing what
     python-can's recv would have delivered."""
     return raw_can_socket(bus) is not None and not getattr(bus, "filters", None)
 

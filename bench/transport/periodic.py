@@ -38,13 +38,15 @@ import socket
 import struct
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import can
 
-from bench.e2e import Protection
-from bench.restbus import Restbus
-from bench.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, SO_TIMESTAMPNS, FastReceiver, plain_socketcan
+from bench.transport.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, SO_TIMESTAMPNS, FastReceiver, plain_socketcan
+
+if TYPE_CHECKING:
+    from bench.e2e import Protection
+    from bench.restbus import Restbus
 
 log = logging.getLogger(__name__)
 

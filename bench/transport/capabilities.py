@@ -5,8 +5,8 @@ does (docs/architecture.md "Adding a bus interface").
 - `delivers_own_frames`: does the bus hand a sender's own frames back to it? (the station then drops them
   as echoes instead of monitoring them as another sender's);
 - `raw_can_socket`: has the bus a raw SocketCAN socket the bench may read and filter in the kernel itself?
-  (bench/socketcan_rx.py, bench/periodic.py);
-- `takes_hop_limit`: is the interface an IP network bus whose frames could leave this host? (bench/bus.py
+  (socketcan_rx.py, periodic.py);
+- `takes_hop_limit`: is the interface an IP network bus whose frames could leave this host? (bus.py
   pins its hop limit to 0).
 """
 

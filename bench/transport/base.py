@@ -1,0 +1,113 @@
+"""The one interface between a station and its bus, and its adapter for any python-can bus.
+
+Why: a station must read every frame on the bus and send its restbus at its tick, and each kind of bus has a
+faster way to do it than python-can's per-frame `recv`/`send` (the embedded bus hands frames over as bytes,
+SocketCAN reads batches from its socket and sends cyclic frames from the kernel). The station picks its adapter
+once (`bench.transport.transport_for`) and then asks it nothing about the bus: what a kind of bus can do is said
+here and in its adapter (bench.transport.embedded, .socketcan, .udp), never found out by the station.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from typing import TYPE_CHECKING, Protocol
+
+import can
+
+from bench.transport.capabilities import delivers_own_frames
+
+if TYPE_CHECKING:
+    from bench.restbus import Restbus
+    from bench.transport.periodic import KernelPeriodic
+
+
+class ReceivedFrame(Protocol):
+    """What a station reads of a received frame (can.Message has these; so do the adapters' lighter frames)."""
+
+    @property
+    def timestamp(self) -> float: ...
+    @property
+    def arbitration_id(self) -> int: ...
+    @property
+    def data(self) -> bytes | bytearray: ...
+    @property
+    def is_extended_id(self) -> bool: ...
+    @property
+    def is_error_frame(self) -> bool: ...
+
+
+class Transport(Protocol):
+    """A station's bus: receive a batch, send, periodic sending where the bus offers it, the receive stamp."""
+
+    bus: can.BusABC
+    #: A frame it sends comes back to its own receive side (the station then drops such echoes).
+    loops_back: bool
+    #: Its frames' timestamps are their receive times on the wall clock (epoch s), which the clock turns into
+    #: bench time; False: the sender's bench time (the embedded bus), and the station uses the time of reading.
+    receive_stamped: bool
+    #: Its frames carry the kernel's receive time and one call reads a batch: a wall-clock wait may sleep and read
+    #: at its end (bench.clock.WallClock.wait_until).
+    stamped_batches: bool
+
+    def frames(self, timeout: float, limit: int) -> Iterable[ReceivedFrame]:
+        """Up to `limit` pending frames; the first may be waited for up to `timeout` s, the rest only if here."""
+
+    def send(self, t: float, frame_id: int, data: bytes) -> None:
+        """A classic 11-bit data frame at bench time `t`; a refused frame raises can.CanError."""
+
+    def send_error(self, t: float, frame_id: int, data: bytes) -> None:
+        """An error frame (a babbling node's, bench.faults)."""
+
+    def periodic(self, restbus: Restbus) -> KernelPeriodic | None:
+        """Periodic sending offered by the bus for `restbus`'s messages (SocketCAN's broadcast manager), or None."""
+
+    def fileno(self) -> int | None:
+        """A descriptor that becomes readable when a frame arrives (one poll() over several stations), or None."""
+
+    def shutdown(self) -> None: ...
+
+
+class PythonCanTransport:
+    """Any python-can bus, through python-can's own `recv` and `send`."""
+
+    receive_stamped = True
+    stamped_batches = False
+
+    def __init__(self, bus: can.BusABC) -> None:
+        self.bus = bus
+        self.loops_back = delivers_own_frames(bus)   # asked of the bus (bench/transport/capabilities.py)
+
+    def frames(self, timeout: float, limit: int) -> Iterable[ReceivedFrame]:
+        return self._recv(timeout, limit)
+
+    def _recv(self, timeout: float, limit: int) -> Iterator[can.Message]:
+        bus = self.bus
+        msg = bus.recv(timeout)
+        count = 0
+        while msg is not None:
+            yield msg
+            count += 1
+            if count >= limit:
+                return      # not one recv more: a frame read here would be lost
+            msg = bus.recv(0.0)
+
+    def send(self, t: float, frame_id: int, data: bytes) -> None:
+        self.bus.send(can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
+                                  is_fd=False, is_error_frame=False))
+
+    def send_error(self, t: float, frame_id: int, data: bytes) -> None:
+        self.bus.send(can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
+                                  is_fd=False, is_error_frame=True))
+
+    def periodic(self, restbus: Restbus) -> KernelPeriodic | None:
+        return None
+
+    def fileno(self) -> int | None:
+        try:
+            fd = int(self.bus.fileno())
+        except (NotImplementedError, AttributeError, OSError, ValueError, TypeError):
+            return None
+        return fd if fd >= 0 else None
+
+    def shutdown(self) -> None:
+        self.bus.shutdown()
