@@ -55,6 +55,15 @@ def _first(bench: Case, since: float, value: int, *, equal: bool = True) -> floa
     return float(s["t"][hit[0]]) + bench.start - since if hit.size else float("nan")
 
 
+def _expect_cleared(bench: Case, kind: str, wheel: str) -> None:
+    """The sensor reads true again: AbsFault 0 within fault_report_max (ABS-FLT-01's clearing); the case's plot."""
+    t_clear = _fault(bench, wheel, NONE)
+    bench.run(0.3)
+    bench.expect_between(f"{kind} ended: AbsFault 0 after", _first(bench, t_clear, 0), 0.0,
+                         steps.limit("fault_report_max"), unit="s", detail=steps.source("fault_report_max"))
+    steps.plot_abs(bench, f"{kind} {wheel}")
+
+
 @pytest.mark.dut("ABS")
 @pytest.mark.req("ABS-FLT-01", "ABS-OUT-02")
 def test_abs_sensor_short(bench: Case) -> None:
@@ -84,11 +93,7 @@ def test_abs_sensor_short(bench: Case) -> None:
         gap = float(np.max(np.abs(p[:n] - master[:n]))) if n else float("nan")
         bench.expect(f"braking in the fault: {w} pressure - master pressure, largest", gap, 0.0, abs_tol=tol,
                      unit="bar", detail=steps.source("passive_pressure_tol"))
-    t_clear = _fault(bench, "FR", NONE)
-    bench.run(0.3)
-    bench.expect_between("SHORT ended: AbsFault 0 after", _first(bench, t_clear, 0), 0.0, report, unit="s",
-                         detail=steps.source("fault_report_max"))
-    steps.plot_abs(bench, "SHORT FR")
+    _expect_cleared(bench, "SHORT", "FR")
 
 
 @pytest.mark.dut("ABS")
@@ -101,11 +106,7 @@ def test_abs_sensor_open_line(bench: Case) -> None:
     bench.expect_between("OPEN_LINE RL: AbsFault WHEEL_SPEED_INVALID after", _first(bench, t_fault,
                          WHEEL_SPEED_INVALID), confirm, confirm + report, unit="s",
                          detail=f"{steps.source('open_line_confirm')}; {steps.source('fault_report_max')}")
-    t_clear = _fault(bench, "RL", NONE)
-    bench.run(0.3)
-    bench.expect_between("OPEN_LINE ended: AbsFault 0 after", _first(bench, t_clear, 0), 0.0, report, unit="s",
-                         detail=steps.source("fault_report_max"))
-    steps.plot_abs(bench, "OPEN_LINE RL")
+    _expect_cleared(bench, "OPEN_LINE", "RL")
 
 
 @pytest.mark.dut("ABS")

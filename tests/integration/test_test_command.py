@@ -20,7 +20,7 @@ from tests.repo import ROOT
 LOADED_HOST_FAILURES = (
     "tests/bench/test_bus_settings.py::test_pytest_plugin_options_reach_python_can",
     "tests/integration/test_duplicate_sender.py::test_two_plant_processes_on_udp_multicast",
-    "tests/integration/test_example_vcu.py::test_campaign_passes_against_the_example_vcu",
+    "tests/integration/test_example_ecus.py::test_campaign_passes_against_the_example[VCU]",
     "tests/integration/test_run_integration.py::test_plant_and_runner_in_two_processes_over_udp_multicast",
     "tests/integration/test_stop_signals.py::test_sigterm_during_a_flood_at_the_bus_limit",
 )
