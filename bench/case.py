@@ -17,15 +17,15 @@ from typing import Literal
 import numpy as np
 from pytest import fail
 
-from bench.checks import StepLog, percentile, tolerance_text, within
-from bench.codec import SignalCodec
+from bench.checks.monitor import InvalidFrame
+from bench.checks.steps import StepLog, percentile, tolerance_text, within
+from bench.checks.timing import LATE_FLOOR, Late, SelfTiming
+from bench.database.codec import SignalCodec
 from bench.errors import BenchError, Inconclusive
-from bench.faults import KINDS, Fault
-from bench.monitor import InvalidFrame
-from bench.results import CaseResult, FaultRecord, Plot, Series, Table
+from bench.faults.plan import KINDS, Fault
+from bench.results.model import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
-from bench.station import LATE_CYCLES
-from bench.timing import LATE_FLOOR, Late, SelfTiming
+from bench.sim.station import LATE_CYCLES
 
 MAX_INPUT_GAPS = 500         # gaps past their bound looked at per message and case (they are compared pairwise)
 BENCH_FIGURES = 8            # figures of the bench's own timing on a case's record at most (the worst)
@@ -82,7 +82,7 @@ class Case:
             raise BenchError("a test case needs the runner station")
         self._runner = runner
         self._monitor = runner.monitor
-        self._monitor.history_from = self.start   # the case's whole history is kept (bench.monitor)
+        self._monitor.history_from = self.start   # the case's whole history is kept (bench.checks.monitor)
         if session.self_timing is not None:       # the bench's own timing counts from here (not the pause before)
             session.self_timing.resume(self.start)
         session.scheduler.begin_case()            # and so does the watchdog's lag
@@ -227,9 +227,9 @@ class Case:
         self.bench_verdict()
 
     def bench_verdict(self) -> str:
-        """Real time: the bench's own timing (bench.timing.SelfTiming) and the gaps of the DUT's inputs from other
-        processes (`_input_gaps`) since the case's latest scenario started (or the case, without one: before it the
-        bench was setting the case up, and an in-process plant replaying the pause between cases) onto its record
+        """Real time: the bench's own timing (bench.checks.timing.SelfTiming) and the gaps of the DUT's inputs from
+        other processes (`_input_gaps`) since the case's latest scenario started (or the case, without one: before it
+        the bench was setting the case up, and an in-process plant replaying the pause between cases) onto its record
         (`bench_timing`, worst first), and the line that makes it inconclusive ("" when every figure is within its
         bound; always "" in virtual time, where the bench is never late). Records no step."""
         timing = self.session.self_timing
@@ -349,7 +349,7 @@ class Case:
 
     def inject(self, kind: str, target: str, *, after: float = 0.0, duration: float = math.inf,
                param: float = 0.0) -> Fault:
-        """Inject a fault of `kind` (the registry bench.fault_kinds.KINDS; its table is in docs/reliability.md)
+        """Inject a fault of `kind` (the registry bench.faults.kinds.KINDS; its table is in docs/reliability.md)
         on `target` (a message, a node or an identifier such as "0x000", as the kind says), starting `after`
         s from now and lasting `duration` s (default: to the end of the run). `param`: the kind's PARAM
         (e.g. the delay in s, a bit index). Returns the Fault; its window is in bench time. Records no step;

@@ -22,7 +22,7 @@ from bench.transport import EMBEDDED, is_embedded
 from bench.transport.busopts import BusOptions, positive_int
 
 if TYPE_CHECKING:
-    from bench.codec import Codebook
+    from bench.database.codec import Codebook
 
 CONFIG_NAME = "bench.toml"
 #: s a status has to start following a command change before the change counts as not followed.
@@ -34,7 +34,7 @@ DEFAULT_SCENARIO_TIMEOUT = 2.0
 @dataclass(frozen=True)
 class LatencyPair:
     """A command signal and the status signal that follows it, for the report's timing section
-    (`bench.timing`). `threshold` is in the signals' unit; None means one step of the coarser signal."""
+    (`bench.checks.timing`). `threshold` is in the signals' unit; None means one step of the coarser signal."""
 
     name: str
     command: tuple[str, str]            # (message, signal)

@@ -12,8 +12,8 @@ class BenchError(Exception):
 
 class Inconclusive(BenchError):
     """The bench cannot stand behind the verdict of the case in progress, through no fault of the DUT: the case
-    ends with the outcome "inconclusive" and this message, never "failed" (bench.pytest_plugin). Raised by the
-    watchdog (bench time fell behind wall time, bench.clock.Scheduler) and by a limit of the bench itself
+    ends with the outcome "inconclusive" and this message, never "failed" (bench.pytest.plugin). Raised by the
+    watchdog (bench time fell behind wall time, bench.sim.clock.Scheduler) and by a limit of the bench itself
     (BenchLimit)."""
 
 

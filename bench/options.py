@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from bench import fault_kinds
+from bench.faults import kinds as fault_kinds
 
 Kind = Literal["value", "list", "flag", "switch"]
 #: value: one value; list: repeatable (the command line also takes several after one flag when `many`);
@@ -81,7 +81,7 @@ def shard(text: str) -> tuple[int, int]:
     return k, n
 
 
-#: --fault's help: the spec pattern, and the kinds as the fault registry lists them (bench.fault_kinds).
+#: --fault's help: the spec pattern, and the kinds as the fault registry lists them (bench.faults.kinds).
 FAULT_HELP = ("inject a fault: KIND:TARGET[:PARAM]@[case+]START[-END] in s from the run's start, or with case+ from "
               "each case's start (an open END lasts to the end of the run or case); e.g. drop:MESSAGE@2-3, "
               f"drop:MESSAGE@case+1-2, silence:NODE@case+0.5-; {fault_kinds.help_text()} (docs/reliability.md)")

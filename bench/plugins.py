@@ -12,7 +12,7 @@ from importlib.metadata import entry_points
 from types import ModuleType
 
 from bench.errors import ConfigError, did_you_mean
-from bench.node import Behaviour
+from bench.sim.node import Behaviour
 
 PLANT_GROUP = "bench.plants"
 

@@ -10,20 +10,21 @@ from pathlib import Path
 
 import pytest
 
-from bench import e2e, results_io
+from bench import e2e
 from bench.case import Case
-from bench.checks import LOG_ERROR, LOG_INFO, StepLog, step_values
-from bench.codec import Codebook
+from bench.checks.findings import FindingCollector
+from bench.checks.monitor import CheckedFrame, DuplicateSender, Monitor
+from bench.checks.steps import LOG_ERROR, LOG_INFO, StepLog, step_values
+from bench.checks.timing import TimingCollector
 from bench.config import ProjectConfig, RunSettings
+from bench.database.codec import Codebook
 from bench.errors import BenchError, Inconclusive
-from bench.faults import Fault
-from bench.findings import FindingCollector
+from bench.faults.plan import Fault
 from bench.log.logproc import LogProcess
-from bench.monitor import CheckedFrame, DuplicateSender, Monitor
-from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
+from bench.results import store as results_io
+from bench.results.model import CaseRef, CaseResult, RequirementInfo, RunResult, Step, Table
 from bench.session import BenchSession
 from bench.stop import STOP
-from bench.timing import TimingCollector
 
 log = logging.getLogger(__name__)
 
@@ -167,7 +168,7 @@ class BenchRun:
             frames=monitor.frames if monitor else 0, invalid_frames=monitor.invalid_frames if monitor else 0,
             requirements=list(self.requirements), deselected=list(self.deselected),
             faults=session.faults.records() if session else [])
-        if session is not None:   # the report's timing section (bench.timing); never raises
+        if session is not None:   # the report's timing section (bench.checks.timing); never raises
             run.tables.extend(self.timing.tables(session.codebook))
             if session.self_timing is not None:   # real time: the bench's own lateness (what it really sent)
                 run.tables.append(session.self_timing.table())
@@ -221,7 +222,7 @@ def _without_plots(run: RunResult) -> RunResult:
 
 
 def duplicates_table(monitors: list[Monitor]) -> Table | None:
-    """Identifiers with two senders (bench.monitor.DuplicateSender), one row each, with the evidence; the
+    """Identifiers with two senders (bench.checks.monitor.DuplicateSender), one row each, with the evidence; the
     first monitor's finding of an identifier wins. None when there is none."""
     found: dict[int, DuplicateSender] = {}
     for monitor in monitors:

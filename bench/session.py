@@ -10,17 +10,17 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Sequence
 
-from bench.clock import Clock, Scheduler, VirtualClock, WallClock
-from bench.codec import Codebook, load_codebook
+from bench.checks.monitor import FrameSink, Monitor
+from bench.checks.timing import SelfTiming
 from bench.config import ProjectConfig, RunSettings
+from bench.database.codec import Codebook, load_codebook
 from bench.errors import BenchError, ConfigError, InputProblems
-from bench.faults import FaultPlan
-from bench.monitor import FrameSink, Monitor
-from bench.node import Behaviour
+from bench.faults.plan import FaultPlan
 from bench.plugins import load_plant
-from bench.restbus import Restbus
-from bench.station import Station
-from bench.timing import SelfTiming
+from bench.sim.clock import Clock, Scheduler, VirtualClock, WallClock
+from bench.sim.node import Behaviour
+from bench.sim.restbus import Restbus
+from bench.sim.station import Station
 from bench.transport import in_process, open_bus
 from bench.transport.busopts import BusOptions, contract_options
 
@@ -93,8 +93,8 @@ class BenchSession:
             station.faults = self.faults
         self.stations[-1].babbles = True
         self.scheduler = Scheduler(self.stations, self.clock)
-        # Real time: the bench's own timing (bench.timing.SelfTiming): frames it sends stamped when they went out and
-        # timed against their schedule, the tick loop's lateness, the receive path's waiting.
+        # Real time: the bench's own timing (bench.checks.timing.SelfTiming): frames it sends stamped when they
+        # went out and timed against their schedule, the tick loop's lateness, the receive path's waiting.
         self.self_timing: SelfTiming | None = None
         if self.clock.realtime:
             self.self_timing = self.scheduler.self_timing = SelfTiming()

@@ -52,7 +52,7 @@ def _medians_ns(runs: dict[str, object], n: int, repeat: int) -> dict[str, float
 
 
 def measure(frames: int, repeat: int, rev: str) -> dict[str, float]:
-    from bench.codec import load_codebook
+    from bench.database.codec import load_codebook
 
     codec = load_codebook([REPO / "dbc" / "chassis.dbc"])["VCU_WheelCmd_FL"]
     protection = codec.protection

@@ -9,12 +9,12 @@ benchmarks/common.py puts it first on sys.path, so the child imports that tree's
 tree and layer: the median CPU ms per bench second and the median of the ratios to B0 of the same round (the
 machine is shared: B0 moves with the load, the ratio less).
 
-`--plant`: B0 (the bare plant tick loop, no bus) per vehicle in a driving scenario each (PLANT_SCENARIOS: the EV
-in PIVOT as B0, the EV at speed with ADAPTIVE rear steering, the A-class steering at speed, the A-class braking
-under ABS), CPU µs per 1 ms tick, medians and the median ratio to the first tree of the same round. The child for
-these is this file's own `plant_tick` (it needs only bench.config, bench.codec, bench.plugins and bench.testing,
-so any tree runs it). `--digest` prints instead a SHA-256 per scenario of every value the plant sent at every
-tick (repr of the floats): a cost cut that keeps the physics' results gives the same digests in every tree.
+`--plant`: B0 (the bare plant tick loop, no bus) per vehicle in a driving scenario each (PLANT_SCENARIOS: the EV in
+PIVOT as B0, the EV at speed with ADAPTIVE rear steering, the A-class steering at speed, the A-class braking under ABS),
+CPU µs per 1 ms tick, medians and the median ratio to the first tree of the same round. The child for these is this
+file's own `plant_tick` (it needs only bench.config, bench.database.codec, bench.plugins and bench.sim.testing, so any
+tree runs it). `--digest` prints instead a SHA-256 per scenario of every value the plant sent at every tick (repr of the
+floats): a cost cut that keeps the physics' results gives the same digests in every tree.
 """
 
 from __future__ import annotations
@@ -51,10 +51,10 @@ def plant_tick(scenario: str, seconds: float, digest: bool = False) -> dict[str,
     import hashlib
     import time
 
-    from bench.codec import load_codebook
     from bench.config import load_config
+    from bench.database.codec import load_codebook
     from bench.plugins import load_plant
-    from bench.testing import MemoryIO
+    from bench.sim.testing import MemoryIO
 
     vehicle, stimulus = PLANT_SCENARIOS[scenario]
     project = load_config()

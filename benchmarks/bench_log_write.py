@@ -50,8 +50,8 @@ def measure(result: common.Result, args: argparse.Namespace) -> None:
     import bench.log.format
     import bench.log.mcapfast
     import bench.log.recorder
-    from bench.codec import load_codebook, load_dbc
     from bench.config import load_config
+    from bench.database.codec import load_codebook, load_dbc
     from bench.log.logread import read_frames
 
     seconds = 2.0 if args.quick else 10.0

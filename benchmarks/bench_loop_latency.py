@@ -1,7 +1,7 @@
 """Target 4: loop latency — a VCU_WheelCmd_xx change shows up in WHL_Status_xx within one cycle plus the servo.
 
 The case benchmarks/cases/test_wheel_steps.py steps all four wheel commands N times (full 24, quick 8). The
-latency of each change is what the report's timing section measures (bench/timing.py: from the onset of a
+latency of each change is what the report's timing section measures (bench/checks/timing.py: from the onset of a
 command change by more than the threshold of bench.toml [timing], with the status at rest, to the first
 status frame that moved by more than the threshold the same way). Two runs:
   virtual    `bench run <case>` on the embedded default, in this process; the per-wheel figures are read
@@ -9,7 +9,7 @@ status frame that moved by more than the threshold the same way). Two runs:
   real time  `bench plant --interface udp_multicast` in one process and `bench run --interface udp_multicast
              --external all <case>` in another (hop limit 0), both in real time.
 For both, every wheel's events are pooled from the run's MCAP log with the same definition
-(bench.timing.follow_latencies) for p50/p99/max over all four wheels.
+(bench.checks.timing.follow_latencies) for p50/p99/max over all four wheels.
 
 The bound ("within one cycle plus the servo dynamics"), per change: one WHL_Status cycle (DBC, 10 ms) + one
 plant tick (the wheel ECU reads the command frame on the tick after it was sent) + the servo's time to move
@@ -68,11 +68,11 @@ class Servo:
 
 
 def pooled_latencies(mcap: Path) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
-    """Per wheel pair: the latencies (s) from the logged decoded frames, by bench.timing's definition (its
-    LatencyFollower fed in time order as bench.timing.follow_latencies does), and each change's step (deg):
+    """Per wheel pair: the latencies (s) from the logged decoded frames, by bench.checks.timing's definition (its
+    LatencyFollower fed in time order as bench.checks.timing.follow_latencies does), and each change's step (deg):
     the latest command minus the status at rest before the change, when the status followed."""
+    from bench.checks.timing import LatencyFollower
     from bench.log.logread import read_decoded
-    from bench.timing import LatencyFollower
 
     pairs = wheel_pairs()
     wanted = {p.command[0] for p in pairs} | {p.status[0] for p in pairs}
@@ -112,8 +112,8 @@ def pooled_latencies(mcap: Path) -> tuple[dict[str, list[float]], dict[str, list
 def within_bounds(latencies: dict[str, list[float]], steps: dict[str, list[float]]) -> dict:
     """Each followed change against one status cycle + one plant tick + the servo's time to move the threshold
     (plus one LSB of the status signal, for its quantisation) after that change's step."""
-    from bench.codec import load_codebook
     from bench.config import load_config
+    from bench.database.codec import load_codebook
 
     codebook = load_codebook(load_config().databases)
     servo = Servo()
@@ -137,8 +137,8 @@ def within_bounds(latencies: dict[str, list[float]], steps: dict[str, list[float
 
 def bound_ms() -> tuple[float, str]:
     """The bound for steps over ~6° (where the servo moves the threshold at its rate limit), ms."""
-    from bench.codec import load_codebook
     from bench.config import load_config
+    from bench.database.codec import load_codebook
 
     codebook = load_codebook(load_config().databases)
     servo = Servo()

@@ -16,9 +16,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_virtual_time as bvt  # noqa: E402 - after this folder is on sys.path
 
-import bench.monitor as monitor_module  # noqa: E402
-from bench.codec import load_codebook  # noqa: E402
+import bench.checks.monitor as monitor_module  # noqa: E402
 from bench.config import load_config  # noqa: E402
+from bench.database.codec import load_codebook  # noqa: E402
 
 
 def record(seconds: float) -> list[tuple[int, float, int, bytes, str]]:

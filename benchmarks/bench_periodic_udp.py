@@ -35,8 +35,8 @@ RECEIVE_BUFFER = 8 * 1024 * 1024
 
 def plant_messages() -> dict[int, tuple[str, float]]:
     """id -> (name, DBC cycle s) of every periodic message the plant sends (every node but the stimulus)."""
-    from bench.codec import load_codebook
     from bench.config import load_config
+    from bench.database.codec import load_codebook
 
     project = load_config()
     codebook = load_codebook(project.databases)

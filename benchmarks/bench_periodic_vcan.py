@@ -9,7 +9,7 @@ The question (issue 15, acceptance 2): the period error of the bench's two send 
 the broadcast manager through bench/transport/periodic.py), beside python-can's own `send_periodic` as the baseline,
 measured in the same run. Four senders run at the same time, each in a process of its own, for 20 s (quick:
 6 s) after a 2 s warm-up, while `bench plant` runs on the same bus as load (--no-load: without it):
-- "tick scheduler": a bench station (bench.station, the restbus of node DRIVER: DRV_Steering and DRV_Pedals
+- "tick scheduler": a bench station (bench.sim.station, the restbus of node DRIVER: DRV_Steering and DRV_Pedals
   at 10 ms, DRV_MotionRequest at 20 ms) on the wall clock's 1 ms tick, with kernel periodic sending off
   (what every message of the bench did before bench/transport/periodic.py);
 - "bench + BCM": a bench station with bench/transport/periodic.py on (the restbus of node TESTER: BENCH_SteeringRobot
@@ -59,8 +59,8 @@ def has_vcan() -> bool:
 
 
 def station_messages(node: str) -> dict[int, tuple[str, float]]:
-    from bench.codec import load_codebook
     from bench.config import load_config
+    from bench.database.codec import load_codebook
 
     codebook = load_codebook(load_config().databases)
     return {c.frame_id: (c.name, c.cycle_time) for c in codebook.sent_by([node]) if c.cycle_time}
@@ -71,12 +71,12 @@ def run_station(node: str, kernel: bool, seconds: float) -> None:
     """A bench station playing `node` on the wall clock's tick, as bench plant / bench run do."""
     import can
 
-    from bench.clock import Scheduler, WallClock
-    from bench.codec import load_codebook
+    from bench.checks.monitor import Monitor
     from bench.config import load_config
-    from bench.monitor import Monitor
-    from bench.restbus import Restbus
-    from bench.station import Station
+    from bench.database.codec import load_codebook
+    from bench.sim.clock import Scheduler, WallClock
+    from bench.sim.restbus import Restbus
+    from bench.sim.station import Station
 
     codebook = load_codebook(load_config().databases)
     bus = can.Bus(interface="socketcan", channel=CHANNEL, receive_own_messages=False)

@@ -1,8 +1,8 @@
 """Target 2: throughput of the receive path on one core — decode + monitor checks + MCAP write, frames/s.
 
 N valid contract frames (every message of chassis.dbc and bench.dbc at its DBC cycle time, signals moving
-as sinusoids over their DBC ranges, AliveCounter and Checksum right: built by `bench.restbus.Restbus.build`)
-go through `bench.monitor.Monitor` (length, E2E, counter sequence, decode, range; history kept) with a sink
+as sinusoids over their DBC ranges, AliveCounter and Checksum right: built by `bench.sim.restbus.Restbus.build`)
+go through `bench.checks.monitor.Monitor` (length, E2E, counter sequence, decode, range; history kept) with a sink
 that logs the raw frame and its decoded values to `bench.log.recorder.Recorder`, on this one thread; the time
 includes closing the log (every chunk compressed and on disk).
 
@@ -33,9 +33,9 @@ CHANNEL = "bench:receive-path"
 
 def make_frames(n: int) -> tuple[list[tuple[float, int, bytes]], object, object]:
     """n frames in bus order (1 ms ticks, each message at its DBC cycle and phase), with moving values."""
-    from bench.codec import load_codebook
     from bench.config import load_config
-    from bench.restbus import Restbus
+    from bench.database.codec import load_codebook
+    from bench.sim.restbus import Restbus
 
     project = load_config()
     codebook = load_codebook(project.databases)
@@ -81,13 +81,13 @@ def make_frames(n: int) -> tuple[list[tuple[float, int, bytes]], object, object]
 
 def bench_path(frames, project, codebook, path: Path) -> tuple[float, float, int]:
     """Monitor + Recorder (frame + decoded) on this thread; (wall s, CPU s, invalid frames)."""
-    from bench.codec import load_dbc
+    from bench.checks.monitor import Monitor
+    from bench.database.codec import load_dbc
     from bench.log.recorder import Recorder
-    from bench.monitor import Monitor
 
     recorder = Recorder(path, [load_dbc(p) for p in project.databases], attachments=list(project.databases))
 
-    def sink(frame):   # a bench.monitor.CheckedFrame, as bench/run.py's sink gets it
+    def sink(frame):   # a bench.checks.monitor.CheckedFrame, as bench/run.py's sink gets it
         recorder.frame(frame.t, frame.arbitration_id, frame.data, channel=CHANNEL, direction=frame.direction,
                        valid=frame.valid, error=frame.reason)
         if frame.values is not None and frame.codec is not None:
@@ -103,7 +103,7 @@ def bench_path(frames, project, codebook, path: Path) -> tuple[float, float, int
 
 
 def bench_monitor_only(frames, codebook) -> tuple[float, float]:
-    from bench.monitor import Monitor
+    from bench.checks.monitor import Monitor
 
     monitor = Monitor(codebook, keep_history=True)
     on_frame = monitor.on_frame
@@ -116,7 +116,7 @@ def bench_monitor_only(frames, codebook) -> tuple[float, float]:
 
 
 def bench_recorder_only(frames, project, codebook, path: Path) -> tuple[float, float]:
-    from bench.codec import load_dbc
+    from bench.database.codec import load_dbc
     from bench.log.recorder import Recorder
 
     by_id = codebook.by_id
@@ -150,8 +150,8 @@ def bench_baseline(frames, project, path: Path) -> tuple[float, float]:
 
 def bench_as_run(frames, project, codebook, out: Path) -> tuple[float, float, str] | None:
     """The monitor with the sink `bench.run.BenchRun` builds today (whatever the log's process layout)."""
+    from bench.checks.monitor import Monitor
     from bench.config import RunSettings
-    from bench.monitor import Monitor
     from bench.run import BenchRun
 
     run = BenchRun(project, RunSettings(), out)

@@ -1,7 +1,7 @@
 """Target 1: the full campaign on the embedded default (virtual time) — bench seconds per wall second.
 
 Measured: `bench run --out DIR` (every case of testcases/; --quick: three short files) run in this process
-through `bench.cli.main`, figures from `bench.pytest_plugin.finished_run()`: per test case bench time / wall
+through `bench.cli.main`, figures from `bench.pytest.plugin.finished_run()`: per test case bench time / wall
 time, the cases together, the run (from the bus opening to the end of the last case) and the whole command
 (collection, start-up, report writing). The run's MCAP summary proves every frame was logged and every
 valid one decoded (counts of /can/frames and /can/decoded/* against the monitor's frame count).
@@ -34,7 +34,7 @@ from typing import Any
 
 import common
 
-from bench.testing import MemoryIO
+from bench.sim.testing import MemoryIO
 
 TARGET = 50.0
 QUICK_PATHS = ["testcases/ev4wis/test_uturn.py", "testcases/sbw/test_step.py", "testcases/ev4wis/test_ackermann.py"]
@@ -44,8 +44,8 @@ PIVOT = {"DriveMode": "PIVOT", "PivotX": 5.0, "PivotY": 2.0, "TargetSpeed": 1.0}
 def bare_plant(seconds: float, vehicle: str = "EV4WIS") -> dict[str, float]:
     """B0: the plant's behaviours (bench.plants entry point) stepped on a MemoryIO; EV4WIS gets a PIVOT request,
     other vehicles their stimulus start values (their models step the same equations every tick)."""
-    from bench.codec import load_codebook
     from bench.config import load_config
+    from bench.database.codec import load_codebook
     from bench.plugins import load_plant
 
     project = load_config()
@@ -81,9 +81,9 @@ def _scenario(case, seconds: float) -> None:
 def session_no_log(seconds: float) -> dict[str, float]:
     """B1: a BenchSession on the virtual-time bus, no sink (no log, no timing collector)."""
     from bench.case import Case
-    from bench.checks import StepLog
+    from bench.checks.steps import StepLog
     from bench.config import RunSettings, load_config
-    from bench.results import CaseResult
+    from bench.results.model import CaseResult
     from bench.session import BenchSession
 
     session = BenchSession(load_config(), RunSettings())

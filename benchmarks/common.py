@@ -30,15 +30,15 @@ CASES = BENCHMARKS / "cases"
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.checks import percentile  # noqa: E402 - the bench's own, after the repository is on sys.path
+from bench.checks.steps import percentile  # noqa: E402 - the bench's own, after the repository is on sys.path
 from bench.e2e import Protection  # noqa: E402
 
 
 def protection_of(frame_id: int) -> Protection:
     """The E2E protection of an identifier: the project databases' declaration, else the contract's for a raw
     identifier of a benchmark (docs/spec/e2e.md: Profile 11, the identifier as its Data ID, the header at bit 48)."""
-    from bench.codec import load_codebook
     from bench.config import load_config
+    from bench.database.codec import load_codebook
 
     global _CODEBOOK
     if _CODEBOOK is None:
@@ -212,7 +212,7 @@ def print_result(result: Result) -> None:
             print(f"   {'':<52} {fig.note}")
 
 
-# -- statistics (percentile: the bench's own, bench/checks.py) ---------------------------------------------------
+# -- statistics (percentile: the bench's own, bench/checks/steps.py) ---------------------------------------------------
 def summary(values: Sequence[float], scale: float = 1.0) -> dict[str, float | int]:
     """n, p50, p99, max (and mean) of values, times scale (e.g. 1000 for ms)."""
     return {"n": len(values), "p50": percentile(values, 50) * scale, "p99": percentile(values, 99) * scale,
@@ -394,9 +394,9 @@ def isolate_group(bus: Any) -> bool:
 
 def bench_inprocess(argv: list[str]) -> tuple[int, Any, float, float]:
     """Run `bench <argv>` in this process (bench.cli.main); returns (exit code, the run's RunResult from
-    bench.pytest_plugin.finished_run(), wall s, CPU s of this process and its waited-for children)."""
+    bench.pytest.plugin.finished_run(), wall s, CPU s of this process and its waited-for children)."""
     from bench.cli import main
-    from bench.pytest_plugin import finished_run
+    from bench.pytest.plugin import finished_run
 
     before = finished_run()
     wall0, cpu0 = time.perf_counter(), cpu_seconds()

@@ -3,7 +3,7 @@ pauses recorded (a diagnostic for target 3, not part of run_all).
 
     python benchmarks/diag_plant_ticks.py [--seconds 40] [--channel 239.255.x.y]
 
-A tick is late when it starts more than 0.5 ms after its wall-clock deadline (bench.clock.WallClock.wait_until
+A tick is late when it starts more than 0.5 ms after its wall-clock deadline (bench.sim.clock.WallClock.wait_until
 is wrapped to see it); the collector's pauses come from gc.callbacks. Prints how many ticks were late, by how
 much, every collection of generation 1 and 2, and how many late ticks followed a pause within 20 ms.
 """
@@ -27,7 +27,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from bench.cli import main as bench_main
-    from bench.clock import WallClock
+    from bench.sim.clock import WallClock
 
     pauses: list[tuple[float, int, float]] = []
     started: dict[str, float] = {}

@@ -69,7 +69,7 @@ import can
 import cantools
 from e2e import p01, p02, p05, p11
 
-# --- Vehicle B (docs/spec/vehicles.md B, formulas.md §6) -------------------------------------------------------
+# --- Vehicle B (docs/spec/vehicles.md B, docs/spec/formulas.md §6) ----------------------------------------------
 A_CG, B_CG = 1.06, 1.59  # m, centre of gravity to the front / rear axle
 WHEELBASE = A_CG + B_CG  # L = 2.65 m
 TRACK = 1.55  # B, m

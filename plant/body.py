@@ -17,7 +17,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Protocol
 
-from bench.node import Behaviour, NodeIO
+from bench.sim.node import Behaviour, NodeIO
 from plant import signal_ranges as ranges
 from plant.kinematics import CORNERS, Geometry
 from plant.scenario import ScenarioTracker

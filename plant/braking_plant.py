@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
-from bench.node import Behaviour, NodeIO
+from bench.sim.node import Behaviour, NodeIO
 from plant import signal_ranges as ranges
 from plant.brakes import BrakeHydraulics, Valve
 from plant.braking_vehicle import KMH, BrakingVehicle, VehicleSpec

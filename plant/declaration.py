@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from bench.node import Behaviour
+from bench.sim.node import Behaviour
 from plant.vehicles import ParameterFile
 
 

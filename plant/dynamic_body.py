@@ -62,7 +62,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
-from bench.node import Behaviour
+from bench.sim.node import Behaviour
 from plant import signal_ranges as ranges
 from plant.body import BodyNode, PlanarBody, WheelSource
 from plant.single_track import SingleTrackParams

@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Collection
 
-from bench.node import Behaviour, NodeIO
+from bench.sim.node import Behaviour, NodeIO
 from plant import registry
 
 log = logging.getLogger(__name__)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from bench.node import NodeIO
+from bench.sim.node import NodeIO
 from plant import signal_ranges as ranges
 
 #: The bench.dbc names of the protocol (plant/ may know its vehicle's databases; the bench takes them from

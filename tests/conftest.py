@@ -6,7 +6,7 @@ import signal
 
 import pytest
 
-from bench.codec import Codebook, load_codebook
+from bench.database.codec import Codebook, load_codebook
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 

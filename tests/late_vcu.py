@@ -16,7 +16,7 @@ from collections.abc import Mapping
 import pytest
 
 import plant.assemblies.ev4wis as ev4wis
-from bench.node import NodeIO
+from bench.sim.node import NodeIO
 from plant.ecus.vcu import Vcu
 
 DELAYED = ("DRV_MotionRequest", "DRV_Steering")

@@ -12,8 +12,8 @@ import os
 import tempfile
 from pathlib import Path
 
-from bench.codec import Codebook, load_codebook
 from bench.config import ProjectConfig
+from bench.database.codec import Codebook, load_codebook
 from bench.errors import ConfigError
 from bench.options import add_cli_options
 from bench.session import resolve_bus_options

@@ -4,7 +4,7 @@ communication matrix at a glance without opening an editor. Without FILE: the da
 bench.toml ([bench] databases), with its [e2e] table applied.
 
 `bench dbc check [--e2e optional|required] [FILE ...]`: check databases against the bench's needs
-(`bench.dbccheck`), print per message the protection the bench will apply (profile, DataID, offsets, window) or
+(`bench.database.check`), print per message the protection the bench will apply (profile, DataID, offsets, window) or
 "unprotected", then every finding with its file and line. `--e2e optional` (the default): a message may go
 without protection; `--e2e required`: every message must declare a profile (the contract's databases). Exit 0
 when no file has an error (warnings allowed), 1 when one has, 2 when a file cannot be read. `check` is
@@ -24,9 +24,9 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
-from bench import dbccheck
-from bench.codec import load_dbc
 from bench.config import load_config
+from bench.database import check as dbccheck
+from bench.database.codec import load_dbc
 from bench.e2e import config as e2e_config
 from bench.errors import ConfigError, DatabaseError, did_you_mean
 
@@ -206,7 +206,7 @@ def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[
                        f"{unreadable} unreadable"))
     names = [p.name for outcome in outcomes if isinstance(outcome, dbccheck.CheckResult) for p in outcome.protections]
     stray = [name for name in (e2e_overrides or {}) if name not in names]
-    for name in stray:   # what `bench run` refuses too (bench.codec.Codebook)
+    for name in stray:   # what `bench run` refuses too (bench.database.codec.Codebook)
         out.print(Text(f"bench.toml: error [e2e] {name}: no such message in the databases{did_you_mean(name, names)}",
                        style="red"))
     return 2 if unreadable else (1 if rejected or stray else 0)

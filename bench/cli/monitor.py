@@ -3,7 +3,7 @@
 Per message: identifier, name, sender, measured rate and cycle time (p50 / max over a sliding window)
 against the DBC cycle time, the last valid decoded values, the end-to-end state (counts of checksum,
 counter, length and range errors) and the timeout state; above it the totals (frames, invalid frames,
-unknown identifiers). Every frame goes through `bench.monitor.Monitor`, the same checks as a bench run.
+unknown identifiers). Every frame goes through `bench.checks.monitor.Monitor`, the same checks as a bench run.
 
 Frame times are the interface's receive timestamps (the kernel's on socketcan and udp_multicast), so the
 measured cycle times do not depend on when this process gets to read or draw; python-can's `Notifier` reads
@@ -28,11 +28,11 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from bench.checks.monitor import TIMEOUT_CYCLES, MessageState, Monitor
 from bench.cli.common import add_bus_options, bus_options_for, reject_in_process
-from bench.codec import MessageCodec
 from bench.config import load_config
+from bench.database.codec import MessageCodec
 from bench.errors import BenchError, ConfigError
-from bench.monitor import TIMEOUT_CYCLES, MessageState, Monitor
 from bench.transport import UDP_MULTICAST_DEFAULT_GROUP, open_bus
 
 REFRESH = 0.25          # s between screen updates

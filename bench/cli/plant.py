@@ -13,11 +13,11 @@ from pathlib import Path
 
 from rich.console import Console
 
+from bench.checks.monitor import Monitor
 from bench.cli.common import add_bus_options, add_node_options, given_bus_options, reject_in_process
 from bench.config import RunSettings, load_config
 from bench.errors import ConfigError, Inconclusive
-from bench.faults import CASE, CASE_PREFIX, Fault, parse_fault
-from bench.monitor import Monitor
+from bench.faults.plan import CASE, CASE_PREFIX, Fault, parse_fault
 from bench.session import BenchSession
 
 STATUS_PERIOD = 5.0   # s between status lines
@@ -58,7 +58,7 @@ def _report_invalid(console: Console, monitor: Monitor, shown: int) -> int:
 
 
 def _report_duplicates(console: Console, monitor: Monitor, shown: set[int]) -> None:
-    """Say each identifier with two senders once, with its evidence (bench.monitor.DuplicateSender)."""
+    """Say each identifier with two senders once, with its evidence (bench.checks.monitor.DuplicateSender)."""
     for frame_id, found in sorted(monitor.duplicates.items()):
         if frame_id not in shown:
             shown.add(frame_id)
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     next_status = STATUS_PERIOD
     shown = 0   # invalid frames of the plant's monitor already reported (monitor.invalid_frames)
     duplicates: set[int] = set()   # identifiers with two senders already reported
-    behind = 0   # times the watchdog found the plant's ticks behind the wall clock (bench.clock.Scheduler)
+    behind = 0   # times the watchdog found the plant's ticks behind the wall clock (bench.sim.clock.Scheduler)
     try:
         while not stop["now"] and session.now() < end:
             try:

@@ -10,12 +10,12 @@ from typing import Any
 
 from rich.console import Console
 
-from bench import results_io
 from bench.cli.common import check_out_dir
 from bench.errors import ConfigError
+from bench.pytest.shard import DURATIONS_NAME
 from bench.report.merge import LOGS_NAME, merge
+from bench.results import store as results_io
 from bench.run import RESULTS_NAME
-from bench.shard import DURATIONS_NAME
 
 
 def register(sub: Any) -> None:

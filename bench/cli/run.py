@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from bench import options, shard
+from bench import options
 from bench.cli.common import (
     BUS_OPTIONS,
     NODE_OPTIONS,
@@ -25,17 +25,18 @@ from bench.cli.common import (
     check_out_dir,
     given_bus_options,
 )
-from bench.clock import settle_heap
-from bench.codec import load_codebook
 from bench.config import ProjectConfig, load_config
+from bench.database.codec import load_codebook
 from bench.errors import BenchError, ConfigError, InputProblems, did_you_mean
-from bench.faults import validate as validate_faults
-from bench.marks import split_names
+from bench.faults.plan import validate as validate_faults
 from bench.options import add_cli_options
 from bench.plugins import load_plant
+from bench.pytest import shard
+from bench.pytest.marks import split_names
 from bench.report.junit import step_summary
 from bench.run import default_out_dir
 from bench.session import resolve_bus_options, resolve_external
+from bench.sim.clock import settle_heap
 from bench.stop import STOP
 from bench.transport import EMBEDDED, check_channel, check_interface, is_embedded, probe_bus
 from bench.transport.busopts import BusOptions
@@ -137,7 +138,7 @@ class _Progress:
 
 
 def _settle_at_exit() -> None:
-    """Once per process: when the interpreter exits, collect once and freeze what is left (bench.clock.settle_heap).
+    """Once per process: when the interpreter exits, collect once and freeze what is left (bench.sim.clock.settle_heap).
     Python's shutdown otherwise runs several full collections over a heap that a run made large (0.3-0.5 s after
     the report is out, measured on a 200-case run); the garbage present at exit is still collected, except after a
     stop signal (then only the freeze: the process ends within a second of the signal, bench.stop)."""
@@ -257,7 +258,7 @@ def _rootdir(project: ProjectConfig, paths: list[str]) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from bench.pytest_plugin import finished_run
+    from bench.pytest.plugin import finished_run
 
     console = Console(soft_wrap=not sys.stdout.isatty())   # a CI log keeps whole lines, never cut at 80 columns
     STOP.reset()

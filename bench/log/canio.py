@@ -31,11 +31,11 @@ from typing import Any, BinaryIO, TypedDict
 import can
 from can.io.generic import BinaryIOMessageReader, BinaryIOMessageWriter
 
-from bench.codec import load_codebook
+from bench.checks.monitor import CheckedFrame, Monitor
+from bench.database.codec import load_codebook
 from bench.errors import LogError
 from bench.log.logread import LoggedFrame, read_frames
 from bench.log.recorder import Recorder
-from bench.monitor import CheckedFrame, Monitor
 
 NO_CHANNEL = ""       # the channel label of frames whose bus gives none (read back as None)
 

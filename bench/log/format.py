@@ -6,7 +6,7 @@ panels), and JSON keeps the log pure Python. Channels:
 - `/can/frames`: every raw frame (`bench.CanFrame`, ROS `can_msgs/Frame` fields plus bench fields);
 - `/can/decoded/<Message>`: the decoded signals of each DBC message (numbers; a non-finite value is null);
 - `/bench/steps`: test steps and verdicts as `foxglove.Log`;
-- metadata `bench.clock` (`origin_ns`: the log time of bench time 0) and `bench` (who wrote the log).
+- metadata `bench.sim.clock` (`origin_ns`: the log time of bench time 0) and `bench` (who wrote the log).
 
 The writer (bench.log.recorder) builds the records from the templates below, the reader (bench.log.logread)
 parses them; a frame's text is %-formatted rather than built by the json module because most frames of a run

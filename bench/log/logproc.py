@@ -135,7 +135,7 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
         os.nice(LOG_NICE)
     except OSError as exc:   # not fatal: the log is only written later than it could be
         logging.getLogger("bench.log.logproc").warning("log process: nice(%d) failed: %s", LOG_NICE, exc)
-    from bench.codec import load_codebook
+    from bench.database.codec import load_codebook
     from bench.log.recorder import Recorder
 
     try:

@@ -122,7 +122,7 @@ class _Scan:
                 raise LogError(f"{self.path}: cannot read run log: {exc.strerror}") from None
         self.complete = False
         self.topics: dict[int, str] = {}  # channel id -> topic
-        self.origin_ns = 0                # log time of bench time 0 (metadata bench.clock), read on the way
+        self.origin_ns = 0                # log time of bench time 0 (metadata bench.sim.clock), read on the way
         if not isinstance(head, bytes):
             raise LogError(f"{self.path}: a run log is read from a binary file, not {type(source).__name__}")
         if not MAGIC.startswith(head):  # a log cut inside its magic is an empty log, not a foreign file

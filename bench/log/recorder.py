@@ -72,7 +72,7 @@ _ENCODER = json.JSONEncoder(allow_nan=False, separators=(",", ":"), default=lamb
 
 
 class Decoder(Protocol):
-    """What `Recorder.frames` needs of a message's codec (bench.codec.MessageCodec is one)."""
+    """What `Recorder.frames` needs of a message's codec (bench.database.codec.MessageCodec is one)."""
 
     @property
     def name(self) -> str: ...
@@ -362,7 +362,7 @@ class Recorder:
 
     def set_origin(self, epoch_ns: int, time_mode: str = "") -> None:
         """From now on log time = `epoch_ns` + bench time, so viewers show the date of the run; a metadata
-        record `bench.clock` (`origin_ns`) lets readers give bench time back (bench.log.logread)."""
+        record `bench.sim.clock` (`origin_ns`) lets readers give bench time back (bench.log.logread)."""
         if not isinstance(epoch_ns, int) or not 0 <= epoch_ns < 2**62:   # to 2116; + bench time fits uint64
             raise LogError(f"run log {self.path}: bad time origin {epoch_ns!r} ns")
         self.metadata(CLOCK_METADATA, {"origin_ns": str(epoch_ns), "time_mode": str(time_mode),

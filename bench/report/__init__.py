@@ -1,6 +1,6 @@
 """Reports of a run: a self-contained HTML page for people, JUnit XML for CI.
 
-Both read only :class:`bench.results.RunResult`, so they can be (re)written from a stored
+Both read only :class:`bench.results.model.RunResult`, so they can be (re)written from a stored
 result without the bus or pytest.
 """
 

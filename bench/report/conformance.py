@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 from bench.contract import node_prefix, owner_prefix
-from bench.results import CaseResult, RequirementInfo, RunResult
+from bench.results.model import CaseResult, RequirementInfo, RunResult
 
 ReqVerdict = Literal["pass", "fail", "not run", "uncovered"]
 VERDICTS: tuple[ReqVerdict, ...] = ("pass", "fail", "not run", "uncovered")

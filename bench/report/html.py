@@ -28,11 +28,11 @@ from urllib.parse import quote
 from jinja2 import Environment, PackageLoader, select_autoescape
 from markupsafe import Markup, escape
 
-from bench.checks import step_values
+from bench.checks.steps import step_values
 from bench.report.conformance import build_conformance
 from bench.report.junit import error_line
 from bench.report.plots import Plotter, RenderedPlot
-from bench.results import CaseResult, Plot, RunResult, Step
+from bench.results.model import CaseResult, Plot, RunResult, Step
 
 FAILED = ("failed", "error", "aborted")
 OPEN = (*FAILED, "inconclusive")   # the cases a reader must look at: open at the top of the report
@@ -117,7 +117,7 @@ def _env() -> Environment:
     return env
 
 
-#: The template's filters. A step's values as JUnit and the console show them (bench.checks.format_value).
+#: The template's filters. A step's values as JUnit and the console show them (bench.checks.steps.format_value).
 FILTERS = {"num": fmt, "dur": duration, "measured": lambda step: step_values(step)[0],
            "expected": lambda step: step_values(step)[1]}
 

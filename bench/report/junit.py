@@ -16,8 +16,8 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from bench.checks import step_values
-from bench.results import CaseResult, FaultRecord, RunResult, Step
+from bench.checks.steps import step_values
+from bench.results.model import CaseResult, FaultRecord, RunResult, Step
 
 _ILLEGAL_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
 
@@ -58,7 +58,7 @@ def error_line(message: str) -> str:
 
 
 def step_summary(step: Step) -> str:
-    """A failed step in a sentence: name, measured and expected (bench.checks.format_value) and the tolerance."""
+    """A failed step in a sentence: name, measured and expected (bench.checks.steps.format_value) and the tolerance."""
     measured, expected = step_values(step)
     return f"{step.name}: measured {measured}, expected {expected}" + (f" ({step.tolerance})" if step.tolerance else "")
 
@@ -144,7 +144,7 @@ def build_junit(run: RunResult) -> ET.ElementTree:
         ET.SubElement(props, "property", name=key, value=xml_safe(value))
     for fault in run.faults:
         ET.SubElement(props, "property", name="fault", value=xml_safe(fault_text(fault)))
-    for finding in run.findings:   # warnings of the bench and the plant (bench.findings), once each
+    for finding in run.findings:   # warnings of the bench and the plant (bench.checks.findings), once each
         times = f" ({finding.count} times)" if finding.count > 1 else ""
         ET.SubElement(props, "property", name="finding",
                       value=xml_safe(f"{finding.level} {finding.source}: {finding.message}{times}"))

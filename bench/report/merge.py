@@ -14,18 +14,18 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
-from bench import results_io
 from bench.errors import BenchError, LogError
-from bench.results import RunResult, Table
+from bench.pytest.shard import SHARD_NAME, ShardRecord
+from bench.results import store as results_io
+from bench.results.model import RunResult, Table
 from bench.run import RESULTS_NAME, write_reports
-from bench.shard import SHARD_NAME, ShardRecord
 
 log = logging.getLogger(__name__)
 
 LOGS_NAME = "logs.json"      # the index of the merged folder's MCAP logs
 LOGS_DIR = "shards"          # shards/K/<the shard's MCAP files>
 SHARDS_TITLE = "Shards: one report folder and MCAP log each"
-_WORKERS_TITLE = "Workers: one in-process bus and one MCAP log each"   # bench.results_io.merge's table
+_WORKERS_TITLE = "Workers: one in-process bus and one MCAP log each"   # bench.results.store.merge's table
 
 
 class MergeError(BenchError):

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from markupsafe import escape
 
-from bench.results import Plot, Series
+from bench.results.model import Plot, Series
 
 MAX_POINTS = 1000
 """Points per series at most before the pixel-space simplification: about two per pixel column."""

@@ -17,7 +17,7 @@ import can
 from bench.transport.capabilities import delivers_own_frames
 
 if TYPE_CHECKING:
-    from bench.restbus import Restbus
+    from bench.sim.restbus import Restbus
     from bench.transport.periodic import KernelPeriodic
 
 
@@ -46,7 +46,7 @@ class Transport(Protocol):
     #: bench time; False: the sender's bench time (the embedded bus), and the station uses the time of reading.
     receive_stamped: bool
     #: Its frames carry the kernel's receive time and one call reads a batch: a wall-clock wait may sleep and read
-    #: at its end (bench.clock.WallClock.wait_until).
+    #: at its end (bench.sim.clock.WallClock.wait_until).
     stamped_batches: bool
 
     def frames(self, timeout: float, limit: int) -> Iterable[ReceivedFrame]:
@@ -56,7 +56,7 @@ class Transport(Protocol):
         """A classic 11-bit data frame at bench time `t`; a refused frame raises can.CanError."""
 
     def send_error(self, t: float, frame_id: int, data: bytes) -> None:
-        """An error frame (a babbling node's, bench.faults)."""
+        """An error frame (a babbling node's, bench.faults.plan)."""
 
     def periodic(self, restbus: Restbus) -> KernelPeriodic | None:
         """Periodic sending offered by the bus for `restbus`'s messages (SocketCAN's broadcast manager), or None."""

@@ -46,7 +46,7 @@ from bench.transport.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, SO_TIMESTAM
 
 if TYPE_CHECKING:
     from bench.e2e import Protection
-    from bench.restbus import Restbus
+    from bench.sim.restbus import Restbus
 
 log = logging.getLogger(__name__)
 
@@ -337,7 +337,7 @@ class KernelPeriodic:
             return      # the echo socket's filter is empty
         if self.echo_idle:
             self.echo_idle = False
-            return      # found empty just now (bench.clock.WallClock.wait_until)
+            return      # found empty just now (bench.sim.clock.WallClock.wait_until)
         tasks = self.tasks
         for frame in self._echo_rx.frames(0.0, ECHO_READ_LIMIT):
             frame_id, data = frame.arbitration_id, frame.data

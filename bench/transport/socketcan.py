@@ -17,7 +17,7 @@ from bench.transport.periodic import KernelPeriodic
 from bench.transport.socketcan_rx import FastReceiver
 
 if TYPE_CHECKING:
-    from bench.restbus import Restbus
+    from bench.sim.restbus import Restbus
 
 
 class SocketcanTransport(PythonCanTransport):

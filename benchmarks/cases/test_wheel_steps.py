@@ -4,7 +4,7 @@ Each step asks the 4WIS EV for a new PIVOT centre (seeded, on the 0.02 m grid of
 right of the right wheels so that no wheel folds, docs/spec/formulas.md §2), so every VCU_WheelCmd_xx.SteerAngleCmd
 changes at once; the case waits until every WHL_Status_xx.SteerAngle has reached its command (within 0.05°,
 the 4WIS issue's angle tolerance) and lets it rest, so that the next change starts from a status at rest
-(what bench/timing.py times). The latency itself is measured by the run's timing section (bench.toml
+(what bench/checks/timing.py times). The latency itself is measured by the run's timing section (bench.toml
 [timing] pairs "wheel XX steering") and read by benchmarks/bench_loop_latency.py; this case checks that
 each wheel follows its command on the bus (expected = the command frame's value, not a plant figure).
 Runs on the embedded default and over udp_multicast against `bench plant` (--external all).
@@ -16,7 +16,7 @@ import random
 WHEELS = ("FL", "FR", "RL", "RR")
 ANGLE_TOL = 0.05      # deg (4WIS issue)
 SETTLE_S = 2.0        # s a step may take: ≤ 120° at the 120 °/s servo rate limit plus the 50 ms lag
-REST_S = 0.08         # s at rest after each step (bench/timing.py needs 3 status frames at rest)
+REST_S = 0.08         # s at rest after each step (bench/checks/timing.py needs 3 status frames at rest)
 GRID = 0.02           # m, PivotX/PivotY resolution
 
 

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Collection, Mapping, Sequence
 
-from bench.node import Behaviour, NodeIO
+from bench.sim.node import Behaviour, NodeIO
 from plant import signal_ranges as ranges
 from plant.declaration import Vehicle
 from plant.driver import SteeringRobot

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Collection
 
-from bench.node import Behaviour
+from bench.sim.node import Behaviour
 from plant.braking_plant import BrakingPlantNode
 from plant.declaration import Vehicle
 from plant.ecus.abs import AbsEcu

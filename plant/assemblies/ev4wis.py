@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Collection
 
-from bench.node import Behaviour
+from bench.sim.node import Behaviour
 from plant.body import BusWheel, WheelSource
 from plant.declaration import Vehicle
 from plant.dynamic_body import EvBodyNode

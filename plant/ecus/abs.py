@@ -42,7 +42,7 @@ from collections.abc import Mapping, Sequence
 from enum import IntEnum
 from typing import Protocol
 
-from bench.node import NodeIO
+from bench.sim.node import NodeIO
 from plant import signal_ranges as ranges
 from plant.brakes import Valve
 from plant.ecus.abs_control import ControlConfig, WheelController

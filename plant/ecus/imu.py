@@ -12,7 +12,7 @@ from __future__ import annotations
 import random
 from typing import Protocol
 
-from bench.node import NodeIO
+from bench.sim.node import NodeIO
 from plant import signal_ranges as ranges
 
 _YAW_RATE, _ACCEL = ranges.IMU_YAW_RATE, ranges.IMU_ACCEL

@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
-from bench.node import NodeIO
+from bench.sim.node import NodeIO
 from plant import signal_ranges as ranges
 from plant.sbw import SbwSensors
 from plant.vehicles import SbwParams
@@ -235,7 +235,7 @@ class SbwEcu:
         self.steer_current = s.steer_current
         return u_rf, u_sm
 
-    # -- bus side (bench.node.Behaviour) --------------------------------------------------------------
+    # -- bus side (bench.sim.node.Behaviour) --------------------------------------------------------------
     def _read_config(self, io: NodeIO) -> None:
         config = io.latest("BENCH_SbwConfig")
         mode, gain = _DIRECT, self.p.ideal_yaw_gain

@@ -66,7 +66,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 
-from bench.node import NodeIO
+from bench.sim.node import NodeIO
 from plant import signal_ranges as ranges
 from plant.body import VelocityFit
 from plant.ecus.rear_steer import DEFAULT_LAW, SeedLaws, Strategy, VehicleSpeedEstimate

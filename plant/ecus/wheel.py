@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
-from bench.node import NodeIO
+from bench.sim.node import NodeIO
 from plant import signal_ranges as ranges
 from plant.vehicles import Ev4wisParams
 

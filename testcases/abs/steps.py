@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from bench.case import Case
-from bench.results import Series
+from bench.results.model import Series
 from testcases.abs import oracle
 from testcases.limits import limit_value, limits_file, load_limits
 from testcases.stimulus import STIMULUS

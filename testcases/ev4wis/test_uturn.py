@@ -25,7 +25,7 @@ import math
 import numpy as np
 import pytest
 
-from bench.results import Series
+from bench.results.model import Series
 from testcases.ev4wis import oracle
 from testcases.ev4wis.plots import plot_wheels
 from testcases.ev4wis.steps import (

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from bench.case import Case
-from bench.results import Series
+from bench.results.model import Series
 from testcases.ev4wis.oracle import rpm_from_speed
 from testcases.limits import limit_value, limits_file, load_limits
 from testcases.rear_steer_4ws import oracle

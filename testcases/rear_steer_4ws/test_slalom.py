@@ -21,7 +21,7 @@ import math
 import numpy as np
 import pytest
 
-from bench.results import Series
+from bench.results.model import Series
 from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.path_driver import Path, PreviewDriver, Transition
 from testcases.rear_steer_4ws.steps import STRATEGIES, Run, driver_model, plot_side_by_side, start

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.results import Series
+from bench.results.model import Series
 from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.steps import limit, start
 

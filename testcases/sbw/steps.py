@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from bench.case import Case
-from bench.results import Series
+from bench.results.model import Series
 from testcases.limits import limit_value, limits_file, load_limits
 from testcases.sbw import oracle
 from testcases.stimulus import STIMULUS

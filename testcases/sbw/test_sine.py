@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.results import Series
+from bench.results.model import Series
 from testcases.sbw import oracle
 from testcases.sbw.steps import (
     Limits,

@@ -16,7 +16,7 @@ import math
 
 import pytest
 
-from bench.results import Series
+from bench.results.model import Series
 from testcases.sbw import oracle
 from testcases.sbw.steps import SBW_FAULT, Limits, expect_clean_bus, plot_steering, robot_angle, start, steady
 

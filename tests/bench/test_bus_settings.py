@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.codec import load_codebook
 from bench.config import load_config
+from bench.database.codec import load_codebook
 from bench.errors import ConfigError
 from bench.transport import VirtualTimeBus, open_bus
 from bench.transport.busopts import BusOptions, contract_options

@@ -130,8 +130,8 @@ def test_can_player_plays_a_bench_log(tmp_path: Path) -> None:
 
 def test_writer_with_a_dbc_checks_and_decodes_like_a_run(tmp_path: Path) -> None:
     """With dbc=..., frames get the monitor's verdict and decoded channels (the run log's format)."""
-    from bench.codec import load_codebook
-    from bench.restbus import Restbus
+    from bench.database.codec import load_codebook
+    from bench.sim.restbus import Restbus
     codebook = load_codebook([CHASSIS_DBC])
     restbus = Restbus(codebook, ["WHL_FL"])
     restbus.set("WHL_Status_FL", SteerAngle=12.5)

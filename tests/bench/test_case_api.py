@@ -9,10 +9,10 @@ from dataclasses import replace
 import pytest
 
 from bench.case import Case
-from bench.checks import StepLog
+from bench.checks.steps import StepLog
 from bench.config import RunSettings, ScenarioProtocol, load_config
 from bench.errors import BenchError
-from bench.results import CaseResult
+from bench.results.model import CaseResult
 from bench.session import BenchSession
 
 

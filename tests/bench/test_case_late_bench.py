@@ -19,9 +19,9 @@ from collections.abc import Callable, Iterator
 import pytest
 
 from bench.case import Case
-from bench.checks import StepLog
+from bench.checks.steps import StepLog
 from bench.config import RunSettings, load_config
-from bench.results import CaseResult, Step
+from bench.results.model import CaseResult, Step
 from bench.session import BenchSession
 from tests.fakes import ipv4_group
 

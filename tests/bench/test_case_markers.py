@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import pytest
 
 from bench.config import ProjectConfig, load_config
-from bench.marks import read_marks
+from bench.pytest.marks import read_marks
 from tests.repo import ROOT
 
 
@@ -81,7 +81,7 @@ def test_calibration_marker_is_checked_against_bench_toml_for_external_nodes_onl
     marker is a marker problem."""
     from types import SimpleNamespace
 
-    from bench.marks import missing_calibration
+    from bench.pytest.marks import missing_calibration
 
     def marks_of(*marks: pytest.Mark):   # read_marks reads an item's iter_markers only
         return read_marks(SimpleNamespace(iter_markers=lambda: list(marks)))    # type: ignore[arg-type]

@@ -9,9 +9,9 @@ from collections.abc import Iterator
 import pytest
 
 from bench.case import Case
-from bench.checks import StepLog
+from bench.checks.steps import StepLog
 from bench.config import RunSettings, load_config
-from bench.results import CaseResult
+from bench.results.model import CaseResult
 from bench.session import BenchSession
 
 MESSAGE, SIGNAL, NODE = "WHL_Status_FL", "SteerAngle", "WHL_FL"

@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
+from bench.checks.monitor import Monitor
 from bench.cli import main
 from bench.cli.monitor import TimeBase, window_stats
-from bench.codec import Codebook
-from bench.monitor import Monitor
+from bench.database.codec import Codebook
 from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
@@ -157,7 +157,7 @@ def test_the_view_shows_e2e_errors_unknown_ids_and_timeouts(codebook: Codebook) 
     from rich.console import Console
 
     from bench.cli.monitor import LiveMonitor, render
-    from bench.restbus import Restbus
+    from bench.sim.restbus import Restbus
 
     restbus = Restbus(codebook, ["WHL_FL"])
     restbus.set("WHL_Status_FL", SteerAngle=12.5)

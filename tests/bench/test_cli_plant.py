@@ -7,12 +7,12 @@ from __future__ import annotations
 import pytest
 from rich.console import Console
 
+from bench.checks.monitor import Monitor
 from bench.cli import main
 from bench.cli.plant import INVALID_SHOWN, _report_invalid, plant_faults
-from bench.codec import Codebook
+from bench.database.codec import Codebook
 from bench.errors import ConfigError
-from bench.faults import RUN
-from bench.monitor import Monitor
+from bench.faults.plan import RUN
 
 SPEC = "drop:IMU_Motion@case+3.5-3.8"
 

@@ -1,5 +1,5 @@
-"""The databases are parsed once per process (bench.codec.load_codebook, issue 28): the same files with the same
-[e2e] table give the same Codebook again without a second cantools parse; a changed file or other overrides are
+"""The databases are parsed once per process (bench.database.codec.load_codebook, issue 28): the same files with
+the same [e2e] table give the same Codebook again without a second cantools parse; a changed file or other overrides are
 parsed anew."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 import cantools.database
 import pytest
 
-from bench import codec
+from bench.database import codec
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 

@@ -5,7 +5,7 @@ is absent, its cases are skipped saying so and only the project's DBCs (chassis.
 
 Which messages: `bench dbc check` accepts no corpus file that has a message (each lacks a cycle time at
 least; tests/bench/test_dbc_check.py), so "the messages the bench accepts" would be none. The codec is built
-for every message of every DBC the bench can load (`bench.codec.load_dbc`: cantools' strict load, as for
+for every message of every DBC the bench can load (`bench.database.codec.load_dbc`: cantools' strict load, as for
 a configured database), so every such message is compared: big-endian, signed, float, multiplexed
 (cascaded too), value tables, 63- and 64-bit, CAN FD. The files the bench cannot load have no codec; they
 are listed (UNLOADABLE) so that none is left out silently.
@@ -36,7 +36,7 @@ from cantools.database.can import Message, Signal
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from bench.codec import DecodeError, EncodeError, MessageCodec, load_dbc
+from bench.database.codec import DecodeError, EncodeError, MessageCodec, load_dbc
 from bench.errors import DatabaseError
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 

@@ -233,7 +233,7 @@ def test_calibration_errors_are_one_line(tmp_path: Path, body: str, words: str) 
 
 
 def test_calibration_of_an_unknown_node_is_a_problem(tmp_path: Path) -> None:
-    from bench.codec import load_codebook
+    from bench.database.codec import load_codebook
 
     project = load_config(write(tmp_path, toml({"bench": GOOD}) + '[calibration.ABX]\nx = { value = 1, unit = "-" }\n'))
     problems = project.problems(load_codebook(project.databases))

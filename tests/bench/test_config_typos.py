@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from bench.cli import main
-from bench.codec import load_codebook
 from bench.config import load_config
+from bench.database.codec import load_codebook
 from bench.errors import ConfigError
 from tests.repo import BENCH_DBC, CHASSIS_DBC, MINIMAL_PROJECT_TOML, ROOT
 

@@ -16,15 +16,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench import results_io
 from bench.config import load_config
 from bench.contract import ContractError, is_requirement_id, load_requirements, parse_requirements
 from bench.errors import ConfigError
-from bench.marks import CaseMarks, ReferenceOnly, skip_reason, split_names
+from bench.pytest.marks import CaseMarks, ReferenceOnly, skip_reason, split_names
 from bench.report.conformance import build_conformance
 from bench.report.html import render_html
 from bench.report.junit import build_junit
-from bench.results import CaseRef, CaseResult, RequirementInfo, RunResult, Step
+from bench.results import store as results_io
+from bench.results.model import CaseRef, CaseResult, RequirementInfo, RunResult, Step
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 PYTEST = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q"]

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from bench.cli import main
-from bench.dbccheck import ERROR, CheckResult, Finding, check_file, check_text
+from bench.database.check import ERROR, CheckResult, Finding, check_file, check_text
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 
 CORPUS = ROOT.parent / "shared" / "corpus" / "dbc"        # the CI keeps shared/ beside the repository's clone

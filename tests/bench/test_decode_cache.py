@@ -12,7 +12,7 @@ from cantools.database.can import Database, Message
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.codec import RANGE_SLACK, DecodeError, MessageCodec, load_codebook
+from bench.database.codec import RANGE_SLACK, DecodeError, MessageCodec, load_codebook
 from tests.reference import COUNTER_VALUES, contract_checksum
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 

@@ -11,10 +11,10 @@ import re
 import pytest
 
 from bench import e2e
-from bench.codec import Codebook
-from bench.faults import FRAME_KINDS, Fault, FaultPlan
-from bench.monitor import Monitor
-from bench.restbus import Restbus
+from bench.checks.monitor import Monitor
+from bench.database.codec import Codebook
+from bench.faults.plan import FRAME_KINDS, Fault, FaultPlan
+from bench.sim.restbus import Restbus
 from tests.reference import COUNTER_VALUES
 
 MESSAGE = "VCU_WheelCmd_FL"
@@ -177,7 +177,7 @@ def test_the_echo_of_the_stations_own_frame_is_no_second_sender(codebook: Codebo
 def test_two_senders_on_the_virtual_bus(codebook: Codebook) -> None:
     """In process: the bench's VCU and a second VCU on one virtual bus. The runner's monitor (which sends
     neither) shows it by the counters, the first VCU's station by a frame of its own identifier."""
-    from bench.station import Station
+    from bench.sim.station import Station
     from bench.transport import VirtualTimeBus
 
     channel = f"dup-{random.randint(0, 1 << 30)}"

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from bench import e2e
-from bench.codec import Codebook
+from bench.database.codec import Codebook
 from tests import repo
 from tests.reference import COUNTER_VALUES, contract_checksum, crc8_j1850_p11, protected
 

@@ -15,10 +15,10 @@ import pytest
 from cantools.autosar import apply_profile2_crc, apply_profile5_crc
 from e2e import p01, p02, p05, p11
 
-from bench.codec import Codebook, load_codebook
-from bench.dbccheck import check_file
-from bench.monitor import Monitor
-from bench.restbus import Restbus
+from bench.checks.monitor import Monitor
+from bench.database.check import check_file
+from bench.database.codec import Codebook, load_codebook
+from bench.sim.restbus import Restbus
 from tests.repo import ROOT
 
 FIXTURE = ROOT / "tests" / "fixtures" / "e2e_profiles.dbc"

@@ -22,7 +22,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from bench import e2e as bench_e2e
-from bench.codec import Codebook, load_codebook
+from bench.database.codec import Codebook, load_codebook
 from tests.reference import crc8_j1850_p11, p11_crc
 from tests.repo import E2E_ATTRIBUTE_DEFINITIONS
 

@@ -21,8 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench import e2e
-from bench.codec import Codebook
-from bench.monitor import Monitor
+from bench.checks.monitor import Monitor
+from bench.database.codec import Codebook
 from tests import repo
 from tests.reference import COUNTER_VALUES, protected
 

@@ -87,7 +87,7 @@ def test_skipped(bench):
 def test_one_number_format_in_console_junit_and_html(tmp_path: Path) -> None:
     """Issue 27 finding 7: an expected value was -4.886 (HTML), -4.8863 (JUnit) and -4.8862962808010275 (console);
     the JUnit message ended in a dangling "; failed steps:" and showed the test's source; a skipped case showed
-    "-0.00 s". Now one function (bench.checks.format_value) gives the digits the tolerance (±0.005) resolves."""
+    "-0.00 s". Now one function (bench.checks.steps.format_value) gives the digits the tolerance (±0.005) resolves."""
     (tmp_path / "test_numbers.py").write_text(NUMBERS)
     result = subprocess.run([sys.executable, "-m", "bench", "run", str(tmp_path / "test_numbers.py"), "--out",
                              str(tmp_path / "out")], cwd=ROOT, capture_output=True, text=True, timeout=120)

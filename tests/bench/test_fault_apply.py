@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from bench.codec import Codebook
-from bench.faults import Fault, FaultPlan
-from bench.restbus import Restbus
+from bench.database.codec import Codebook
+from bench.faults.plan import Fault, FaultPlan
+from bench.sim.restbus import Restbus
 
 MSG = "VCU_WheelCmd_FL"
 

@@ -20,12 +20,12 @@ from pathlib import Path
 import pytest
 
 from bench.case import NoFrames
-from bench.codec import Codebook
 from bench.config import RunSettings, load_config
+from bench.database.codec import Codebook
 from bench.errors import ConfigError
-from bench.faults import CASE, FaultPlan, parse_fault, validate
+from bench.faults.plan import CASE, FaultPlan, parse_fault, validate
 from bench.log.logread import read_decoded, summarise
-from bench.results import RunResult
+from bench.results.model import RunResult
 from bench.run import BenchRun
 from tests import repo
 
@@ -238,7 +238,7 @@ def test_invalid_frames_are_explained(recorded: Recorded) -> None:
 def test_faults_survive_the_workers_hand_over(recorded: Recorded, tmp_path: Path) -> None:
     """-n N: each worker's part goes through JSON; a command-line fault acts in every worker and is one
     record of the merged run, its frames summed."""
-    from bench import results_io
+    from bench.results import store as results_io
 
     results_io.dump(recorded.run, tmp_path / "gw0.json")
     part = results_io.load(tmp_path / "gw0.json")
@@ -253,7 +253,7 @@ def test_faults_survive_the_workers_hand_over(recorded: Recorded, tmp_path: Path
 def test_real_time_log_times_are_the_receive_stamps() -> None:
     """In real time the log's origin is the wall clock's own start: origin + bench time of a frame is the
     epoch time the kernel stamped it with (within the stamp's rounding)."""
-    from bench.clock import WallClock
+    from bench.sim.clock import WallClock
 
     clock = WallClock()
     clock.start()

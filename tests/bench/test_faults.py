@@ -1,5 +1,5 @@
 """Fault injection: each kind changes the frames as specified, and the monitor notices it; the kinds are one
-registry (bench/fault_kinds.py) from which the checks, the --fault help and docs/reliability.md's table come."""
+registry (bench/faults/kinds.py) from which the checks, the --fault help and docs/reliability.md's table come."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from bench import fault_kinds
 from bench.cli import main
-from bench.codec import Codebook, load_codebook
+from bench.database.codec import Codebook, load_codebook
 from bench.errors import ConfigError
-from bench.fault_kinds import FaultKind, Outgoing
-from bench.faults import KINDS, Fault, FaultPlan, parse_fault, validate
-from bench.restbus import Restbus
+from bench.faults import kinds as fault_kinds
+from bench.faults.kinds import FaultKind, Outgoing
+from bench.faults.plan import KINDS, Fault, FaultPlan, parse_fault, validate
+from bench.sim.restbus import Restbus
 from tests import repo
 from tests.reference import COUNTER_VALUES, contract_checksum
 
@@ -124,11 +124,11 @@ def test_unknown_targets_are_clear_errors(codebook: Codebook) -> None:
 
 
 def test_docs_table_is_the_registry() -> None:
-    """docs/reliability.md's table of kinds is what the registry gives (`python -m bench.fault_kinds FILE`)."""
+    """docs/reliability.md's table of kinds is what the registry gives (`python -m bench.faults.kinds FILE`)."""
     text = (ROOT / "docs" / "reliability.md").read_text(encoding="utf-8")
     table = fault_kinds.documented_table(text)
     assert table is not None, "docs/reliability.md lost its generated block"
-    assert table == fault_kinds.markdown_table(), "out of date: run python -m bench.fault_kinds docs/reliability.md"
+    assert table == fault_kinds.markdown_table(), "out of date: run python -m bench.faults.kinds docs/reliability.md"
     for name in KINDS:
         assert f"| `{name}` |" in table
 

@@ -1,5 +1,5 @@
 """Silent failures are logged and reported (issue 17): a warning of the bench or the plant is a `logging`
-record and, during a run, a finding in the report (bench.findings): frames the bus driver refused, and the
+record and, during a run, a finding in the report (bench.checks.findings): frames the bus driver refused, and the
 kernel's periodic sending given up."""
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ from typing import Any
 import can
 import pytest
 
-from bench.codec import load_codebook
+from bench.checks.findings import MAX_FINDINGS, FindingCollector
 from bench.config import RunSettings, load_config
-from bench.findings import MAX_FINDINGS, FindingCollector
-from bench.restbus import Restbus
-from bench.results import Finding, RunResult
-from bench.results_io import dump, load, merge
+from bench.database.codec import load_codebook
+from bench.results.model import Finding, RunResult
+from bench.results.store import dump, load, merge
 from bench.run import BenchRun
+from bench.sim.restbus import Restbus
 from bench.transport import VirtualTimeBus, periodic
 
 
@@ -28,16 +28,16 @@ def test_collector_keeps_warnings_of_the_bench_and_the_plant() -> None:
     clock = iter([1.5, 2.5, 3.5])
     collector = FindingCollector(lambda: next(clock)).attach()
     try:
-        logging.getLogger("bench.station").warning("frame %s refused", "0x100")
-        logging.getLogger("bench.station").warning("frame %s refused", "0x100")    # the same: counted
+        logging.getLogger("bench.sim.station").warning("frame %s refused", "0x100")
+        logging.getLogger("bench.sim.station").warning("frame %s refused", "0x100")    # the same: counted
         logging.getLogger("plant.body").error("model diverged")
-        logging.getLogger("bench.station").info("not a finding")
+        logging.getLogger("bench.sim.station").info("not a finding")
         logging.getLogger("somebody.else").warning("not ours")
     finally:
         findings = collector.detach()
-    logging.getLogger("bench.station").warning("after the run: not collected")
+    logging.getLogger("bench.sim.station").warning("after the run: not collected")
     assert [(f.source, f.level, f.message, f.time, f.count) for f in findings] == [
-        ("bench.station", "warning", "frame 0x100 refused", 1.5, 2),
+        ("bench.sim.station", "warning", "frame 0x100 refused", 1.5, 2),
         ("plant.body", "error", "model diverged", 2.5, 1)]
 
 
@@ -83,7 +83,7 @@ def test_refused_frames_are_a_warning_and_a_finding(tmp_path: Path, monkeypatch:
     assert run.session.runner is not None
     assert len(refused) >= 10                                # DRV_Steering every 10 ms for 0.2 s
     assert run.session.runner.send_errors == len(refused)
-    warnings = [r for r in caplog.records if r.name == "bench.station" and r.levelno == logging.WARNING]
+    warnings = [r for r in caplog.records if r.name == "bench.sim.station" and r.levelno == logging.WARNING]
     assert len(warnings) == 1 and f"0x{refused_id:03X}" in warnings[0].getMessage()
     texts = [f.message for f in result.findings]
     assert any("refused a frame" in t and f"0x{refused_id:03X}" in t for t in texts), texts
@@ -113,7 +113,7 @@ def test_findings_of_workers_merge(tmp_path: Path) -> None:
     parts = []
     for worker, count in (("gw0", 2), ("gw1", 3)):
         part = RunResult(started="2026-01-01T00:00:00", interface="embedded", channel="", time_mode="virtual",
-                         findings=[Finding("bench.station", "warning", "x", 0.5, count)])
+                         findings=[Finding("bench.sim.station", "warning", "x", 0.5, count)])
         dump(part, tmp_path / f"{worker}.json")
         parts.append((worker, load(tmp_path / f"{worker}.json")))
     merged = merge(parts, 1.0)

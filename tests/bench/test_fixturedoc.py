@@ -1,6 +1,6 @@
 """The fixture reference, docs/reference/fixture.md, is markdown read in the repository without a build step
 (issue 27, finding 6: it was `::: bench.case.Case`, a directive only an mkdocs build with the docs extra turns into
-text). `python -m bench.fixturedoc` writes it from bench/case.py's docstrings and bench.toml's [scenario]; these
+text). `python -m bench.pytest.fixturedoc` writes it from bench/case.py's docstrings and bench.toml's [scenario]; these
 tests fail while the checked-in page is not what the command writes."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from bench import fixturedoc
 from bench.case import Case
 from bench.config import load_config
+from bench.pytest import fixturedoc
 from tests.repo import ROOT
 
 PAGE = ROOT / "docs" / "reference" / "fixture.md"
@@ -18,7 +18,7 @@ PAGE = ROOT / "docs" / "reference" / "fixture.md"
 
 def test_the_page_is_what_the_command_writes() -> None:
     assert PAGE.read_text(encoding="utf-8") == fixturedoc.render(load_config(ROOT / "bench.toml")), (
-        "docs/reference/fixture.md is out of date: run `python -m bench.fixturedoc`")
+        "docs/reference/fixture.md is out of date: run `python -m bench.pytest.fixturedoc`")
 
 
 def test_the_page_is_text_not_a_directive() -> None:
@@ -46,6 +46,6 @@ def test_the_page_explains_dut_and_req() -> None:
 
 
 def test_check_mode() -> None:
-    result = subprocess.run([sys.executable, "-m", "bench.fixturedoc", "--check"], cwd=ROOT, capture_output=True,
+    result = subprocess.run([sys.executable, "-m", "bench.pytest.fixturedoc", "--check"], cwd=ROOT, capture_output=True,
                             text=True, timeout=120)
     assert result.returncode == 0, result.stderr

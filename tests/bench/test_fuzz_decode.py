@@ -21,20 +21,21 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from bench.checks.monitor import Monitor
 from bench.cli import main
-from bench.codec import Codebook, DecodeError, load_codebook
-from bench.dbccheck import check_text
+from bench.database.check import check_text
+from bench.database.codec import Codebook, DecodeError, load_codebook
 from bench.errors import BenchError
 from bench.log.logread import MAGIC, read_decoded, read_frames, read_steps, summarise
 from bench.log.recorder import Recorder
-from bench.monitor import Monitor
 from tests.reference import COUNTER_VALUES, protected
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 _CODEBOOK = load_codebook([CHASSIS_DBC, BENCH_DBC])
 CODECS = sorted(_CODEBOOK.by_id.values(), key=lambda c: c.frame_id)
 IDS = [c.frame_id for c in CODECS]
-HALF_STEP = 0.5   # of the scale: the monitor's allowance for rounding at the range ends (bench.codec.RANGE_SLACK)
+#: of the scale: the monitor's allowance for rounding at the range ends (bench.database.codec.RANGE_SLACK)
+HALF_STEP = 0.5
 
 
 def test_the_contract_messages_take_the_fast_path() -> None:

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from bench.clock import VirtualClock, WallClock
 from bench.log.logread import read_frames, summarise
 from bench.log.recorder import Recorder
+from bench.sim.clock import VirtualClock, WallClock
 
 
 def test_a_recorder_without_interval_reads_no_clock_and_writes_chunks_only_when_flushed(

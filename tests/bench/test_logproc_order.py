@@ -12,7 +12,7 @@ from mcap.records import Metadata
 from mcap.stream_reader import StreamReader
 
 import bench.log.logproc
-from bench.codec import load_codebook, load_dbc
+from bench.database.codec import load_codebook, load_dbc
 from bench.log.logproc import LogProcess
 from bench.log.recorder import Recorder
 from tests.repo import BENCH_DBC, CHASSIS_DBC

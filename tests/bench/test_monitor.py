@@ -6,9 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench import e2e
-from bench.codec import Codebook
-from bench.monitor import Monitor
-from bench.restbus import Restbus
+from bench.checks.monitor import Monitor
+from bench.database.codec import Codebook
+from bench.sim.restbus import Restbus
 
 
 def _frames(codebook: Codebook, message: str, count: int, **values: float) -> list[bytes]:
@@ -101,7 +101,7 @@ def test_random_payloads_on_contract_ids_never_raise(codebook: Codebook, frame_i
 
 
 def test_long_runs_keep_memory_bounded_and_say_so(codebook: Codebook, monkeypatch) -> None:
-    import bench.monitor as monitor_module
+    import bench.checks.monitor as monitor_module
     monkeypatch.setattr(monitor_module, "HISTORY_CAP", 50)
     monkeypatch.setattr(monitor_module, "INTERVALS_CAP", 50)
     monitor = Monitor(codebook, keep_history=True)
@@ -124,7 +124,7 @@ def test_long_runs_keep_memory_bounded_and_say_so(codebook: Codebook, monkeypatc
 def test_the_sink_gets_each_frame_as_one_object_with_its_verdict(codebook: Codebook) -> None:
     """The sink (the run's log and timing) gets a CheckedFrame per frame: its fields by name, slotted (no per-frame
     dict); an unknown identifier and a short frame come rejected with their reason, a valid one with its values."""
-    from bench.monitor import CheckedFrame
+    from bench.checks.monitor import CheckedFrame
 
     got: list[CheckedFrame] = []
     monitor = Monitor(codebook, sink=got.append)

@@ -21,11 +21,11 @@ import can
 import pytest
 
 from bench import e2e
-from bench.codec import Codebook
-from bench.faults import FaultPlan, parse_fault
-from bench.monitor import Monitor
-from bench.restbus import Restbus
-from bench.station import Station
+from bench.checks.monitor import Monitor
+from bench.database.codec import Codebook
+from bench.faults.plan import FaultPlan, parse_fault
+from bench.sim.restbus import Restbus
+from bench.sim.station import Station
 from bench.transport import periodic
 from tests.fakes import FakeBus
 from tests.integration.vcan import IN_LANE, has_vcan

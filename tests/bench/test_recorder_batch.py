@@ -15,7 +15,7 @@ from mcap.stream_reader import StreamReader
 
 import bench.log.mcapfast
 import bench.log.recorder
-from bench.codec import Codebook, load_dbc
+from bench.database.codec import Codebook, load_dbc
 from bench.errors import BenchError
 from bench.log.logread import read_decoded, read_frames
 from bench.log.recorder import Recorder

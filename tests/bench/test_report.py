@@ -18,7 +18,7 @@ from bench.report import write_html, write_junit
 from bench.report.html import fmt
 from bench.report.junit import split_nodeid, xml_safe
 from bench.report.plots import MAX_POINTS, Plotter, decimate
-from bench.results import CaseResult, Plot, RunResult, Series, Step, Table
+from bench.results.model import CaseResult, Plot, RunResult, Series, Step, Table
 
 SCRIPT = "<script>alert(1)</script>"
 IMG = '<img src=x onerror="window.__pwned=1">'

@@ -19,7 +19,7 @@ from jinja2 import Environment, PackageLoader
 
 import bench.report.html as report_html
 from bench.report import write_html
-from bench.results import CaseResult, Plot, RunResult, Series, Step
+from bench.results.model import CaseResult, Plot, RunResult, Series, Step
 from tests.browser import IMG, JS, SCRIPT, Dom, dump, problems, run_browser
 
 

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from bench.config import load_config
-from bench.pytest_plugin import _catalogue
+from bench.pytest.plugin import _catalogue
 from bench.report import write_html
-from bench.results import CaseResult, Plot, RequirementInfo, RunResult, Series, Step, Table
+from bench.results.model import CaseResult, Plot, RequirementInfo, RunResult, Series, Step, Table
 from tests.browser import problems, run_browser
 from tests.repo import ROOT
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from bench.report import write_html
 from bench.report.plots import Plotter
-from bench.results import CaseResult, FaultRecord, Plot, RunResult, Series, Step
+from bench.results.model import CaseResult, FaultRecord, Plot, RunResult, Series, Step
 
 T = np.arange(0, 5, 0.01)
 

@@ -1,4 +1,4 @@
-"""The restbus' cache of unchanged values (bench/restbus.py) sends exactly the frames a fresh check and encoding
+"""The restbus' cache of unchanged values (bench/sim/restbus.py) sends exactly the frames a fresh check and encoding
 would: for any sequence of values set, reset and sent, every frame equals cantools' encoding of the values with
 the contract's AliveCounter and Profile 11 CRC (tests/reference.py), and every bad value is refused at every send,
 named with its value."""
@@ -13,9 +13,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.codec import Codebook, MessageCodec, load_codebook
+from bench.database.codec import Codebook, MessageCodec, load_codebook
 from bench.errors import SignalError
-from bench.restbus import Restbus
+from bench.sim.restbus import Restbus
 from tests.reference import COUNTER_VALUES, protected
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 

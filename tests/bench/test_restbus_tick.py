@@ -13,12 +13,12 @@ import can
 import cantools
 import pytest
 
-from bench.clock import Scheduler, VirtualClock
-from bench.codec import Codebook
+from bench.checks.monitor import Monitor
+from bench.database.codec import Codebook
 from bench.errors import ConfigError
-from bench.monitor import Monitor
-from bench.restbus import Restbus
-from bench.station import Station
+from bench.sim.clock import Scheduler, VirtualClock
+from bench.sim.restbus import Restbus
+from bench.sim.station import Station
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 DURATION = 0.2   # s of bench time

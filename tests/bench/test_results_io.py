@@ -1,4 +1,4 @@
-"""The worker's part of a run (bench.results_io): the fast writer gives the text asdict gave, and reads back."""
+"""The worker's part of a run (bench.results.store): the fast writer gives the text asdict gave, and reads back."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from bench import results_io
-from bench.results import (
+from bench.results import store as results_io
+from bench.results.model import (
     CaseRef,
     CaseResult,
     FaultRecord,
@@ -39,7 +39,7 @@ def _run() -> RunResult:
                     mcap_path="run-gw0.mcap", wall_time=9.5, sim_time=134.8, frames=269504,
                     requirements=[RequirementInfo("VCU-FLT-03", "Priority between faults", "docs/contract/vcu.md", 40)],
                     deselected=[CaseRef("t.py::test_b", "test_b", ["ABS"], [])], faults=[fault],
-                    findings=[Finding("bench.station", "warning", "not sent", None, 2)])
+                    findings=[Finding("bench.sim.station", "warning", "not sent", None, 2)])
     run.tables.append(Table("tuple rows", ["x"], [("a",), ("b",)]))   # type: ignore[list-item]
     return run
 

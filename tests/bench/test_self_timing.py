@@ -22,18 +22,18 @@ import can
 import pytest
 
 from bench.case import Case
-from bench.checks import StepLog
+from bench.checks.monitor import HISTORY_CAP, Monitor
+from bench.checks.steps import StepLog
+from bench.checks.timing import Late, SelfTiming, TimingCollector
 from bench.cli.run import EXIT_INCONCLUSIVE
-from bench.clock import Scheduler, WallClock, watchdog_bound
-from bench.codec import load_codebook
 from bench.config import RunSettings, load_config
+from bench.database.codec import load_codebook
 from bench.errors import BenchLimit, ConfigError, Inconclusive
-from bench.monitor import HISTORY_CAP, Monitor
-from bench.restbus import Restbus
-from bench.results import CaseResult
+from bench.results.model import CaseResult
 from bench.session import BenchSession
-from bench.station import LATE_CYCLES, Station
-from bench.timing import Late, SelfTiming, TimingCollector
+from bench.sim.clock import Scheduler, WallClock, watchdog_bound
+from bench.sim.restbus import Restbus
+from bench.sim.station import LATE_CYCLES, Station
 from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
@@ -306,7 +306,7 @@ def test_a_60_s_case_keeps_its_whole_history_for_a_check_and_a_plot_at_its_end()
 
 
 def test_a_history_beyond_the_bench_limit_is_the_benchs_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    import bench.monitor as monitor_module
+    import bench.checks.monitor as monitor_module
     monkeypatch.setattr(monitor_module, "HISTORY_CAP", 50)
     monkeypatch.setattr(monitor_module, "HISTORY_MAX", 400)
     codebook = load_codebook(load_config().databases)

@@ -7,10 +7,10 @@ in start_scenario.
 
 from __future__ import annotations
 
-from bench.faults import FaultPlan, parse_fault
-from bench.monitor import Monitor
-from bench.restbus import Restbus
-from bench.station import Station
+from bench.checks.monitor import Monitor
+from bench.faults.plan import FaultPlan, parse_fault
+from bench.sim.restbus import Restbus
+from bench.sim.station import Station
 from tests.fakes import FakeBus
 
 

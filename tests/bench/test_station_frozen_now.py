@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import itertools
 
-from bench.codec import Codebook
-from bench.monitor import Monitor
-from bench.restbus import Restbus
-from bench.station import Station
+from bench.checks.monitor import Monitor
+from bench.database.codec import Codebook
+from bench.sim.restbus import Restbus
+from bench.sim.station import Station
 from bench.transport import VirtualTimeBus
 
 

@@ -12,10 +12,10 @@ import time
 import can
 import pytest
 
-from bench.clock import STAMP_WINDOW, WallClock
-from bench.monitor import Monitor
-from bench.restbus import Restbus
-from bench.station import POLL_BATCH, Station
+from bench.checks.monitor import Monitor
+from bench.sim.clock import STAMP_WINDOW, WallClock
+from bench.sim.restbus import Restbus
+from bench.sim.station import POLL_BATCH, Station
 from bench.transport import Transport, open_bus
 from tests.fakes import FakeBus, flood, ipv4_group
 
@@ -115,7 +115,7 @@ def test_a_late_reader_measures_the_intervals_the_bus_had(codebook) -> None:
         # The reader took all 20 within a few ms; the stamps still give the sender's spacing: each interval
         # lies between the shortest and the longest the two sends allow (a sender descheduled between its clock
         # read and its send made a single read 3.4 ms off: seen under load). 1 ms: the stamp's clock
-        # (CLOCK_REALTIME, bench/clock.py) against the monotonic one over 10 ms.
+        # (CLOCK_REALTIME, bench/sim/clock.py) against the monotonic one over 10 ms.
         for (a0, a1), (b0, b1), got in zip(sent_at, sent_at[1:], measured, strict=False):
             assert b0 - a1 - 0.001 <= got <= b1 - a0 + 0.001, (got, b0 - a1, b1 - a0)
     finally:
@@ -147,7 +147,7 @@ def test_the_log_process_skips_a_record_it_cannot_write_and_keeps_the_rest(tmp_p
 
 def test_a_late_runner_goes_to_the_wall_clock_a_late_plant_replays_every_tick(codebook) -> None:
     """Scheduler under the wall clock, 0.1 s late at start: the runner jumps, the plant steps every tick."""
-    from bench.clock import Scheduler
+    from bench.sim.clock import Scheduler
 
     for every_tick in (False, True):
         clock = WallClock()
@@ -182,7 +182,7 @@ def test_a_late_runner_goes_to_the_wall_clock_a_late_plant_replays_every_tick(co
 
 def test_a_real_time_run_reads_what_waits_before_it_returns(codebook) -> None:
     """run_until ends with the sockets read (up to CATCH_UP_FRAMES), so checks see the present."""
-    from bench.clock import CATCH_UP_FRAMES, Scheduler
+    from bench.sim.clock import CATCH_UP_FRAMES, Scheduler
 
     clock = WallClock()
     bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=5 * POLL_BATCH)
@@ -212,7 +212,7 @@ class _CountingMonotonic:
 
 
 def test_a_stamp_is_checked_against_the_latest_read_without_a_new_one(monkeypatch: pytest.MonkeyPatch) -> None:
-    from bench.clock import STAMP_LEAD
+    from bench.sim.clock import STAMP_LEAD
 
     clock = WallClock()
     clock.start()
@@ -234,7 +234,7 @@ def test_behaviours_see_the_tick_s_time_and_a_plant_tick_reads_the_clock_about_o
         codebook, monkeypatch: pytest.MonkeyPatch) -> None:
     """A plant-like station asks for several messages every tick: the answers are timed against the tick's
     time, and the whole tick loop reads the clock about once per tick (it waits for each deadline)."""
-    from bench.clock import Scheduler
+    from bench.sim.clock import Scheduler
 
     seen: list[tuple[float, float]] = []
 
@@ -267,7 +267,7 @@ def test_behaviours_see_the_tick_s_time_and_a_plant_tick_reads_the_clock_about_o
 
 
 def test_a_late_plant_reads_the_clock_once_per_tick(codebook, monkeypatch: pytest.MonkeyPatch) -> None:
-    from bench.clock import Scheduler
+    from bench.sim.clock import Scheduler
 
     clock = WallClock()
     bus = flood_bus(_frame(codebook, "VCU_WheelCmd_FL"), budget=0)

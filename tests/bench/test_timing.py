@@ -1,4 +1,4 @@
-"""The report's timing section (bench.timing) on synthetic buses: known intervals, known latencies.
+"""The report's timing section (bench.checks.timing) on synthetic buses: known intervals, known latencies.
 
 A tiny two-message DBC of its own (a command and a status that follows it), so these tests say nothing
 about any vehicle. Its messages are unprotected (no E2E attributes: judged on length, timing and ranges, every
@@ -16,13 +16,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.codec import Codebook
+from bench.checks.monitor import Monitor
+from bench.checks.timing import CycleStats, LatencyStats, TimingCollector, follow_latencies
 from bench.config import LatencyPair, load_config
+from bench.database.codec import Codebook
 from bench.errors import ConfigError
-from bench.monitor import Monitor
 from bench.report.html import render_html
-from bench.results import RunResult
-from bench.timing import CycleStats, LatencyStats, TimingCollector, follow_latencies
+from bench.results.model import RunResult
 
 DBC = """VERSION ""
 NS_ :
@@ -271,7 +271,7 @@ def test_bad_timing_tables_are_clear_errors(tmp_path: Path, timing: str, needle:
 
 def test_the_projects_pairs_name_real_signals() -> None:
     """bench.toml's pairs resolve against the project's databases (else the report would say so)."""
-    from bench.codec import load_codebook
+    from bench.database.codec import load_codebook
     project = load_config()
     assert project.latency
     for stats in TimingCollector(project.latency).latency_stats(load_codebook(project.databases)):

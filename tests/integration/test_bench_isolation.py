@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.codec import load_codebook
 from bench.config import load_config
+from bench.database.codec import load_codebook
 from bench.log.logread import read_frames
 from tests.fakes import ipv4_group, ipv6_available, ipv6_group
 from tests.repo import ROOT

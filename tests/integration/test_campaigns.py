@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from bench.marks import CAMPAIGN
+from bench.pytest.marks import CAMPAIGN
 from testcases.limits import load_limits
 from tests.repo import ROOT
 

@@ -12,8 +12,8 @@ import time
 import can
 import pytest
 
-from bench.codec import Codebook
-from bench.monitor import Monitor
+from bench.checks.monitor import Monitor
+from bench.database.codec import Codebook
 from tests.child import Child
 from tests.fakes import ipv4_group
 from tests.reference import COUNTER_VALUES
@@ -69,9 +69,9 @@ def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
 
 SECOND_VCU_CASE = '''
 from bench.transport import VirtualTimeBus
-from bench.monitor import Monitor
-from bench.restbus import Restbus
-from bench.station import Station
+from bench.checks.monitor import Monitor
+from bench.sim.restbus import Restbus
+from bench.sim.station import Station
 
 
 def test_a_second_vcu_joins(bench):

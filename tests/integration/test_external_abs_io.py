@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import statistics
 
+from bench.checks.monitor import Monitor
 from bench.config import RunSettings, load_config
-from bench.monitor import Monitor
-from bench.node import NodeIO
-from bench.restbus import Restbus
 from bench.session import BenchSession
-from bench.station import Station
+from bench.sim.node import NodeIO
+from bench.sim.restbus import Restbus
+from bench.sim.station import Station
 from bench.transport import VirtualTimeBus
 
 WHEELS = ("FL", "FR", "RL", "RR")

@@ -4,7 +4,7 @@ bench/ is a generic bench: it knows no vehicle, so no message, signal or vehicle
 project's databases appears in it (code, docstrings, help text, report templates), not even the end-to-end
 signals' (the bench finds the counter and the checksum by their places), nor the repository's file layout;
 a project names what the bench needs in its bench.toml. The import direction holds: plant/ imports only the
-bench's behaviour API (bench.node), testcases/ never imports plant/, bench/ imports neither.
+bench's behaviour API (bench.sim.node), testcases/ never imports plant/, bench/ imports neither.
 """
 
 from __future__ import annotations
@@ -114,7 +114,7 @@ def imports(folder: Path) -> Iterator[tuple[str, int, str]]:
                     parts = parts[:len(parts) - node.level + 1]
                     base = ".".join([*parts, base] if base else parts)
                 yield str(path.relative_to(ROOT)), node.lineno, base
-                for alias in node.names:        # `from bench import node`: the module bench.node
+                for alias in node.names:        # `from bench import node`: the module bench.sim.node
                     yield str(path.relative_to(ROOT)), node.lineno, f"{base}.{alias.name}"
 
 
@@ -123,7 +123,7 @@ def _top(module: str) -> str:
 
 
 #: What plant/ may import of the bench: the behaviour API only (a plant is a plugin of the bench).
-PLANT_MAY_IMPORT = {"bench", "bench.node"}
+PLANT_MAY_IMPORT = {"bench", "bench.sim.node"}
 
 
 @pytest.mark.parametrize("folder, forbidden", [
@@ -140,20 +140,21 @@ def test_plant_uses_only_the_behaviour_api() -> None:
     wrong = [f"{file}:{line}: {module}" for file, line, module in imports(ROOT / "plant")
              if _top(module) == "bench" and module not in PLANT_MAY_IMPORT
              and not any(module.startswith(f"{allowed}.") for allowed in PLANT_MAY_IMPORT - {"bench"})]
-    assert not wrong, "plant/ imports of the bench beyond bench.node:\n" + "\n".join(wrong)
+    assert not wrong, "plant/ imports of the bench beyond bench.sim.node:\n" + "\n".join(wrong)
 
 
 def test_the_import_scan_sees_relative_and_from_imports() -> None:
     """The scanner resolves `from . import x` and `from bench import node` (else the rule checks nothing)."""
     folder = ROOT / "plant"
     found = {module for _, _, module in imports(folder)}
-    assert "bench.node" in found
+    assert "bench.sim.node" in found
     assert any(module.startswith("plant.") for module in found)
 
 
 # -- the log package ------------------------------------------------------------------------------------------
 #: What bench/log/ may import of the bench besides itself: the frame checks it logs with, the errors, the version.
-LOG_MAY_IMPORT = {"bench", "bench.version", "bench.errors", "bench.codec", "bench.monitor", "bench.config"}
+LOG_MAY_IMPORT = {"bench", "bench.version", "bench.errors", "bench.database.codec", "bench.checks.monitor",
+                  "bench.config"}
 #: The one module that may reach into mcap's private state (its bytes are compared with mcap's public writer's,
 #: tests/bench/test_recorder.py).
 MCAP_FAST_PATH = "bench/log/mcapfast.py"
@@ -195,7 +196,7 @@ def test_no_private_mcap_name_outside_the_fast_path() -> None:
 # -- the transport package ------------------------------------------------------------------------------------
 #: What bench/transport/ may import of the bench besides itself: the errors, and, for its types and the kernel's
 #: periodic sending, the restbus it sends and the E2E protection of its frames.
-TRANSPORT_MAY_IMPORT = {"bench", "bench.errors", "bench.restbus", "bench.e2e"}
+TRANSPORT_MAY_IMPORT = {"bench", "bench.errors", "bench.sim.restbus", "bench.e2e"}
 
 
 def test_the_transport_package_sits_below_the_station() -> None:
@@ -208,7 +209,7 @@ def test_the_transport_package_sits_below_the_station() -> None:
              or _top(module) in {"pytest", "_pytest"}]
     assert not wrong, ("bench/transport/ imports beyond " + ", ".join(sorted(TRANSPORT_MAY_IMPORT)) + ":\n"
                        + "\n".join(wrong))
-    assert any(module == "bench.restbus" for _, _, module in imports(BENCH / "transport"))   # the scan sees it
+    assert any(module == "bench.sim.restbus" for _, _, module in imports(BENCH / "transport"))   # the scan sees it
 
 
 def test_only_the_transport_asks_a_bus_what_it_is() -> None:
@@ -220,3 +221,27 @@ def test_only_the_transport_asks_a_bus_what_it_is() -> None:
              for number, text in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if probing.search(text)]
     assert not found, "bus probing outside bench/transport/:\n" + "\n".join(found)
     assert any(probing.search(path.read_text(encoding="utf-8")) for path in (BENCH / "transport").rglob("*.py"))
+
+
+# -- the packages of bench/ ------------------------------------------------------------------------------------
+#: The packages below the session: what a run is built of. None imports the session, the case, the runner, the
+#: command line, the reports or the pytest plugin, and none imports pytest (they run without a test runner).
+BELOW_THE_SESSION = ("transport", "log", "sim", "checks", "faults", "database", "e2e", "results")
+ABOVE = ("bench.session", "bench.case", "bench.run", "bench.cli", "bench.report", "bench.pytest", "bench.stop")
+#: At most this many modules at bench/'s top level (issue 28): the rest lives in packages named for what they hold.
+TOP_LEVEL_MAX = 12
+
+
+def test_bench_is_grouped_into_packages() -> None:
+    top = sorted(p.name for p in BENCH.glob("*.py"))
+    assert len(top) <= TOP_LEVEL_MAX, f"{len(top)} modules at bench/'s top level: {top}"
+    for package in BELOW_THE_SESSION:
+        assert (BENCH / package / "__init__.py").is_file(), package
+
+
+@pytest.mark.parametrize("package", BELOW_THE_SESSION)
+def test_the_packages_below_the_session_import_nothing_above_it(package: str) -> None:
+    wrong = [f"{file}:{line}: {module}" for file, line, module in imports(BENCH / package)
+             if any(module == above or module.startswith(f"{above}.") for above in ABOVE)
+             or _top(module) in {"pytest", "_pytest"}]
+    assert not wrong, f"bench/{package}/ imports the session's layer or pytest:\n" + "\n".join(wrong)

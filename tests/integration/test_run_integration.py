@@ -30,7 +30,7 @@ def bench_run(out: Path, *extra: str, timeout: float = 300) -> subprocess.Comple
 
 def frames_of(path: Path) -> list[tuple[int, int, bytes, str]]:
     """(bench time ns, id, data, direction) of every raw frame, read with the mcap reader itself. Log times are
-    epoch times (the run's wall-clock start + bench time); metadata `bench.clock` gives the start."""
+    epoch times (the run's wall-clock start + bench time); metadata `bench.sim.clock` gives the start."""
     out = []
     with open(path, "rb") as f:
         origin = next(int(m.metadata["origin_ns"]) for m in make_reader(f).iter_metadata() if m.name == "bench.clock")

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.realtime
 
 CASES = ROOT / "tests" / "fixtures" / "cases"
 LIMIT = 1.0          # s from the signal to the process's end
-FLOOD = "flood:0x000:8@3-1e9"   # at the bus's limit (bench.fault_kinds.FLOOD_MAX_RATE), from bench time 3 s on
+FLOOD = "flood:0x000:8@3-1e9"   # at the bus's limit (bench.faults.kinds.FLOOD_MAX_RATE), from bench time 3 s on
 
 
 class Run:

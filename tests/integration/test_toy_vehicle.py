@@ -38,7 +38,7 @@ from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bench.node import Behaviour, NodeIO
+from bench.sim.node import Behaviour, NodeIO
 from plant.declaration import Vehicle
 from plant.scenario import ScenarioTracker
 from plant.vehicles import ParameterFile, param

@@ -25,8 +25,8 @@ from pathlib import Path
 import can
 import pytest
 
-from bench.codec import load_codebook
 from bench.config import load_config
+from bench.database.codec import load_codebook
 from plant.factory import messages_of, vehicles
 from tests.integration.vcan import CHANNEL, IN_LANE, has_vcan, load_lane_script
 from tests.reference import COUNTER_VALUES, counter_of, intact

@@ -1,9 +1,9 @@
-"""The ACLASS plant with its SBW on a fake NodeIO (bench.testing.MemoryIO) at dt = 1 ms, no bus: the rig of the
+"""The ACLASS plant with its SBW on a fake NodeIO (bench.sim.testing.MemoryIO) at dt = 1 ms, no bus: the rig of the
 plant's SBW tests (test_sbw_model, test_sbw_io)."""
 
 from __future__ import annotations
 
-from bench.testing import MemoryIO
+from bench.sim.testing import MemoryIO
 from plant import signal_ranges as ranges
 from plant.assemblies import aclass
 from plant.driver import ANGLE

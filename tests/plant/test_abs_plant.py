@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench.testing import MemoryIO
+from bench.sim.testing import MemoryIO
 from plant import signal_ranges
 from plant.assemblies.aclass_abs import build
 from plant.brakes import BrakeHydraulics, Valve

@@ -18,7 +18,7 @@ import math
 
 import pytest
 
-from bench.testing import MemoryIO
+from bench.sim.testing import MemoryIO
 from plant import signal_ranges as ranges
 from plant.assemblies.ev4wis import build
 

@@ -12,7 +12,7 @@ import statistics
 
 import pytest
 
-from bench.testing import MemoryIO
+from bench.sim.testing import MemoryIO
 from plant import signal_ranges
 from plant.assemblies.aclass_abs import build
 from plant.braking_plant import BrakingPlantNode

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from bench.testing import MemoryIO
+from bench.sim.testing import MemoryIO
 from plant import signal_ranges as ranges
 from plant.dynamic_body import (
     DYNAMIC_OFF_SPEED,

@@ -8,8 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from bench.node import Behaviour
-from bench.testing import MemoryIO
+from bench.sim.node import Behaviour
+from bench.sim.testing import MemoryIO
 from plant import signal_ranges as ranges
 from plant.body import BodyNode, BusWheel
 from plant.ecus.imu import Imu

@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.node import Behaviour
-from bench.testing import MemoryIO
+from bench.sim.node import Behaviour
+from bench.sim.testing import MemoryIO
 from plant.driver import ANGLE, OFF, TORQUE, SteeringRobot
 from plant.ecus.sbw import SbwFault, SteeringMode
 from plant.factory import assemble

@@ -103,8 +103,8 @@ def test_switching_vehicle_switches_the_network() -> None:
 
 def _case(session: BenchSession):
     from bench.case import Case
-    from bench.checks import StepLog
-    from bench.results import CaseResult
+    from bench.checks.steps import StepLog
+    from bench.results.model import CaseResult
 
     return Case(session, CaseResult(nodeid="t", name="t", outcome="passed"), StepLog(session.now))
 

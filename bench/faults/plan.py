@@ -1,6 +1,6 @@
 """Fault injection: what a broken ECU or bus does to frames, scoped to a message or node and a window.
 
-The kinds (what each does, its TARGET and PARAM) are the registry in bench/fault_kinds.py; this module
+The kinds (what each does, its TARGET and PARAM) are the registry in bench/faults/kinds.py; this module
 parses and checks specs and applies the faults of a run, asking each fault's kind.
 Spec syntax (command line, `--fault`): `KIND:TARGET[:PARAM]@[case+]START[-END]`, times in seconds.
 Without `case+` the window counts from the start of the run (bench time) and an open END lasts to the
@@ -20,10 +20,10 @@ import random
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from bench.codec import Codebook
+from bench.database.codec import Codebook
 from bench.errors import ConfigError
-from bench.fault_kinds import KINDS, MESSAGE, Outgoing, kinds_with_target
-from bench.results import FaultRecord
+from bench.faults.kinds import KINDS, MESSAGE, Outgoing, kinds_with_target
+from bench.results.model import FaultRecord
 
 __all__ = ["KINDS", "FRAME_KINDS", "RUN", "CASE", "CASE_PREFIX", "COMMAND_LINE", "RANDOM_SEED", "Fault", "FaultPlan",
            "parse_fault", "check_fault", "validate"]

@@ -5,7 +5,7 @@ A plain `pytest` on any folder of test cases works: options `--bench-interface`,
 plant, MCAP log) starts at the first case that asks for the `bench` fixture; at the end of the session
 `report.html` and `junit.xml` are written next to `run.mcap`, marked aborted on Ctrl-C.
 
-Conformance markers (bench.marks): `dut`, `req` and `reference_only` are checked against the databases'
+Conformance markers (bench.pytest.marks): `dut`, `req` and `reference_only` are checked against the databases'
 nodes and the contract documents when a module is collected (a bad one is that module's collection
 error, so nothing runs); reference-only cases are skipped at collection when their node is external;
 `--bench-dut NODE` deselects every case that does not judge NODE.
@@ -22,16 +22,15 @@ from pathlib import Path
 import pytest
 from pluggy import Result
 
-from bench import results_io
-from bench import shard as shards
 from bench.case import Case
-from bench.checks import step_values
-from bench.clock import settle_heap
-from bench.codec import load_codebook
+from bench.checks.steps import step_values
 from bench.config import ProjectConfig, RunSettings, load_config
+from bench.database.codec import load_codebook
 from bench.errors import BenchError, Inconclusive
-from bench.faults import parse_fault
-from bench.marks import (
+from bench.faults.plan import parse_fault
+from bench.options import add_pytest_options
+from bench.pytest import shard as shards
+from bench.pytest.marks import (
     MARKER_HELP,
     CaseMarks,
     check_marks,
@@ -40,12 +39,13 @@ from bench.marks import (
     skip_reason,
     split_names,
 )
-from bench.options import add_pytest_options
+from bench.pytest.shard import apply_shard
 from bench.report.junit import step_summary
-from bench.results import SIMULATION_FAILED, CaseRef, RequirementInfo, RunResult, Step, Table
+from bench.results import store as results_io
+from bench.results.model import SIMULATION_FAILED, CaseRef, RequirementInfo, RunResult, Step, Table
 from bench.run import MCAP_NAME, BenchRun, default_out_dir, write_reports
 from bench.session import resolve_external
-from bench.shard import apply_shard
+from bench.sim.clock import settle_heap
 from bench.stop import STOP
 from bench.transport import EMBEDDED, check_channel, check_interface, is_embedded
 from bench.transport.busopts import BusOptions
@@ -58,7 +58,7 @@ _DESELECTED_KEY = pytest.StashKey[list[CaseRef]]()
 _PENDING_KEY = pytest.StashKey[list[tuple[pytest.Item, pytest.TestReport, pytest.CallInfo[None]]]]()
 _SELECTED_KEY = pytest.StashKey[list[str]]()   # the case ids this process (or its workers) was given
 _last_finished: list[RunResult] = []
-_LOG = logging.getLogger("bench.steps")   # failed steps of the bench's own simulation: findings (bench.findings)
+_LOG = logging.getLogger("bench.steps")   # failed steps of the bench's own simulation: findings (bench.checks.findings)
 PARTS_DIR = "parts"   # where pytest-xdist workers leave their part of the run for the controller
 
 
@@ -406,7 +406,7 @@ def call_site_error(excinfo: pytest.ExceptionInfo[BaseException]) -> str:
     return f"{where}{excinfo.typename}: {excinfo.value}"
 
 
-_PACKAGE = Path(__file__).resolve().parent
+_PACKAGE = Path(__file__).resolve().parents[1]   # bench/
 
 
 def _record(run: BenchRun, item: pytest.Item, report: pytest.TestReport, call: pytest.CallInfo[None]) -> None:

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.results import (
+from bench.results.model import (
     CaseRef,
     CaseResult,
     FaultRecord,

@@ -45,7 +45,7 @@ from typing import Any
 import cantools
 from cantools.database.can import Database, Message, Signal
 
-from bench.codec import RANGE_SLACK
+from bench.database.codec import RANGE_SLACK
 from bench.e2e import config as e2e_config
 from bench.e2e.profiles import P01_MODES, PROFILES, Field, Protection
 from bench.errors import DatabaseError, did_you_mean

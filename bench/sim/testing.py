@@ -15,7 +15,7 @@ Bounds = Mapping[tuple[str, str], tuple[float, float]]
 
 
 class MemoryIO:
-    """The bus reduced to a dict of the latest values of each message (bench.node.NodeIO).
+    """The bus reduced to a dict of the latest values of each message (bench.sim.node.NodeIO).
 
     `values` is what the behaviours read (set a stimulus by assigning `values[message] = {...}`); `sent` holds
     the latest values each message was sent with. With `loopback` (the default) a sent message is also read

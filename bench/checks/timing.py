@@ -1,7 +1,7 @@
 """The report's timing section: measured cycle times against the DBC, and command → status latencies.
 
 Why streamed: the runner's monitor keeps only the recent part of its histories and intervals (memory stays
-flat in long runs, bench/monitor.py), but the report speaks of the whole run. So `TimingCollector` sees
+flat in long runs, bench/checks/monitor.py), but the report speaks of the whole run. So `TimingCollector` sees
 every frame the runner's monitor checks (it is called from the monitor's sink, `bench.run.BenchRun`) and
 keeps what the section needs in constant memory per message. It knows no vehicle: which status follows which
 command comes from bench.toml (`[timing] latency`, `bench.config.LatencyPair`).
@@ -46,13 +46,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bench.codec import Codebook, MessageCodec
 from bench.config import LatencyPair
+from bench.database.codec import Codebook, MessageCodec
 from bench.errors import BenchError
-from bench.results import Table
+from bench.results.model import Table
 
 if TYPE_CHECKING:
-    from bench.monitor import CheckedFrame
+    from bench.checks.monitor import CheckedFrame
 
 #: The bounds of `Case.check_cycle_times` (fractions of the DBC cycle time); MAX_MAX x is the timeout.
 P50_BAND, P99_MAX, MAX_MAX = 0.05, 1.5, 3.0
@@ -122,7 +122,8 @@ class CycleAccumulator:
 
 
 def _percentiles(bins: Counter[int], count: int, qs: Sequence[float]) -> list[float]:
-    """Percentiles of binned values: numpy's percentile (bench.checks.percentile's) over the values the bins hold."""
+    """Percentiles of binned values: numpy's percentile (bench.checks.steps.percentile's) over the values
+    the bins hold."""
     keys = sorted(bins)
     values = np.repeat(np.asarray(keys, dtype=float) * BIN, [bins[k] for k in keys])
     assert len(values) == count
@@ -223,7 +224,7 @@ def follow_latencies(t_cmd: Sequence[float], cmd: Sequence[float], t_sts: Sequen
 
 # -- the collector -------------------------------------------------------------------------------------------
 class TimingCollector:
-    """Called with every frame the runner's monitor checks (a bench.monitor.CheckedFrame, its sink); makes the
+    """Called with every frame the runner's monitor checks (a bench.checks.monitor.CheckedFrame, its sink); makes the
     report's timing tables at the end. Never raises on frames: bad pair names are reported in the table.
 
     A pair without a threshold gets one step of the coarser of its two signals, known once a frame of each
@@ -364,7 +365,7 @@ def latency_table(stats: Sequence[LatencyStats]) -> Table:
     return Table(
         "Timing: command → status latency (from the onset of a command change by more than the threshold, with "
         "the status at rest, to the first status frame after it that moved by more than the threshold the same "
-        "way; includes up to one status cycle; definition in bench/timing.py)",
+        "way; includes up to one status cycle; definition in bench/checks/timing.py)",
         ["Pair", "Command → status", "Threshold", "Timed changes", "Followed", "min [ms]", "p50 [ms]", "p99 [ms]",
          "max [ms]", "Not followed", "Window [s]", "Status moving (not timed)", "Note"], rows)
 
@@ -407,7 +408,8 @@ class _LateAccumulator:
 
 
 class SelfTiming:
-    """The bench's own timing in real time, from the stamps of what really happened (bench.station, bench.clock):
+    """The bench's own timing in real time, from the stamps of what really happened (bench.sim.station,
+    bench.sim.clock):
 
     - a frame it sends (stimulus, simulated node): its lateness = the clock read after the driver took it minus the
       tick it was due at on its schedule (the restbus's next due tick, before a late station skipped it);

@@ -15,15 +15,15 @@ from typing import TYPE_CHECKING
 
 import can
 
-from bench.faults import FaultPlan
-from bench.monitor import Monitor
-from bench.node import Behaviour
-from bench.restbus import Restbus
+from bench.checks.monitor import Monitor
+from bench.faults.plan import FaultPlan
+from bench.sim.node import Behaviour
+from bench.sim.restbus import Restbus
 from bench.transport import ReceivedFrame, Transport, transport_for
 
 if TYPE_CHECKING:
-    from bench.restbus import _Periodic
-    from bench.timing import SelfTiming
+    from bench.checks.timing import SelfTiming
+    from bench.sim.restbus import _Periodic
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +33,7 @@ BABBLE_ECHO_WINDOW = 256   # a babbling node sends many identical frames per tic
 #: tick (and the clock to its deadline) instead of draining for ever; the rest waits in the socket.
 POLL_BATCH = 64
 #: A frame the bench sends late by more than this many cycles of its message leaves its receivers a gap of more
-#: than 3 cycles (their timeout, docs/spec/k-matrix.md): the bound of bench.timing.SelfTiming for a sent frame.
+#: than 3 cycles (their timeout, docs/spec/k-matrix.md): the bound of bench.checks.timing.SelfTiming for a sent frame.
 LATE_CYCLES = 2
 
 
@@ -53,7 +53,7 @@ def _due_ticks(schedule: Sequence[tuple[int, int, _Periodic]], tick: int) -> dic
 
 
 class _StationIO:
-    """The NodeIO a behaviour sees (bench.node)."""
+    """The NodeIO a behaviour sees (bench.sim.node)."""
 
     __slots__ = ("_station",)
 
@@ -106,7 +106,7 @@ class Station:
         self.now = now
         self.t = 0.0       # bench time of the tick in progress (or the last one): what its behaviours see
         self.drained = False   # the clock's wait read the socket empty just before this tick
-        # Real time: bench time of a received frame from its receive timestamp (bench.clock.WallClock.stamp,
+        # Real time: bench time of a received frame from its receive timestamp (bench.sim.clock.WallClock.stamp,
         # checked against the clock's latest read), so a late station still measures the bus's timing, not its
         # own lateness, and a frame costs no clock read. None: the time of reading.
         self.stamp = stamp if self.transport.receive_stamped else None
@@ -115,7 +115,7 @@ class Station:
         # frame gets the time read once per poll instead of a read of its own (the same number).
         self.frozen_now = frozen_now
         # A plant's models integrate every tick; a runner's timers and restbus are due-based and may skip
-        # ticks when late (bench.clock.Scheduler).
+        # ticks when late (bench.sim.clock.Scheduler).
         self.every_tick = every_tick
         self.behaviours = list(behaviours)
         self.loops_back = self.transport.loops_back
@@ -138,7 +138,7 @@ class Station:
         self._frames = self.transport.frames
         self._send = self.transport.send
         self._schedule = restbus.schedule   # the restbus' heap: a tick with nothing due does not call `due`
-        # Real time (set by the session): the bench's own timing (bench.timing.SelfTiming). A frame it sends is
+        # Real time (set by the session): the bench's own timing (bench.checks.timing.SelfTiming). A frame it sends is
         # logged with the clock read after the tick's frames went to the driver (`send_clock`), not the tick's
         # time, so that the monitor, the log and the report's timing section see when it went out; its lateness
         # against its schedule goes to `self_timing` under "<timing_label> <message>". `recent`: the clock's latest
@@ -156,7 +156,7 @@ class Station:
     def stamped_batches(self) -> bool:
         """Whether its frames carry the kernel's receive time and one call reads a batch of them (socketcan,
         bench/transport/socketcan_rx.py): then a wall-clock wait may sleep and read at its end
-        (bench.clock.WallClock)."""
+        (bench.sim.clock.WallClock)."""
         return self.transport.stamped_batches and self.stamp is not None
 
     def socket_fds(self) -> tuple[int, int | None]:
@@ -201,11 +201,11 @@ class Station:
         return count
 
     def tick(self, tick: int, t: float, dt: float) -> None:
-        if dt != self.restbus.dt:   # the restbus counts in the ticks of whoever ticks it (bench.restbus.Restbus)
+        if dt != self.restbus.dt:   # the restbus counts in the ticks of whoever ticks it (bench.sim.restbus.Restbus)
             self.restbus.set_tick(dt)
         self._t_before = self.t   # the previous tick's time: a frame due before it was parked then (_flush)
         self.t = t
-        if self.drained:   # the clock's wait just found the socket empty (bench.clock.WallClock.wait_until)
+        if self.drained:   # the clock's wait just found the socket empty (bench.sim.clock.WallClock.wait_until)
             self.drained = False
         else:
             self.poll(0.0)

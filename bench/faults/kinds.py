@@ -1,9 +1,9 @@
 """The fault kinds: what each does to frames, what its TARGET and PARAM are, and how they are checked.
 
 One class per kind, registered in the one table `KINDS` at the end of this module. Everything else is
-derived from that table: parsing and checking `--fault` specs and applying them (bench/faults.py), the
+derived from that table: parsing and checking `--fault` specs and applying them (bench/faults/plan.py), the
 `--fault` help of the command line (`help_text`) and the table in docs/reliability.md (`markdown_table`;
-`python -m bench.fault_kinds docs/reliability.md` rewrites it, tests/bench/test_faults.py checks it). Adding a
+`python -m bench.faults.kinds docs/reliability.md` rewrites it, tests/bench/test_faults.py checks it). Adding a
 kind = one class here and one entry in `KINDS` (docs/architecture.md "Adding a fault kind").
 
 Faults act on the frames a station sends, after the restbus built them (so they look like a real broken
@@ -20,11 +20,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
-from bench.codec import Codebook, MessageCodec
+from bench.database.codec import Codebook, MessageCodec
 from bench.e2e import Protection
 
 if TYPE_CHECKING:
-    from bench.faults import Fault
+    from bench.faults.plan import Fault
 
 #: Babbling frames per ms from which lower-priority frames never win arbitration (500 kbit/s carries about
 #: 4.3 eight-byte frames per ms). The virtual-time bus has no arbitration: `flood` models it.
@@ -295,7 +295,7 @@ def help_text() -> str:
                                  for kind in KINDS.values())
 
 
-DOC_BEGIN = "<!-- fault kinds: generated from bench/fault_kinds.py by `python -m bench.fault_kinds FILE` -->"
+DOC_BEGIN = "<!-- fault kinds: generated from bench/faults/kinds.py by `python -m bench.faults.kinds FILE` -->"
 DOC_END = "<!-- end of fault kinds -->"
 
 
@@ -329,7 +329,7 @@ def rewrite(path: Path) -> bool:
 
 
 def main(argv: list[str]) -> int:
-    """`python -m bench.fault_kinds [FILE ...]`: print the table, or rewrite it in each FILE."""
+    """`python -m bench.faults.kinds [FILE ...]`: print the table, or rewrite it in each FILE."""
     if not argv:
         print(markdown_table())
     for name in argv:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import heapq
 from collections.abc import Collection, Iterator, Mapping
 
-from bench.codec import Codebook, MessageCodec
+from bench.database.codec import Codebook, MessageCodec
 from bench.errors import ConfigError, SignalError
 
 #: How far a cycle time may lie from a whole number of ticks (relative): float noise, never a real offset.
@@ -51,7 +51,7 @@ class Restbus:
     """The periodic transmitter of one bus handle.
 
     It counts in the ticks of the scheduler that drives it, and the scheduler owns their length: it gives its dt
-    (`set_tick`, bench.clock.Scheduler; a station ticked by hand gives the dt of its first tick), and every
+    (`set_tick`, bench.sim.clock.Scheduler; a station ticked by hand gives the dt of its first tick), and every
     message's period in ticks follows from that dt and the message's DBC cycle time. Why: with a tick length of
     its own the restbus would silently send every message at another cycle whenever the scheduler's dt changed."""
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-from bench.results import Finding
+from bench.results.model import Finding
 
 #: The loggers whose warnings are findings: the bench's own and its plant's.
 SOURCES = ("bench", "plant")

@@ -23,10 +23,10 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Protocol
 
 from bench.errors import ConfigError, Inconclusive
-from bench.station import POLL_BATCH, Station
+from bench.sim.station import POLL_BATCH, Station
 
 if TYPE_CHECKING:
-    from bench.timing import SelfTiming
+    from bench.checks.timing import SelfTiming
 
 DEFAULT_DT = 0.001
 #: A receive timestamp is taken as bench time only when it lies this far before now at most; outside
@@ -43,7 +43,7 @@ DRAIN_BATCHES = 16
 #: in progress as inconclusive (bench.errors.Inconclusive) instead of letting it run for ever behind the wall
 #: clock. Environment variable BENCH_WATCHDOG (s; "inf" or "0": off). Only a loop that replays every tick (an
 #: in-process plant's) falls behind for good; a runner alone goes to the wall clock's tick after a stall, and what
-#: the stall did to its frames is their lateness (bench.timing.SelfTiming).
+#: the stall did to its frames is their lateness (bench.checks.timing.SelfTiming).
 WATCHDOG_S = 1.0
 
 
@@ -219,7 +219,7 @@ class WallClock:
             for station in self._probe(stations):
                 for _ in range(DRAIN_BATCHES):
                     if station.poll(0.0) < POLL_BATCH:
-                        station.drained = True   # its tick reads no more (bench.station.Station.tick)
+                        station.drained = True   # its tick reads no more (bench.sim.station.Station.tick)
                         break
             return
         # Other buses: receive while waiting. A station whose last poll here found its socket empty (a short

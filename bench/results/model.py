@@ -103,7 +103,7 @@ class CaseResult:
     faults: list[FaultRecord] = field(default_factory=list)   # faults active during the case (windows clipped)
     invalid_frames: int = 0      # frames the monitor rejected during the case
     invalid: list[list[str]] = field(default_factory=list)    # [message, reason, count] of those frames
-    # The bench's own timing during the case (real time only; bench.timing.SelfTiming): one line per figure,
+    # The bench's own timing during the case (real time only; bench.checks.timing.SelfTiming): one line per figure,
     # e.g. "stimulus MSG: late by 146.0 ms at 12.300 s, bound 20 ms", and the one line that made the
     # case inconclusive ("" when none did).
     bench_timing: list[str] = field(default_factory=list)
@@ -170,9 +170,9 @@ class CaseRef:
 @dataclass
 class Finding:
     """Something that went wrong without stopping the run: a warning the bench or the plant logged
-    (bench.findings), e.g. frames the driver could not send."""
+    (bench.checks.findings), e.g. frames the driver could not send."""
 
-    source: str                  # the logger: "bench.station", "bench.transport.periodic", "plant...."
+    source: str                  # the logger: "bench.sim.station", "bench.transport.periodic", "plant...."
     level: str                   # "warning", "error" or "critical"
     message: str
     time: float | None = None    # bench time of the first occurrence, s; None before the clock ran
@@ -197,7 +197,7 @@ class RunResult:
     requirements: list[RequirementInfo] = field(default_factory=list)   # the contract's catalogue
     deselected: list[CaseRef] = field(default_factory=list)
     faults: list[FaultRecord] = field(default_factory=list)   # every fault injected in the run
-    findings: list[Finding] = field(default_factory=list)     # warnings logged during the run (bench.findings)
+    findings: list[Finding] = field(default_factory=list)     # warnings logged during the run (bench.checks.findings)
     not_run: int = 0             # cases this run was given that never started (an aborted run's rest)
 
     @property

@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from bench.results import Step
+from bench.results.model import Step
 
 LOG_INFO, LOG_ERROR = 2, 4   # foxglove.Log levels
 
@@ -79,7 +79,7 @@ def step_values(step: Step) -> tuple[str, str]:
 
 def percentile(values: Sequence[float], q: float) -> float:
     """The q-th percentile by linear interpolation between order statistics: numpy's, the bench's one percentile
-    (bench.timing's histograms use it too); NaN of no values."""
+    (bench.checks.timing's histograms use it too); NaN of no values."""
     if not len(values):
         return math.nan
     return float(np.percentile(values, q))

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from bench import e2e
-from bench.codec import Codebook, DecodeError, MessageCodec
+from bench.database.codec import Codebook, DecodeError, MessageCodec
 from bench.errors import BenchError, BenchLimit
 
 TIMEOUT_CYCLES = 3   # docs/spec/k-matrix.md: a message not seen for 3 x its cycle time is timed out
@@ -36,7 +36,7 @@ HISTORY_CAP = 3000       # frames of decoded history per message kept from befor
 HISTORY_MAX = 200_000    # frames per message kept at most even within a case (2000 s at 10 ms, 200 s at 1 ms): a
                          # history asked beyond it is a limit of the bench (BenchLimit), never the DUT's failure
 INTERVALS_CAP = 5000     # frame intervals per message for cycle-time checks (50 s at 10 ms; the report's
-                         # timing section keeps its own whole-run histogram, bench/timing.py)
+                         # timing section keeps its own whole-run histogram, bench/checks/timing.py)
 INVALID_CAP = 20000      # invalid-frame records
 # Two senders of one identifier (a finding of its own, not thousands of counter errors):
 SENDERS_GAP_CYCLES = 3   # a reception gap (no frame at all) longer than this many cycles ends the counter streams

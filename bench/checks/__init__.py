@@ -1,0 +1,1 @@
+"""Checks of the frames and of the bench itself: the monitor, the steps' verdicts, the bench's timing, findings."""

@@ -1,0 +1,1 @@
+"""Fault injection: the kinds (what each does to frames) and the plan of a run."""

@@ -1,0 +1,1 @@
+"""The record of a run (results.json): the model and its store."""
