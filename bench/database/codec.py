@@ -11,8 +11,8 @@ Either way the codec equals cantools (`Message.encode(..., scaling=True, strict=
 error of the same class: a raw value that does not fit its bit field raises `EncodeError` (never
 wraps), a payload shorter than the message raises `DecodeError`, a longer one is cut to the
 message's length. `encode(..., strict=True)` adds cantools' strict checks (exactly the signals
-needed, values inside the DBC range). `tests/bench/test_codec.py` (the contract's messages) and
-`tests/bench/test_codec_cantools.py` (every message of cantools' own test DBCs) prove it.
+needed, values inside the DBC range). `tests/bench/database/test_codec.py` (the contract's messages) and
+`tests/bench/database/test_codec_cantools.py` (every message of cantools' own test DBCs) prove it.
 """
 
 from __future__ import annotations

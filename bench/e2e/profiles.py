@@ -204,7 +204,7 @@ def _fast_crc(profile: str, mode: str, data_id: int, crc_byte: int, length: int
     """Profiles 1 and 11 with DataIDMode BOTH (the contract's protection) through the library's CRC-8 alone:
     AUTOSAR's chained Crc_CalculateCRC8 calls over the Data ID's low and high byte, then every byte but the CRC's,
     in one library call per frame. The profile functions of `autosar-e2e` take keyword arguments, which that
-    library parses slowly (docs/performance.md "E2E"); tests/bench/test_e2e_profiles.py checks that these bytes
+    library parses slowly (docs/performance.md "E2E"); tests/bench/e2e/test_e2e_profiles.py checks that these bytes
     equal the profile functions' for every offset, length and counter. None: use the profile functions."""
     if profile not in ("P01", "P11") or mode != "BOTH":
         return None

@@ -1,7 +1,7 @@
 """The AUTOSAR E2E receiver of one message: the profile's check, the E2E state machine, the consumer's rule.
 
 Written from the AUTOSAR E2E specification (the check of Profiles 4 to 11 and E2E_SM with one window size);
-the transition table is docs/spec/e2e.md "State machine", which tests/bench/test_e2e_receiver.py checks row by
+the transition table is docs/spec/e2e.md "State machine", which tests/bench/e2e/test_e2e_receiver.py checks row by
 row against a model of its own. The receiver runs once per received frame (NewDataAvailable is always true);
 that a message stopped arriving is the consumer's deadline monitoring (the timeout), not the receiver's.
 """

@@ -3,7 +3,7 @@
 One class per kind, registered in the one table `KINDS` at the end of this module. Everything else is
 derived from that table: parsing and checking `--fault` specs and applying them (bench/faults/plan.py), the
 `--fault` help of the command line (`help_text`) and the table in docs/reliability.md (`markdown_table`;
-`python -m bench.faults.kinds docs/reliability.md` rewrites it, tests/bench/test_faults.py checks it). Adding a
+`python -m bench.faults.kinds docs/reliability.md` rewrites it, tests/bench/faults/test_faults.py checks it). Adding a
 kind = one class here and one entry in `KINDS` (docs/architecture.md "Adding a fault kind").
 
 Faults act on the frames a station sends, after the restbus built them (so they look like a real broken

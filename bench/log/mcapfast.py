@@ -5,7 +5,7 @@ BytesIO; the log writes two messages per frame, and that was the largest part of
 issue 18). This module writes the same bytes itself, into the writer's open chunk, and keeps the writer's chunk
 index and statistics as `Writer.add_message` does, through the writer's private state: the only place of the
 bench that touches mcap's internals (tests/integration/test_layering.py checks that), and only for the mcap
-releases it was checked against (SUPPORTED, the same as pyproject.toml's pin). tests/bench/test_recorder.py and
+releases it was checked against (SUPPORTED, the same as pyproject.toml's pin). tests/bench/log/test_recorder.py and
 test_recorder_batch.py compare its files with mcap's public writer's, record by record; any other release, or
 a writer whose state is not what these releases have, gets None here and the recorder writes through
 `Writer.add_message`.

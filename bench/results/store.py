@@ -41,7 +41,7 @@ def dumps(run: RunResult) -> str:
     for 0.002): 60 % of the file was those times. Rounded, they are the ticks again (a real-time run's wall-clock
     times lose what lies below 1 us, far below a plot's pixel). Measured on 46 campaign cases: 3.76 -> 2.45 MB,
     and the dump 82 -> 62 ms of CPU (short numbers are quicker to write); steps, verdicts and every other value
-    as they were (tests/bench/test_results_io.py)."""
+    as they were (tests/bench/results/test_results_io.py)."""
     return json.dumps(run, default=_fields, allow_nan=True)
 
 

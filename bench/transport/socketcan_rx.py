@@ -5,7 +5,7 @@ and data. python-can's `SocketcanBus.recv` costs a select() and a recvmsg() syst
 of about twenty fields per frame; on a slow machine (the vcan lane's emulated guest) that was a large part of
 the runner's time. Here the station reads the bus's own socket (the bus is opened, filtered and sent on by
 python-can as before) with one non-blocking recvmsg() per frame and parses what python-can's
-`capture_message` parses, the same way (tests/bench/test_socketcan_rx.py compares the two on the same bytes).
+`capture_message` parses, the same way (tests/bench/transport/test_socketcan_rx.py compares the two on the same bytes).
 Used only for a bus without python-can filters of its own (python-can would apply those in `recv`).
 
 System calls are what a slow guest pays for (the vcan lane under User-mode Linux: about 57 us per call, where

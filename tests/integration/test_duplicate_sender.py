@@ -1,5 +1,5 @@
 """Issue 16, finding 10, as a user meets it: two `bench plant` processes on one bus, and `bench run` of a case with
-a second VCU, each name the second sender once (the monitor's rules: tests/bench/test_duplicate_sender.py)."""
+a second VCU, each name the second sender once (the monitor's rules: tests/bench/sim/test_duplicate_sender.py)."""
 
 from __future__ import annotations
 

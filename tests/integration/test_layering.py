@@ -156,7 +156,7 @@ def test_the_import_scan_sees_relative_and_from_imports() -> None:
 LOG_MAY_IMPORT = {"bench", "bench.version", "bench.errors", "bench.database.codec", "bench.checks.monitor",
                   "bench.config"}
 #: The one module that may reach into mcap's private state (its bytes are compared with mcap's public writer's,
-#: tests/bench/test_recorder.py).
+#: tests/bench/log/test_recorder.py).
 MCAP_FAST_PATH = "bench/log/mcapfast.py"
 
 

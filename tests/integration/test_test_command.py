@@ -18,7 +18,7 @@ from tests.repo import ROOT
 #: The real-time tests that failed the README's command on a loaded 2-core host (issue 27), and one of the
 #: stop-signal tests (a second from signal to exit, wall time).
 LOADED_HOST_FAILURES = (
-    "tests/bench/test_bus_settings.py::test_pytest_plugin_options_reach_python_can",
+    "tests/bench/transport/test_bus_settings.py::test_pytest_plugin_options_reach_python_can",
     "tests/integration/test_duplicate_sender.py::test_two_plant_processes_on_udp_multicast",
     "tests/integration/test_example_ecus.py::test_campaign_passes_against_the_example[VCU]",
     "tests/integration/test_run_integration.py::test_plant_and_runner_in_two_processes_over_udp_multicast",

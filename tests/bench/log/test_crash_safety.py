@@ -1,7 +1,7 @@
 """Crash safety: a bench run killed with SIGKILL keeps at least 95 % of the frames it put on the bus
 before the kill in its MCAP log. The log is written by a child process (bench/log/logproc.py) that gets the
 frames every 0.2 s and finishes the file when the run dies; if it dies too, the file still reads back
-up to its last chunk (flushed every 0.5 s: tests/bench/test_recorder.py kills a recorder itself)."""
+up to its last chunk (flushed every 0.5 s: tests/bench/log/test_recorder.py kills a recorder itself)."""
 
 from __future__ import annotations
 

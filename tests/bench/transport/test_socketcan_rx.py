@@ -2,8 +2,8 @@
 
 Both parse the same bytes (struct can_frame / canfd_frame and the SO_TIMESTAMPNS control message, as the
 kernel delivers them) from a socket that replays them; hypothesis picks identifiers, flags, lengths, data and
-times. The receiver itself runs on the fake kernel of tests/bench/test_periodic.py and on the real vcan0 in the
-vcan lane (tests/integration/test_vcan_lane.py). Its batched receive (one recvmmsg() per batch) and its send are
+times. The receiver itself runs on the fake kernel of tests/bench/transport/test_periodic.py and on the real vcan0
+in the vcan lane (tests/integration/test_vcan_lane.py). Its batched receive (one recvmmsg() per batch) and its send are
 checked on a real kernel socket that exists on every Linux host: an AF_UNIX datagram pair, which carries the same bytes
 and SO_TIMESTAMPNS stamps.
 """

@@ -6,7 +6,7 @@ sockets. A station runs on it tick by tick through stable values, a single chang
 a fault plan; the frames "on the wire" must keep the contract (docs/spec/k-matrix.md: AliveCounter +1 per transmission,
 CRC-8/SAE-J1850 Checksum, the DBC cycle) across every hand-over, and the station's log must hold exactly the
 wire's frames. With CAN in the kernel (the vcan lane: scripts/vcan-lane --command 'python -m pytest
-tests/bench/test_periodic.py'), the same checks run against the real BCM on vcan0.
+tests/bench/transport/test_periodic.py'), the same checks run against the real BCM on vcan0.
 """
 
 from __future__ import annotations

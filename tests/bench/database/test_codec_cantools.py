@@ -4,7 +4,7 @@ Corpus: `../shared/corpus/dbc` beside the repository (the DBC files of cantools'
 is absent, its cases are skipped saying so and only the project's DBCs (chassis.dbc, bench.dbc) are compared.
 
 Which messages: `bench dbc check` accepts no corpus file that has a message (each lacks a cycle time at
-least; tests/bench/test_dbc_check.py), so "the messages the bench accepts" would be none. The codec is built
+least; tests/bench/database/test_dbc_check.py), so "the messages the bench accepts" would be none. The codec is built
 for every message of every DBC the bench can load (`bench.database.codec.load_dbc`: cantools' strict load, as for
 a configured database), so every such message is compared: big-endian, signed, float, multiplexed
 (cascaded too), value tables, 63- and 64-bit, CAN FD. The files the bench cannot load have no codec; they

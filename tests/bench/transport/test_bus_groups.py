@@ -2,7 +2,7 @@
 sends on another group of this host (python-can binds every such socket to one port on the wildcard address),
 for IPv4 and IPv6 groups alike (issue 25, acceptance 1).
 
-Found by tests/bench/test_replay.py failing under load beside other benches: the receiver's first frames were
+Found by tests/bench/cli/test_replay.py failing under load beside other benches: the receiver's first frames were
 another group's (0x121, 0x122 ... of a running `bench plant`), queued between the socket's bind and
 IP_MULTICAST_ALL = 0 (48 of 200 fresh buses before the fix). On IPv6 groups every bus heard every group of the
 port until IPV6_MULTICAST_ALL = 0 (issue 25: `bench monitor` showed another bench's PLANT_Status).

@@ -1,5 +1,5 @@
 """The fast codec derived from the DBC agrees with cantools bit for bit on every message of the contract, and
-never wraps a value its bit field cannot hold (tests/bench/test_codec_cantools.py: the same over cantools'
+never wraps a value its bit field cannot hold (tests/bench/database/test_codec_cantools.py: the same over cantools'
 test DBCs)."""
 
 from __future__ import annotations
