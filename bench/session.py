@@ -117,7 +117,7 @@ class BenchSession:
 
     def recent(self) -> float:
         """Bench time of the clock's latest read (real time: at most a tick's work old; no new read, which
-        in a UML guest is a system call of about 55 us)."""
+        in a UML guest is a costly system call)."""
         return self.scheduler.now if not self.clock.realtime else self.clock.recent()
 
     @property

@@ -139,8 +139,8 @@ class _Progress:
 
 def _settle_at_exit() -> None:
     """Once per process: when the interpreter exits, collect once and freeze what is left (bench.sim.clock.settle_heap).
-    Python's shutdown otherwise runs several full collections over a heap that a run made large (0.3-0.5 s after
-    the report is out, measured on a 200-case run); the garbage present at exit is still collected, except after a
+    Python's shutdown otherwise runs several full collections over a heap that a run made large (a long pause after
+    the report is out: docs/performance.md); the garbage present at exit is still collected, except after a
     stop signal (then only the freeze: the process ends within a second of the signal, bench.stop)."""
     atexit.unregister(settle_heap)   # registered once however often run() is called
     atexit.unregister(gc.freeze)

@@ -149,8 +149,8 @@ class WallClock:
 
     def between_cases(self) -> None:
         """What the last cases left (results, steps, plots) out of the collector's view too: a full collection in
-        a case scanned all of it, up to 18 ms after 7 to 19 cases and growing with the campaign; after a settle
-        at most a case's survivors (about 1 ms; docs/vcan-lane.md)."""
+        a case scanned all of it, growing with the campaign; after a settle at most a case's survivors (the figures:
+        docs/vcan-lane.md)."""
         settle_heap()
 
     def recent_monotonic(self) -> float:
@@ -161,7 +161,7 @@ class WallClock:
         """One poll() over every station's sockets: a station whose bus socket is empty is `drained` (its tick
         reads nothing), an empty echo socket is skipped once (bench.transport.periodic.KernelPeriodic.echo_idle).
         Returns the stations with frames waiting. Most sockets are empty at most ticks, and in a UML guest
-        each read that finds nothing is a system call of about 61 us (docs/vcan-lane.md)."""
+        each read that finds nothing is a costly system call (docs/vcan-lane.md)."""
         fds = [station.socket_fds() for station in stations]
         ready = self._ready(fds)
         waiting = []

@@ -125,7 +125,7 @@ class KernelPeriodic:
         self.error = ""
         self.pending_echoes: list[tuple[int, bytes, float]] = []
         # Set by the wall clock's wait when one poll() over the stations' sockets found the echo socket empty:
-        # the next read is skipped (a system call saved per tick, 61 us in a UML guest; docs/vcan-lane.md).
+        # the next read is skipped (a system call saved per tick, costly in a UML guest; docs/vcan-lane.md).
         self.echo_idle = False
         # The per-tick look's clock (time.monotonic's scale): the station gives the wall clock's latest read,
         # so that a tick costs no extra read; None: a read of _clock.

@@ -8,12 +8,11 @@ python-can as before) with one non-blocking recvmsg() per frame and parses what 
 `capture_message` parses, the same way (tests/bench/transport/test_socketcan_rx.py compares the two on the same bytes).
 Used only for a bus without python-can filters of its own (python-can would apply those in `recv`).
 
-System calls are what a slow guest pays for (the vcan lane under User-mode Linux: about 57 us per call, where
-parsing a frame costs a few), so a batch is one `recvmmsg()` (through ctypes, Linux): up to `limit` frames and
+System calls are what a slow guest pays for (the vcan lane under User-mode Linux: a call costs many times what parsing
+a frame does, docs/vcan-lane.md), so a batch is one `recvmmsg()` (through ctypes, Linux): up to `limit` frames and
 their timestamps per call, and a short batch says the socket is empty without one more call. Where libc has no
 recvmmsg, one non-blocking recvmsg() per frame. `send_frame` sends a classic data frame with one `send()`
-(python-can's send adds a select() and a clock read per frame).
-"""
+(python-can's send adds a select() and a clock read per frame)."""
 
 from __future__ import annotations
 
