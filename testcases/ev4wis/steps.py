@@ -19,7 +19,7 @@ from testcases.stimulus import STIMULUS
 VEHICLE = "EV4WIS"
 #: the nodes a 4WIS case judges when it checks commanded (VCU_WheelCmd_xx) and reached (WHL_Status_xx) values
 VCU_AND_WHEELS = ("VCU", "WHL_FL", "WHL_FR", "WHL_RL", "WHL_RR")
-#: requirements every 4WIS case checks through expect_clean_bus: no out-of-range value, no E2E error, 8 bytes
+#: requirements every 4WIS case checks through bench.expect_clean_bus(): no out-of-range value, no E2E error, 8 bytes
 CLEAN_BUS_REQS = ("COM-VAL-01", "COM-E2E-01", "COM-E2E-02", "COM-FRM-01")
 LIMITS_FILE = limits_file(__file__)
 LIMITS = load_limits(LIMITS_FILE, "4wis")
@@ -160,6 +160,3 @@ def expect_fault(bench: Case, fault: str) -> bool:
                         detail="VCU_VehicleState.VcuFault value table (dbc/chassis.dbc)")
 
 
-def expect_clean_bus(bench: Case) -> bool:
-    """No invalid frame on the bus since the case started (Case.expect_clean_bus: per sending node)."""
-    return bench.expect_clean_bus()

@@ -26,7 +26,6 @@ from testcases.ev4wis.steps import (
     SPEED_ABS_TOL,
     SPEED_REL_TOL,
     VCU_AND_WHEELS,
-    expect_clean_bus,
     expect_fault,
     send_car_mode,
     speed_for,
@@ -95,7 +94,7 @@ def test_ackermann_normal(bench, hand_wheel: float) -> None:
                  detail="docs/spec/formulas.md §3 (E2 corrected)")
     bench.expect(f"V_a ({inner}) = V_b · sin β / sin α", v_a, oracle.inner_front_speed(v_b, beta, alpha),
                  abs_tol=SPEED_ABS_TOL, rel_tol=SPEED_REL_TOL, unit="rpm", detail="docs/spec/formulas.md §3")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)
 
 
@@ -126,5 +125,5 @@ def test_ackermann_difference_doubles_in_adaptive(bench, hand_wheel: float) -> N
         bench.expect(f"{rear} mirrors {front}", bench.value(f"WHL_Status_{rear}", "SteerAngle"),
                      -bench.value(f"WHL_Status_{front}", "SteerAngle"), abs_tol=2 * ANGLE_TOL, unit="deg",
                      detail="[P0] §3: rear angles mirror the front; each angle within 0.05° → 0.1° for the pair")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)

@@ -32,7 +32,6 @@ from testcases.ev4wis.steps import (
     CLEAN_BUS_REQS,
     FAULT_VALUE,
     VCU_AND_WHEELS,
-    expect_clean_bus,
     expect_fault,
     expect_wheels,
     limit,
@@ -78,7 +77,7 @@ def _expect_rejected(bench, fault: str, held: dict[str, float], *, plots: bool =
         bench.expect(f"{w} angle command held", bench.value(f"VCU_WheelCmd_{w}", "SteerAngleCmd"), held[w],
                      abs_tol=ANGLE_TOL, unit="deg", detail="held at the last valid command (VCU-FLT-08)")
     bench.expect("YawRateTarget 0", bench.value("VCU_VehicleState", "YawRateTarget"), 0.0, unit="deg/s")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     if plots:
         plot_wheels(bench)
         plot_vcu_state(bench)
@@ -102,7 +101,7 @@ def test_centre_at_origin_at_standstill_is_valid(bench) -> None:
     wait_for_targets(bench, targets)
     expect_fault(bench, "OK")
     expect_wheels(bench, targets, "docs/spec/formulas.md §2 eq. 1-4 at S = (0, 0), v_o = 0")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)
 
 
@@ -146,7 +145,7 @@ def test_motion_request_timeout(bench) -> None:
     bench.resume_sending("DRV_MotionRequest")
     wait_for_targets(bench, oracle.rotation_targets(*S0, V0))
     expect_fault(bench, "OK")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)
     plot_vcu_state(bench)
 
@@ -237,7 +236,7 @@ def test_beyond_geometry_not_reachable_from_the_bus(bench, mode: str, hand_wheel
     for w in WHEELS:
         n = bench.value(f"WHL_Status_{w}", "WheelSpeed")
         bench.expect_true(f"{w} rolls forward", n > 0, measured=n, expected="> 0 rpm")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)
 
 
@@ -255,5 +254,5 @@ def test_pivot_between_the_wheels_folds(bench) -> None:
     n_fr = bench.value("WHL_Status_FR", "WheelSpeed")
     bench.expect_true("FR reversed (negative rpm although the rotation is clockwise)", n_fr < 0, measured=n_fr,
                       expected="< 0 rpm")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)

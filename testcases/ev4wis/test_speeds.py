@@ -27,7 +27,6 @@ from testcases.ev4wis.steps import (
     VCU_AND_WHEELS,
     WHEEL_SPEED_LIMIT,
     YAW_ABS_TOL,
-    expect_clean_bus,
     expect_fault,
     expect_wheels,
     send_car_mode,
@@ -114,7 +113,7 @@ def test_wheel_speeds(bench, centre: tuple[float, float], direction: str) -> Non
                  detail="docs/spec/k-matrix.md; an estimate from the four WHL_Status: 0.5 % (the wheel-speed "
                         "tolerance) "
                         "+ half an LSB (0.005 m/s)")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)
 
 
@@ -162,7 +161,7 @@ def test_lateral_speeds(bench, v: float) -> None:
                  unit="m", detail="0.002 m = two LSB of PLANT_Position")
     bench.expect("ground truth yaw rate", bench.value("PLANT_Motion", "YawRate"), 0.0, abs_tol=YAW_ABS_TOL,
                  unit="deg/s")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)
 
 
@@ -194,7 +193,7 @@ def test_errata_e1_e2(bench) -> None:
                           measured=round(measured - printed, 3), expected=f"|difference| > {limit:.3g} rpm")
         rows.append(["E1", f"({x:g}, {y:g}) m, v_o {v:+g} m/s", "n4 (RR) rpm", f"{printed:.2f}",
                      f"{geometric:.2f}", f"{measured:.1f}"])
-        expect_clean_bus(bench)
+        bench.expect_clean_bus()
 
     # E2: NORMAL, centre on the rear-axle line; outer wheels FL/RL in a right turn
     start(bench)
@@ -222,7 +221,7 @@ def test_errata_e1_e2(bench) -> None:
                  f"{geometric:.2f}", f"{v_b:.1f}"])
     rows.append(["E2", "same", "rear speeds RL / RR rpm (paper: equal)", "equal", f"{targets['RL'].rpm:.2f} / "
                  f"{targets['RR'].rpm:.2f}", f"{v_d:.1f} / {v_inner_rear:.1f}"])
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     bench.table("Errata: printed formula vs geometry vs bench (reached WHL_Status speeds)",
                 ["erratum", "request", "quantity", "printed in the paper", "geometry (checked)", "bench"], rows)
     bench.note("The bench checks the geometry: E1 corrected (n4 uses x - K, [P0] eq. 10 prints x + K) and "

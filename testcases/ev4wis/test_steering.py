@@ -24,7 +24,6 @@ from testcases.ev4wis.steps import (
     SPEED_REL_TOL,
     VCU_AND_WHEELS,
     YAW_ABS_TOL,
-    expect_clean_bus,
     expect_fault,
     expect_wheels,
     send_car_mode,
@@ -141,7 +140,7 @@ def test_steering_angles(bench, req: Request) -> None:
                      abs_tol=CENTRE_ABS_TOL, unit="m")
         bench.expect("RotationCentreY", bench.value("VCU_RotationCentre", "RotationCentreY"), centre[1],
                      abs_tol=CENTRE_ABS_TOL, unit="m")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     plot_wheels(bench)
 
 
@@ -175,7 +174,7 @@ def test_rotation_centre_at_infinity(bench) -> None:
         for signal, want in zip(("RotationCentreX", "RotationCentreY"), expected):
             bench.expect(f"{label}: {signal}", bench.value("VCU_RotationCentre", signal), want,
                          abs_tol=CENTRE_ABS_TOL, unit="m", detail="docs/contract/vcu.md VCU-OUT-07 (one LSB)")
-        expect_clean_bus(bench)
+        bench.expect_clean_bus()
     plot_wheels(bench, "last request (LATERAL left)")
     bench.plot("VCU_RotationCentre (last request)", [("VCU_RotationCentre", "RotationCentreX"),
                                                      ("VCU_RotationCentre", "RotationCentreY")], ylabel="m")

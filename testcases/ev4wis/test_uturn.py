@@ -32,7 +32,6 @@ from testcases.ev4wis.steps import (
     ANGLE_TOL,
     CLEAN_BUS_REQS,
     VCU_AND_WHEELS,
-    expect_clean_bus,
     expect_fault,
     limit,
     send_car_mode,
@@ -131,7 +130,7 @@ def _drive(bench, mode: str) -> dict[str, object]:
     send_car_mode(bench, mode, hand_wheel, 0.0)
     bench.wait_until(lambda: all(abs(bench.value(f"WHL_Status_{w}", "WheelSpeed")) < 0.05 for w in oracle.WHEELS), 1.0)
     expect_fault(bench, "OK")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
 
     traj = _trajectory(bench)
     width = float(traj["wx"].max() - traj["wx"].min())

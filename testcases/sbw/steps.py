@@ -204,6 +204,3 @@ def plot_steering(bench: Case, label: str = "", extra_yaw: Sequence[Series] = ()
         + list(extra_ay), xlabel=xlabel, ylabel="lateral acceleration [m/s²]")
 
 
-def expect_clean_bus(bench: Case) -> bool:
-    """No invalid frame on the bus since the case started (Case.expect_clean_bus: per sending node)."""
-    return bench.expect_clean_bus()

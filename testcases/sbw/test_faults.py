@@ -31,7 +31,7 @@ import math
 import numpy as np
 import pytest
 
-from testcases.sbw.steps import SBW_FAULT, Limits, expect_clean_bus, plot_steering, robot_angle, signal, start
+from testcases.sbw.steps import SBW_FAULT, Limits, plot_steering, robot_angle, signal, start
 
 SPEED_KMH = 50.0
 HAND_WHEEL = 20.0      # deg held during the faults
@@ -155,7 +155,7 @@ def _sensor_fault(bench, lim: Limits, *, fault: str, offset: float, code: str, c
     lim.at_most("reaction: steering continues, max |hand wheel − pinion| (truth)", "fault_tracking_error_max",
                 float(np.max(np.abs(hw_true[window_true] - pin_true[window_true]))))
     bench.expect("SbwFault after the sensor recovered", bench.value("SBW_Pinion", "SbwFault"), SBW_FAULT["OK"])
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     lim.report()
     plot_steering(bench, fault)
     sensor = "PinionSensor" if code == "PINION_RANGE" else "HandWheelSensor"

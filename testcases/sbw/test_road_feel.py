@@ -16,7 +16,7 @@ import pytest
 
 from bench.results.model import Series
 from testcases.sbw import oracle
-from testcases.sbw.steps import Limits, expect_clean_bus, plot_steering, robot_angle, signal, start
+from testcases.sbw.steps import Limits, plot_steering, robot_angle, signal, start
 
 SPEED_KMH = 50.0
 RAMP_LAT_ACCEL = 4.0     # m/s², end of the ramp for the plain car (docs/spec/formulas.md §5)
@@ -76,7 +76,7 @@ def test_sbw_road_feel_50kmh(bench) -> None:
                 detail=f"{angle_at_release:.1f}° at release, {angle_after:.1f}° after (SBW_HandWheel.HandWheelAngle)")
     lim.condition("hands off for", "return_time", bench.now - release)
 
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     lim.report()
     bench.plot_series("driver torque against lateral acceleration (ramp)",
                       [Series("SBW_HandWheel.DriverTorque", ay_at.tolist(), torque.tolist()),

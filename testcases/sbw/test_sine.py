@@ -20,7 +20,6 @@ from bench.results.model import Series
 from testcases.sbw import oracle
 from testcases.sbw.steps import (
     Limits,
-    expect_clean_bus,
     plot_steering,
     predicted_yaw,
     robot_angle,
@@ -98,7 +97,7 @@ def test_sbw_sine_50kmh(bench, frequency: float) -> None:
                 ["quantity", "2-DOF model / ideal steering", "measured", "unit"], rows)
 
     bench.check_cycle_times(["SBW_HandWheel", "SBW_Pinion"])
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     lim.report()
     plot_steering(bench, f"sine {frequency:g} Hz",
                   extra_yaw=[Series("2-DOF model, hand wheel / 15", t_pred.tolist(), r_pred.tolist())],

@@ -20,7 +20,6 @@ from bench.results.model import Series
 from testcases.sbw import oracle
 from testcases.sbw.steps import (
     Limits,
-    expect_clean_bus,
     plot_steering,
     predicted_yaw,
     robot_angle,
@@ -99,7 +98,7 @@ def test_sbw_step_50kmh(bench) -> None:
                 deviation, node="PLANT")   # the plant's check (PLANT-DYN-02), never the SBW's
 
     bench.check_cycle_times(["SBW_HandWheel", "SBW_Pinion", "IMU_Motion"])
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     lim.report()
     plot_steering(bench, "step 50 km/h",
                   extra_yaw=[Series("2-DOF model, hand wheel / 15 (mechanical car)", t_pred.tolist(), r_pred.tolist()),

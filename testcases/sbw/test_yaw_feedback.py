@@ -18,7 +18,7 @@ import pytest
 
 from bench.results.model import Series
 from testcases.sbw import oracle
-from testcases.sbw.steps import SBW_FAULT, Limits, expect_clean_bus, plot_steering, robot_angle, start, steady
+from testcases.sbw.steps import SBW_FAULT, Limits, plot_steering, robot_angle, start, steady
 
 SPEEDS_KMH = (40.0, 60.0, 80.0, 100.0)
 HAND_WHEEL = 30.0     # deg held at every speed (a_y from 1.3 to 4.1 m/s², inside the linear range)
@@ -77,7 +77,7 @@ def test_sbw_yaw_gain_across_speeds(bench, variant: str) -> None:
         series.append(Series("plain 15:1, measured", speeds, plain_gains))
     series.append(Series(f"{variant}, measured", speeds, fb_gains))
     bench.plot_series("steady r/θ_h against speed", series, xlabel="speed [km/h]", ylabel="r/θ_h [1/s]")
-    expect_clean_bus(bench)
+    bench.expect_clean_bus()
     lim.report()
     plot_steering(bench, f"all scenarios ({', '.join(f'{s:g}' for s in SPEEDS_KMH)} km/h"
                          f"{', plain then ' if measure_plain else ', '}{variant})",
