@@ -87,6 +87,8 @@ class Case:
             session.self_timing.resume(self.start)
         session.scheduler.begin_case()            # and so does the watchdog's lag
         self._timers: list[_Timer] = []
+        # bench time of the plant's acknowledgement of the latest scenario: what came before is the last one's
+        self._acknowledged_at = -math.inf
         self._mark_counts()
         self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
         self._closed = False
@@ -306,7 +308,9 @@ class Case:
         with `control` (other signals of that message, e.g. the vehicle) beside it; reset every stimulus message
         to its start values, end the timers of the last scenario, and wait (up to `[scenario] timeout`, default
         2 s of bench time) for the plant to echo the id in `[scenario] ack`; `elapsed`, `history` and
-        `invalid_log` count from then on. `stimulus`: the stimulus messages this scenario sends (besides the
+        `invalid_log` count from then on, and `value` reads only frames that came with or after the
+        acknowledgement (a plant frame sent before the reset, or read late on a busy host, is the last
+        scenario's). `stimulus`: the stimulus messages this scenario sends (besides the
         scenario message itself); the others stay off the bus until the next scenario (a vehicle whose network
         reads none of them need not carry them). Default: every stimulus message. Raises Inconclusive (a
         BenchError: the case's outcome is "inconclusive", never the DUT's failure) when the plant does not
@@ -345,6 +349,8 @@ class Case:
             raise Inconclusive(f"the plant did not acknowledge scenario {scenario} within "
                                f"{protocol.timeout:g} s ({ack}.{ack_signal}): the case could not start")
         self.start = self.now
+        acked_at = self._monitor.state(ack).last_valid
+        self._acknowledged_at = self.start if acked_at is None else acked_at
         self._mark_counts()
 
     def inject(self, kind: str, target: str, *, after: float = 0.0, duration: float = math.inf,
@@ -376,16 +382,20 @@ class Case:
     # -- observation -------------------------------------------------------------------------------
     def value(self, message: str, signal: str) -> float:
         """Latest valid value of a signal (physical, in the DBC's unit) from the frames the monitor
-        accepted. With no valid frame now, a NaN (`NoFrames`) that a check records as "no frames of
-        MESSAGE" (none came) or "MESSAGE timed out" (none lately). Records no step."""
+        accepted since the latest scenario's acknowledgement (`start_scenario`). With no such frame now, a NaN
+        (`NoFrames`) that a check records as "no frames of MESSAGE" (none came), "no frames of MESSAGE since the
+        scenario started" or "MESSAGE timed out" (none lately). Records no step."""
         # the clock's latest read, not a new one: a predicate calls this every tick (bench.session.Session.recent)
-        latest = self._monitor.latest(message, self.session.recent())
+        latest = self._monitor.latest(message, self.session.recent(), since=self._acknowledged_at)
         if latest is None:
             if signal not in self.session.codebook[message].signal_names:
                 self.session.codebook[message].physical(signal, 0.0)  # raises the clear error
             state = self._monitor.state(message)
             if state.last_valid is None:
                 return NoFrames(f"no frames of {message}")
+            if state.last_valid < self._acknowledged_at:
+                return NoFrames(f"no frames of {message} since the scenario started (the last at "
+                                f"{state.last_valid:.3f} s)")
             return NoFrames(f"{message} timed out (last frame at {state.last_valid:.3f} s)")
         if signal not in latest:
             self.session.codebook[message].physical(signal, 0.0)  # raises the clear error

@@ -341,14 +341,15 @@ class Monitor:
             self.codebook[message]  # raises the clear error
             raise
 
-    def latest(self, message: str, now: float) -> dict[str, float] | None:
-        """The message's latest valid values; None before the first or while it is timed out. (A plant's
-        behaviours ask several times per tick: `timed_out`'s rule, written out here.)"""
+    def latest(self, message: str, now: float, since: float = -math.inf) -> dict[str, float] | None:
+        """The message's latest valid values; None before the first, when it came before `since` (bench time,
+        s) or while it is timed out. (A plant's behaviours ask several times per tick: `timed_out`'s rule,
+        written out here.)"""
         state = self.by_name.get(message)
         if state is None:
             state = self.state(message)
         last_valid = state.last_valid
-        if last_valid is None or now - last_valid > state.timeout_s:
+        if last_valid is None or last_valid < since or now - last_valid > state.timeout_s:
             return None
         return state.latest
 

@@ -3,6 +3,7 @@ the checks no campaign case happens to use (`always`) still do what their docstr
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import replace
 
@@ -42,6 +43,34 @@ def test_start_scenario_uses_the_configured_names(on_bench: tuple[BenchSession, 
     assert sent >= 1 and case.value(ack, ack_signal) == sent
     case.start_scenario(Vehicle="EV4WIS")                                          # the next id, acknowledged
     assert case.value(ack, ack_signal) == sent % 255 + 1                           # ScenarioId: 8 bits, 0..255
+
+
+def test_values_after_start_scenario_are_the_new_scenarios(on_bench: tuple[BenchSession, Case]) -> None:
+    """The CI failure of the example VCU (test_rotation_centre_at_infinity, one run in many): the plant's wheel
+    status from before the reset, still the latest when its acknowledgement came, satisfied the next request's
+    targets before the VCU had seen it. After start_scenario, value() reads only frames that came with or after
+    the acknowledgement: a NaN that says so until the plant sends again, then the reset plant's values."""
+    session, case = on_bench
+    case.start_scenario(Vehicle="EV4WIS")
+    case.set("DRV_MotionRequest", DriveMode="NORMAL", TargetSpeed=1.0)
+    case.run(1.0)
+    moving = case.value("WHL_Status_FL", "WheelSpeed")
+    assert moving > 30.0                                                          # rpm at 1 m/s
+    case.start_scenario(Vehicle="EV4WIS")
+    monitor = session.runner.monitor                                              # type: ignore[union-attr]
+    protocol = session.project.scenario
+    assert protocol is not None
+    acknowledged_at = monitor.state(protocol.ack[0]).last_valid
+    earlier = [name for name, state in monitor.by_name.items()
+               if state.last_valid is not None and state.last_valid < acknowledged_at]
+    for name in earlier:                                                          # the last scenario's frames
+        signal = session.codebook[name].signal_names[0]
+        assert math.isnan(case.value(name, signal)), name
+        assert "since the scenario started" in str(case.value(name, signal))
+    assert earlier                                                                # the check above ran
+    case.run(0.03)                                                                # every cycle is ≤ 20 ms
+    speed = case.value("WHL_Status_FL", "WheelSpeed")
+    assert not math.isnan(speed) and speed < moving / 2                           # the reset plant's
 
 
 def test_the_timeout_is_the_configured_one() -> None:
