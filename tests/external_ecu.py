@@ -63,13 +63,33 @@ def judge_example(example: Path, node: str, out: Path, *, min_ran: int, seconds:
         ecu.wait_for("running", 60)
         run = subprocess.run([*priority, *BENCH, "run", *bus, "--external", "all", "--dut", node, "--out", str(out)],
                              cwd=ROOT, capture_output=True, text=True, timeout=seconds)
-        assert run.returncode == 0, run.stdout[-6000:] + run.stderr[-3000:]
+        assert run.returncode == 0, _failures(out) + run.stdout[-3000:] + run.stderr[-3000:]
         campaign = _check_report(out, node, min_ran)
     finally:
         outputs = {"ecu": ecu.stop() if ecu is not None else "", "plant": plant.stop()}
     assert ecu is not None and ecu.process.returncode == 0 and "stopped" in outputs["ecu"], outputs["ecu"]
     assert plant.process.returncode == 0, outputs["plant"]
     return campaign
+
+
+def _failures(out: Path) -> str:
+    """What a failed campaign's results.json says about each case that did not pass or skip: its failed steps
+    (measured, expected, when), its invalid frames and the bench's timing figures. The console table's tail alone
+    names the case, not the step, and a real-time failure on another host is seen only once."""
+    path = out / "results.json"
+    if not path.exists():
+        return "no results.json\n"
+    lines = []
+    for case in json.loads(path.read_text())["cases"]:
+        if case["outcome"] in ("passed", "skipped"):
+            continue
+        lines.append(f"{case['outcome']}: {case['nodeid']} {case.get('inconclusive') or ''}")
+        lines += [f"  step {s['name']!r}: measured {s['measured']!r}, expected {s['expected']!r} {s['tolerance']}"
+                  f" at {s['time']:.3f} s {s['detail']}" for s in case["steps"] if s["verdict"] == "fail"]
+        lines += [f"  invalid: {entry}" for entry in case.get("invalid", [])[:5]]
+        lines += [f"  bench timing: {entry}" for entry in case.get("bench_timing", [])[:5]]
+        lines += [f"  message: {case['message'][-1500:]}"] if case.get("message") else []
+    return "\n".join(lines) + "\n"
 
 
 def _check_report(out: Path, node: str, min_ran: int) -> Campaign:
