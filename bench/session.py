@@ -88,7 +88,7 @@ class BenchSession:
             self.stations.append(self.runner)
         if not self.stations:
             raise ConfigError("nothing to simulate: every node is external")
-        self.faults = FaultPlan(self.codebook)
+        self.faults = FaultPlan(self.codebook, frozenset().union(*(s.restbus.nodes for s in self.stations)))
         for station in self.stations:
             station.faults = self.faults
         self.stations[-1].babbles = True

@@ -88,7 +88,11 @@ def run(args: argparse.Namespace) -> int:
                            vehicle=args.vehicle, bus=given_bus_options(args))
     faults = plant_faults(args.fault)
     session = BenchSession(project, settings, role="plant")
-    session.faults.extend(faults)
+    try:
+        session.faults.extend(faults)   # a fault on frames this process does not send: one line, before the start
+    except ConfigError:
+        session.close()
+        raise
     stop = {"now": False}
 
     def request_stop(signum: int, frame: object) -> None:

@@ -194,7 +194,8 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
         problems.append(f"-n: parallel workers each run their own embedded bus (--interface {EMBEDDED}, virtual "
                         f"time); --interface {args.interface} is not it")
     options = check(resolve_bus_options, project, given_bus_options(args), codebook)
-    problems.extend(validate_faults(args.fault, codebook))
+    simulated = frozenset(codebook.nodes) - external if isinstance(external, set) else None
+    problems.extend(validate_faults(args.fault, codebook, simulated))
     problems.extend(shard.check(args.shard, args.durations, project.path.parent))
     check(check_out_dir, out_dir, args.force)
     if not problems and interface_known:

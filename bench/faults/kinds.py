@@ -77,6 +77,20 @@ class FaultKind:
                 return "TARGET must be an identifier like 0x000"
         return None
 
+    def check_reach(self, target: str, codebook: Codebook, simulated: frozenset[str]) -> str | None:
+        """Why a process that simulates the nodes `simulated` cannot inject this fault (None: it can): a fault
+        changes only frames the bench sends, so a message's sender or the node must be one of them."""
+        why = f"(this process simulates {', '.join(sorted(simulated)) or 'nothing'}; a fault changes only frames " \
+              f"the bench sends)"
+        if self.target == MESSAGE:
+            senders = codebook.by_name[target].senders
+            if not set(senders) & simulated:
+                sent_by = " / ".join(senders) or "no node"
+                return f"{target} is sent by {sent_by}, which the bench does not simulate {why}"
+        if self.target == NODE and target not in simulated:
+            return f"{target} is a node the bench does not simulate {why}"
+        return None
+
     def applies(self, fault: Fault, frame_id: int, codec: MessageCodec) -> bool:
         """Whether the fault acts on this frame of the message `codec` (it then counts the frame)."""
         return self.target == MESSAGE and fault.target == codec.name

@@ -110,26 +110,30 @@ def _number(spec: str, name: str, text: str) -> float:
     raise ConfigError(f"--fault {spec!r}: {name} {text!r} is not a number" + (" (s)" if name != "PARAM" else ""))
 
 
-def check_fault(fault: Fault, codebook: Codebook) -> None:
-    """ConfigError when the fault's target or PARAM does not fit its kind and the databases."""
+def check_fault(fault: Fault, codebook: Codebook, simulated: frozenset[str] | None = None) -> None:
+    """ConfigError when the fault's target or PARAM does not fit its kind and the databases, or (given the nodes
+    `simulated` by the process that would inject it) when none of its frames is the bench's to change."""
     kind = KINDS.get(fault.kind)
     if kind is None:
         raise ConfigError(f"fault {fault.describe()}: unknown kind {fault.kind!r} (kinds: {', '.join(KINDS)})")
     if not (fault.start >= 0 and fault.end > fault.start):
         raise ConfigError(f"fault {fault.describe()}: need 0 <= START < END")
     problem = kind.check_target(fault.target, codebook) or kind.check_param(fault.param)
+    if problem is None and simulated is not None:
+        problem = kind.check_reach(fault.target, codebook, simulated)
     if problem:
         raise ConfigError(f"fault {fault.describe()}: {problem}")
 
 
-def validate(specs: Iterable[str], codebook: Codebook) -> list[str]:
+def validate(specs: Iterable[str], codebook: Codebook, simulated: frozenset[str] | None = None) -> list[str]:
     """One line per problem of the `--fault` specs (syntax, kind, target in the databases, window,
-    PARAM); empty when all can be injected. For the command line's check before the first case."""
+    PARAM, and with `simulated` a sender the process simulates); empty when all can be injected. For the
+    command line's check before the first case."""
     problems = []
     for spec in specs:
         try:
             fault = parse_fault(spec)
-            check_fault(fault, codebook)
+            check_fault(fault, codebook, simulated)
         except ConfigError as exc:
             text = str(exc)
             problems.append(text if text.startswith("--fault") else f"--fault {spec!r}: {text.partition(': ')[2]}")
@@ -139,8 +143,9 @@ def validate(specs: Iterable[str], codebook: Codebook) -> list[str]:
 class FaultPlan:
     """The faults of a run; every station of the run applies them to the frames it sends."""
 
-    def __init__(self, codebook: Codebook) -> None:
+    def __init__(self, codebook: Codebook, simulated: frozenset[str] | None = None) -> None:
         self.codebook = codebook
+        self.simulated = simulated   # the nodes whose frames the run's stations send (None: not checked)
         self.faults: list[Fault] = []       # the faults that may act now (run windows, this case's instances)
         self.templates: list[Fault] = []    # case+ faults: an instance of each for every case
         self.history: list[Fault] = []      # every fault of the run, in the order added (for the record)
@@ -150,7 +155,7 @@ class FaultPlan:
         self.listener: Callable[[Fault], None] | None = None   # told of every fault added (the MCAP log)
 
     def add(self, fault: Fault) -> Fault:
-        check_fault(fault, self.codebook)
+        check_fault(fault, self.codebook, self.simulated)
         if fault.relative == CASE:
             self.templates.append(fault)
         else:

@@ -1,6 +1,6 @@
 """`bench plant`: a case+ --fault window, which counts from each case's start, is refused with one line (exit 2);
-bench plant runs no cases, so such a fault would never act (it dropped nothing). Its status lines say why frames
-were invalid, not only how many."""
+bench plant runs no cases, so such a fault would never act (it dropped nothing). So is a fault on frames it does not
+send (an external node's). Its status lines say why frames were invalid, not only how many."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from bench.cli.plant import INVALID_SHOWN, _report_invalid, plant_faults
 from bench.database.codec import Codebook
 from bench.errors import ConfigError
 from bench.faults.plan import RUN
+from tests.fakes import ipv4_group
 
 SPEC = "drop:IMU_Motion@case+3.5-3.8"
 
@@ -26,6 +27,19 @@ def test_case_window_refused_in_one_line(capsys: pytest.CaptureFixture[str]) -> 
     assert "--fault" in lines[0] and SPEC in lines[0] and "runs no cases" in lines[0]
     assert "drop:IMU_Motion@3.5-3.8" in lines[0]            # the window it takes instead
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(("spec", "named"), [("drop:VCU_WheelCmd_FL@1-2", "sent by VCU"),
+                                              ("silence:VCU@1-", "VCU is a node the bench does not simulate")])
+def test_a_fault_on_frames_the_plant_does_not_send_is_refused(spec: str, named: str,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """It used to start and act on nothing: the external VCU's frames are not the plant's to change."""
+    code = main(["plant", "--interface", "udp_multicast", "--channel", ipv4_group(), "--external", "VCU",
+                 "--fault", spec])
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1, err
+    assert spec in lines[0] and named in lines[0] and "Traceback" not in err
 
 
 def test_run_windows_accepted() -> None:

@@ -121,6 +121,13 @@ def test_every_problem_is_its_own_line(tmp_path: Path, capsys: pytest.CaptureFix
         assert sum(needle in line for line in lines) == 1, (needle, lines)
 
 
+def test_a_fault_on_an_external_nodes_frames(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The bench changes only frames it sends: a fault on an external node's message would act on nothing."""
+    [line] = errors(capsys, ["--external", "VCU", "--fault", "drop:VCU_WheelCmd_FL@1-2", "--fault",
+                             "drop:WHL_Status_FL@1-2", "--out", str(tmp_path / "out")])
+    assert "drop:VCU_WheelCmd_FL@1-2" in line and "sent by VCU, which the bench does not simulate" in line, line
+
+
 def test_missing_test_path(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["run", str(tmp_path / "nowhere.py"), "--out", str(tmp_path / "out")]) == 2
     [line] = capsys.readouterr().err.strip().splitlines()

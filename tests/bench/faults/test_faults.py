@@ -57,6 +57,19 @@ def test_window_and_target(codebook: Codebook) -> None:
     assert plan.apply(1.5, other, data) == [(0.0, data)]
 
 
+def test_a_plan_takes_only_faults_on_frames_its_stations_send(codebook: Codebook) -> None:
+    """A fault acts on frames the bench sends; on an external node's it would act on nothing, silently."""
+    plan = FaultPlan(codebook, simulated=frozenset({"DRIVER", "WHL_FL"}))
+    plan.add(Fault("drop", "DRV_Steering", 1.0, 2.0))                 # DRIVER's
+    plan.add(Fault("silence", "WHL_FL", 1.0, 2.0))
+    plan.add(Fault("flood", "0x000", 1.0, 2.0, 1.0))                  # the bench's own frames: always its to send
+    with pytest.raises(ConfigError, match=r"drop:VCU_WheelCmd_FL.*sent by VCU, which the bench does not simulate"):
+        plan.add(Fault("drop", MSG, 1.0, 2.0))
+    with pytest.raises(ConfigError, match=r"silence:VCU.*VCU is a node the bench does not simulate"):
+        plan.add(Fault("silence", "VCU", 1.0, 2.0))
+    assert [f.target for f in plan.history] == ["DRV_Steering", "WHL_FL", "0x000"]
+
+
 def test_each_frame_fault(codebook: Codebook) -> None:
     frame_id, data = _frame(codebook)
     assert _apply(codebook, Fault("delay", MSG, 0, 9, 0.05)) == [(0.05, data)]
