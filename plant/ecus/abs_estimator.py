@@ -20,8 +20,13 @@ During ABS control ([P4] §3.2 and §3.3):
   - a wheel's "hold->increase switching point" is, on the bus, its first sample in INCREASE after it was in
     DECREASE: the end of a pressure cycle, where the wheel has re-accelerated (the reference ECU reports the
     cycle's phase, plant/ecus/abs_control.py); a pause inside the stepped increase is not one;
-  - step 1: one side's two wheels in DECREASE while the other side's are in INCREASE (left turn: Dec1, Dec3,
-    Inc2, Inc4), held for t0, arms the identification for that side;
+  - step 1: one side's two wheels decreasing while the other side's are in INCREASE (left turn: Dec1, Dec3,
+    Inc2, Inc4), held for t0, arms the identification for that side. A wheel counts as decreasing when it was
+    in DECREASE in an update of the last pattern_window; the other side's must be in INCREASE in the update
+    itself; both sides matching is no pattern. The inner front wheel (individual control) and the inner rear
+    wheel (select-low) cycle on their own: their DECREASE stretches often alternate, and read from one
+    update's states alone the pattern appeared only when the cycles' phases overlapped (docs/contract/abs.md
+    ABS-TURN-01);
   - step 2: at the switching points of the armed side's (inner) wheels, while the outer wheel of the same axle
     is in INCREASE, the axle's speed difference is taken (dV1 at the front, dV2 at the rear); with both axles
     measured, eq. 13 (E3 corrected) gives a candidate T, kept only if it agrees with the armed side; a non-zero
@@ -109,11 +114,12 @@ class EstimatorConfig:
     rear_release_time: float = 0.1   # s the released rear axle needs to roll freely (chosen)
     point_window: float = 0.3    # s of interpolation points in the reference-speed fit (chosen)
     min_point_span: float = 0.08 # s the points must span before they give a slope (chosen)
+    pattern_window: float = 0.1  # s a DECREASE counts for the side pattern of step 1 (chosen)
 
     def __post_init__(self) -> None:
         for name in ("track", "wheelbase", "cog_to_front_axle", "v_l0", "v_l1", "v_l2", "t0", "t1", "period",
                      "speed_filter_time", "min_turn_speed", "min_delta_speed", "max_decel", "point_window",
-                     "min_point_span", "rear_release_time", "point_slip_stiffness"):
+                     "min_point_span", "rear_release_time", "point_slip_stiffness", "pattern_window"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"estimator config: {name} must be a positive number, got {value!r}")
@@ -159,6 +165,7 @@ class TurnStateEstimator:
         self._rear_window: deque[tuple[float, float]] = deque(maxlen=int(self.c.delta_average_points))
         self._yaw: float | None = None      # rad/s from the released rear axle (eq. 9)
         self._pattern_side, self._pattern_time = STRAIGHT, 0.0
+        self._last_decrease: list[float | None] = [None] * 4   # time of each wheel's latest DECREASE update
         self._armed = STRAIGHT
         self._dv1: float | None = None
         self._dv2: float | None = None
@@ -230,6 +237,7 @@ class TurnStateEstimator:
         self._rear_window.clear()
         self._yaw = None
         self._pattern_side, self._pattern_time = STRAIGHT, 0.0
+        self._last_decrease = [None] * 4
         self._armed = STRAIGHT
         self._dv1 = self._dv2 = None
         self._abs_cand, self._abs_cand_t = STRAIGHT, 0.0
@@ -314,6 +322,18 @@ class TurnStateEstimator:
                     self.turn, self.delta, self._end_time = STRAIGHT, 0.0, 0.0
         return True
 
+    def _side_pattern(self, states: Sequence[int]) -> int:
+        """Step 1's side pattern at this update: LEFT when FL and RL were each in DECREASE in an update of the
+        last pattern_window (this one included) while FR and RR are in INCREASE in this update; RIGHT
+        mirrored; STRAIGHT otherwise and when both sides match."""
+        horizon = self.t - self.c.pattern_window + self._eps
+        recent = [t is not None and t > horizon for t in self._last_decrease]
+        left = recent[0] and recent[2] and states[1] == INCREASE and states[3] == INCREASE
+        right = recent[1] and recent[3] and states[0] == INCREASE and states[2] == INCREASE
+        if left == right:
+            return STRAIGHT
+        return LEFT if left else RIGHT
+
     def _abs_update(self, speeds: Sequence[float], states: Sequence[int]) -> None:
         c = self.c
         # a cycle's switching point: INCREASE again after a decrease (and usually a hold) of that wheel
@@ -322,6 +342,7 @@ class TurnStateEstimator:
         for i in range(4):
             if states[i] == DECREASE:
                 dec[i] = True
+                self._last_decrease[i] = self.t
             elif states[i] == INCREASE:
                 switched[i] = dec[i]
                 dec[i] = False
@@ -346,12 +367,7 @@ class TurnStateEstimator:
         second = nth_largest(corrected, 2)
         self.ref_speed = ref if ref > second else second
         # step 1: one side decreasing while the other increases, for t0
-        if (states[0] == DECREASE and states[2] == DECREASE and states[1] == INCREASE and states[3] == INCREASE):
-            side = LEFT
-        elif (states[1] == DECREASE and states[3] == DECREASE and states[0] == INCREASE and states[2] == INCREASE):
-            side = RIGHT
-        else:
-            side = STRAIGHT
+        side = self._side_pattern(states)
         if side != STRAIGHT and side == self._pattern_side:
             self._pattern_time += c.period
         else:

@@ -157,6 +157,61 @@ def test_no_identification_under_abs_without_the_side_pattern() -> None:
         assert res.turn == 0
 
 
+def _inner_cycles(est: TurnStateEstimator, speeds: list[float], side: int, offset: int, n: int, *, cycle: int = 12,
+                  stretch: int = 3) -> list[int]:
+    """Under ABS, the two inner wheels of `side` (1 left, -1 right) each run a pressure cycle of `cycle` updates
+    with DECREASE in its first `stretch` updates; the rear one `offset` updates after the front one (the phase
+    between the individually controlled front wheel and the select-low rear axle); the outer wheels stay in
+    INCREASE. Returns T per update."""
+    inner_front, inner_rear = (0, 2) if side == 1 else (1, 3)
+    turns = []
+    for k in range(n):
+        states = [INCREASE] * 4
+        if k % cycle < stretch:
+            states[inner_front] = DECREASE
+        if (k - offset) % cycle < stretch and k >= offset:
+            states[inner_rear] = DECREASE
+        turns.append(est.update(speeds, states, True, True).turn)
+    return turns
+
+
+@pytest.mark.parametrize("side", [1, -1])
+@pytest.mark.parametrize("offset", range(12))
+def test_identification_under_abs_whatever_the_phase_of_the_inner_wheels(side: int, offset: int) -> None:
+    # [P4] §3.2 step 1 (docs/contract/abs.md ABS-TURN-01): the inner side's wheels decrease while the outer ones
+    # increase. Front and rear inner wheels cycle on their own, so for offsets 3..9 their DECREASE stretches never
+    # share an update; the side still decreases while the other increases, and the turn must be identified.
+    # Bound from the rule: both inner wheels have decreased within pattern_window (0.1 s = 10 updates) by the
+    # rear's first stretch (update offset, at most 11): armed; each inner wheel then reaches a switching point
+    # (DECREASE -> INCREASE, outer INCREASE) within one more cycle (12 updates), and the candidate of eq. 13 on
+    # dV1 = dV2 = 3.3 km/h (10 deg at 40 km/h, inside V_l0..V_l1, ddV = 0) is confirmed after t1 (5 updates).
+    est = TurnStateEstimator(CONFIG)
+    speeds = wheel_speeds(40.0, math.radians(10.0 * side))
+    turns = _inner_cycles(est, speeds, side, offset, 60)
+    assert -side not in turns, "never the opposite turn"
+    assert side in turns[: 11 + 12 + 1 + round(CONFIG.t1 / CONFIG.period) + 1], f"T = {side} in time: {turns}"
+
+
+def test_identification_under_abs_with_alternating_inner_wheels_in_detail() -> None:
+    # offset 6: FL in DECREASE at updates 0-2, 12-14, ..., RL at 6-8, 18-20, ...; never both in one update.
+    # By the rule: update 6 is the first with both inner wheels decreasing within 0.1 s (FL's last DECREASE 4
+    # updates back) and both outer ones in INCREASE: the pattern holds, and t0 = one update arms LEFT. RL's
+    # switching point is update 9 (dV2 stored), FL's update 15 (dV1 stored: both, candidate T = 1), confirmed
+    # once t1 = 0.05 s (5 updates) has passed: T = 1 from update 20 on.
+    est = TurnStateEstimator(CONFIG)
+    turns = _inner_cycles(est, wheel_speeds(40.0, math.radians(10.0)), 1, 6, 24)
+    assert turns.index(1) == 20
+    assert turns[20:] == [1] * 4
+
+
+def test_side_pattern_counts_a_decrease_only_within_the_pattern_window() -> None:
+    # the inner wheels' DECREASE stretches 17 updates (0.17 s > pattern_window 0.1 s) apart, outer wheels in
+    # INCREASE: the side is never seen decreasing together, nothing is armed and T stays 0
+    est = TurnStateEstimator(CONFIG)
+    turns = _inner_cycles(est, wheel_speeds(40.0, math.radians(10.0)), 1, 20, 200, cycle=40)
+    assert set(turns) == {0}
+
+
 def test_reference_speed_under_abs_follows_the_interpolation_points() -> None:
     est = TurnStateEstimator(replace(CONFIG, point_slip_stiffness=1e9))   # no point-slip allowance here
     decel = 30.0                                      # km/h per s
