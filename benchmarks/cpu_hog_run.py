@@ -72,6 +72,8 @@ def main() -> int:
     parser.add_argument("-k", default="", help="pytest -k expression to narrow the cases")
     parser.add_argument("paths", nargs="*", default=DEFAULT_CASES, help=f"cases (default: {' '.join(DEFAULT_CASES)})")
     args = parser.parse_args()
+    if args.out.exists():   # bench run would refuse it (exit 2) and the old results.json would be read as this run's
+        parser.error(f"--out {args.out}: exists; give a new folder")
 
     group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
     bus = ["--interface", "udp_multicast", "--channel", group]
@@ -101,7 +103,7 @@ def main() -> int:
             proc.stop()
     print(run.stdout[-4000:])
     results = args.out / "results.json"
-    if not results.exists():
+    if run.returncode not in (0, 1, 3) or not results.exists():   # 2: bad input, 4+: no verdicts to count
         print(run.stderr[-3000:])
         return 1
     cases = json.loads(results.read_text())["cases"]
