@@ -43,6 +43,13 @@ def resolve_external(codebook: Codebook, stimulus: Sequence[str], external: Sequ
     return names
 
 
+def simulated_nodes(codebook: Codebook, stimulus: Sequence[str], external: set[str], role: str) -> frozenset[str]:
+    """The nodes a process of `role` simulates: the plant's (every node neither stimulus nor external) and, in
+    the runner's process (`bench run`), the stimulus nodes, which it sends even when named external."""
+    plant = set(codebook.nodes) - set(stimulus) - external
+    return frozenset(plant | set(stimulus) if role == "runner" else plant)
+
+
 def resolve_bus_options(project: ProjectConfig, given: BusOptions, codebook: Codebook) -> BusOptions:
     """The bus settings of a run: the command line's over bench.toml's [bus] over the databases' (the contract)."""
     options = given.over(project.bus).over(contract_options(codebook.databases))
@@ -71,9 +78,7 @@ class BenchSession:
         self.stations: list[Station] = []
         self.runner: Station | None = None
         self.plant: Station | None = None
-        plant_nodes = set(self.codebook.nodes) - set(project.stimulus) - self.external
-        if role == "plant":
-            plant_nodes -= set(project.stimulus)
+        plant_nodes = set(simulated_nodes(self.codebook, project.stimulus, self.external, "plant"))
         if plant_nodes:
             factory = load_plant(project.plant)
             try:
@@ -88,7 +93,7 @@ class BenchSession:
             self.stations.append(self.runner)
         if not self.stations:
             raise ConfigError("nothing to simulate: every node is external")
-        self.faults = FaultPlan(self.codebook, frozenset().union(*(s.restbus.nodes for s in self.stations)))
+        self.faults = FaultPlan(self.codebook, simulated_nodes(self.codebook, project.stimulus, self.external, role))
         for station in self.stations:
             station.faults = self.faults
         self.stations[-1].babbles = True

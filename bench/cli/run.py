@@ -35,7 +35,7 @@ from bench.pytest import shard
 from bench.pytest.marks import split_names
 from bench.report.junit import step_summary
 from bench.run import default_out_dir
-from bench.session import resolve_bus_options, resolve_external
+from bench.session import resolve_bus_options, resolve_external, simulated_nodes
 from bench.sim.clock import settle_heap
 from bench.stop import STOP
 from bench.transport import EMBEDDED, check_channel, check_interface, is_embedded, probe_bus
@@ -194,7 +194,7 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
         problems.append(f"-n: parallel workers each run their own embedded bus (--interface {EMBEDDED}, virtual "
                         f"time); --interface {args.interface} is not it")
     options = check(resolve_bus_options, project, given_bus_options(args), codebook)
-    simulated = frozenset(codebook.nodes) - external if isinstance(external, set) else None
+    simulated = simulated_nodes(codebook, project.stimulus, external, "runner") if isinstance(external, set) else None
     problems.extend(validate_faults(args.fault, codebook, simulated))
     problems.extend(shard.check(args.shard, args.durations, project.path.parent))
     check(check_out_dir, out_dir, args.force)

@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 
 from bench.config import RunSettings, load_config
-from bench.session import BenchSession
+from bench.session import BenchSession, simulated_nodes
 
 
 @pytest.fixture
@@ -63,3 +63,19 @@ def test_unknown_external_node_is_a_clear_error(project) -> None:
     from bench.errors import ConfigError
     with pytest.raises(ConfigError, match="unknown node.*NOPE"):
         BenchSession(project, RunSettings(external=["NOPE"]))
+
+
+def test_the_nodes_a_process_simulates_are_its_stations_nodes() -> None:
+    """One rule for the fault plan of a session and `bench run`'s check before the first case: the runner's
+    process sends the stimulus nodes even when they are named external, the plant's process never does."""
+    project = load_config()
+    session = BenchSession(project, RunSettings(external=["DRIVER", "VCU"]))
+    try:
+        stations = frozenset().union(*(s.restbus.nodes for s in session.stations))
+        simulated = simulated_nodes(session.codebook, project.stimulus, session.external, "runner")
+        assert simulated == stations and session.faults.simulated == stations
+        assert "DRIVER" in simulated and "VCU" not in simulated
+    finally:
+        session.close()
+    plant = simulated_nodes(session.codebook, project.stimulus, {"VCU"}, "plant")
+    assert not plant & set(project.stimulus) and "VCU" not in plant and "WHL_FL" in plant

@@ -128,6 +128,15 @@ def test_a_fault_on_an_external_nodes_frames(tmp_path: Path, capsys: pytest.Capt
     assert "drop:VCU_WheelCmd_FL@1-2" in line and "sent by VCU, which the bench does not simulate" in line, line
 
 
+def test_a_fault_on_the_stimulus_named_external_is_taken(tmp_path: Path) -> None:
+    """bench run's process sends the stimulus even when it is named external: the check before the first case
+    and the session agree (bench.session.simulated_nodes), so the fault is not refused at the door."""
+    result = subprocess.run([sys.executable, "-m", "bench", "run", str(MINI), "-k", "normal_mode", "--external",
+                             "DRIVER", "--fault", "drop:DRV_Steering@1-2", "--out", str(tmp_path / "out")],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
 def test_missing_test_path(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["run", str(tmp_path / "nowhere.py"), "--out", str(tmp_path / "out")]) == 2
     [line] = capsys.readouterr().err.strip().splitlines()
