@@ -1,0 +1,260 @@
+"""The bench's diagnostic tester: udsoncan's client on the bench's own ISO-TP, on the bench's clock.
+
+A case (`bench.diag("NODE")`) and `bench diag` get a `udsoncan.client.Client`, the client test engineers already
+script, whose connection sends through the runner's station and waits in bench time: while it waits the bench
+runs (plant, restbus, monitors), so in virtual time every ISO-TP and UDS timer counts bench time, the exchange is
+deterministic and takes no wall time. can-isotp reads the wall clock and runs a thread of its own, which would
+make virtual-time runs nondeterministic; the bench's ISO-TP (bench/diag/isotp.py) is tested against it instead.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from typing import Any, Protocol, cast
+
+import udsoncan
+from udsoncan.client import Client
+from udsoncan.common.DidCodec import DidCodec
+from udsoncan.connections import BaseConnection
+from udsoncan.exceptions import (
+    InvalidResponseException,
+    NegativeResponseException,
+    TimeoutException,
+    UnexpectedResponseException,
+)
+from udsoncan.Request import Request
+from udsoncan.Response import Response
+from udsoncan.typing import ClientConfig
+
+from bench.diag.declaration import Declaration, Did, NodeDiagnostics
+from bench.diag.describe import describe
+from bench.diag.isotp import IsoTpEndpoint, IsoTpParams
+from bench.diag.security import documented_key
+from bench.errors import BenchError
+
+#: How much longer than the server's P2 / P2* the tester waits (ISO 14229-2's P2client: the server's limit plus the
+#: network's delays both ways).
+P2_MARGIN = 0.050
+P2_STAR_MARGIN = 0.500
+#: Bench time the tester waits for the rest of a multi-frame response once its first frame came (N_Cr per frame).
+RESPONSE_LIMIT = 30.0
+
+
+class Bench(Protocol):
+    """What the tester needs of a session: its clock and its tick loop."""
+
+    def now(self) -> float: ...
+
+    def run_until(self, t_end: float, stop: Callable[[], bool] | None = None) -> bool: ...
+
+
+class Station(Protocol):
+    def listen(self, listener: Any) -> None: ...
+
+    def unlisten(self, listener: Any) -> None: ...
+
+    def send_now(self, frame_id: int, data: bytes) -> None: ...
+
+
+class DidValue(DidCodec):
+    """udsoncan's codec of one declared DID: physical values (and enumeration names) both ways."""
+
+    def __init__(self, did: Did) -> None:
+        super().__init__()
+        self.did = did
+
+    def encode(self, *did_value: Any) -> bytes:
+        return self.did.encode(did_value[0])
+
+    def decode(self, did_payload: bytes) -> Any:
+        return self.did.decode(did_payload)
+
+    def __len__(self) -> int:
+        return self.did.length
+
+
+class _Port:
+    """The tester's ISO-TP endpoint as a station listener (its response identifier)."""
+
+    def __init__(self, endpoint: IsoTpEndpoint, rx_id: int) -> None:
+        self.endpoint = endpoint
+        self.frame_ids = (rx_id,)
+
+    @property
+    def busy(self) -> bool:
+        return self.endpoint.busy
+
+    def on_frame(self, t: float, frame_id: int, data: bytes) -> None:
+        self.endpoint.on_frame(t, data)
+
+    def poll(self, t: float) -> None:
+        self.endpoint.poll(t)
+
+
+class BenchConnection(BaseConnection):
+    """A udsoncan connection whose waits run the bench for their time, in bench time."""
+
+    def __init__(self, bench: Bench, station: Station, tx_id: int, rx_id: int, params: IsoTpParams,
+                 name: str) -> None:
+        super().__init__(name)
+        self.bench, self.station = bench, station
+        self.endpoint = IsoTpEndpoint(tx_id, rx_id, station.send_now, params)
+        self.port = _Port(self.endpoint, rx_id)
+        self.opened = False
+        #: (bench time, "request" or "response", payload) of every exchange, for the report and the log
+        self.exchanges: list[tuple[float, str, bytes]] = []
+
+    def open(self) -> BenchConnection:
+        if not self.opened:
+            self.station.listen(self.port)
+            self.opened = True
+        return self
+
+    def close(self) -> None:
+        if self.opened:
+            self.station.unlisten(self.port)
+            self.opened = False
+
+    def is_open(self) -> bool:
+        return self.opened
+
+    def empty_rxqueue(self) -> None:
+        self.endpoint.received.clear()
+
+    def specific_send(self, payload: bytes, timeout: float | None = None) -> None:
+        t = self.bench.now()
+        self.exchanges.append((t, "request", bytes(payload)))
+        self.endpoint.transmit(t, bytes(payload))
+
+    def specific_wait_frame(self, timeout: float | None = None) -> bytes | None:
+        received = self.endpoint.received
+        if not received:
+            limit = RESPONSE_LIMIT if timeout is None else float(timeout)
+            bench, endpoint = self.bench, self.endpoint
+            bench.run_until(bench.now() + limit, lambda: bool(received))
+            extra = bench.now() + RESPONSE_LIMIT
+            while not received and endpoint.busy and bench.now() < extra:
+                # the first frame came in time: the rest of a multi-frame response, each frame within N_Cr
+                bench.run_until(bench.now() + endpoint.params.n_cr, lambda: bool(received) or not endpoint.busy)
+            if not received:
+                raise TimeoutException(f"no response within {limit:.3f} s of bench time")  # type: ignore[no-untyped-call]
+        t, payload = received.popleft()
+        self.exchanges.append((t, "response", payload))
+        return payload
+
+
+class DiagnosticError(BenchError):
+    """A request the node did not answer as asked: one line naming the node, the request and what came instead.
+    Each kind is also udsoncan's own exception, so a case catches it as test engineers do."""
+
+
+class NoResponse(DiagnosticError, TimeoutException):
+    def __init__(self, text: str) -> None:
+        Exception.__init__(self, text)
+
+
+class Refused(DiagnosticError, NegativeResponseException):
+    def __init__(self, response: Response, text: str) -> None:
+        NegativeResponseException.__init__(self, response)
+        self.args = (text,)
+
+
+class BadResponse(DiagnosticError, InvalidResponseException):
+    def __init__(self, response: Response, text: str) -> None:
+        InvalidResponseException.__init__(self, response)  # type: ignore[no-untyped-call]
+        self.args = (text,)
+
+
+class BenchClient(Client):
+    """udsoncan's client whose failures name the node and the request (bench.diag.tester.DiagnosticError)."""
+
+    node = ""
+    response_name = ""
+    external = False
+
+    def send_request(self, request: Request, timeout: int = -1) -> Response | None:
+        try:
+            return super().send_request(request, timeout)
+        except (TimeoutException, NegativeResponseException, InvalidResponseException,
+                UnexpectedResponseException) as exc:
+            if isinstance(exc, DiagnosticError):
+                raise
+            asked = describe(request.get_payload())
+            who = f"{'the external ' if self.external else ''}{self.node}"
+            if isinstance(exc, TimeoutException):
+                waited = float(self.config["p2_timeout"] or 0.0)   # (plus P2* after a responsePending)
+                raise NoResponse(f"no {self.response_name} from {who} in {waited:.1f} s: {asked}") from None
+            response: Response = exc.response
+            got = describe(response.get_payload()) if response is not None else "nothing"
+            if isinstance(exc, NegativeResponseException):
+                raise Refused(response, f"{who} refused {asked}: {got}") from None
+            raise BadResponse(response, f"{who} answered {asked} with {got}: {exc}") from None
+
+
+def did_codecs(node: NodeDiagnostics) -> dict[int, DidCodec]:
+    return {did.id: DidValue(did) for did in node.dids}
+
+
+def key_function(node: NodeDiagnostics, security: dict[str, str], external: bool) -> Callable[..., bytes]:
+    """udsoncan's `security_algo` for a node: an external node's "module:function" from bench.toml [diagnostics]
+    security (udsoncan's signature: level, seed, params -> key), else the documented algorithm (DIAG-SEC-01)."""
+    spec = security.get(node.node) if external else None
+    if spec is None:
+        constant = node.security_constant
+
+        def documented(level: int, seed: bytes, params: Any = None) -> bytes:
+            return documented_key(seed, constant)
+
+        return documented
+    module_name, _, function_name = spec.partition(":")
+    where = f"bench.toml [diagnostics] security {node.node} = {spec!r}"
+    try:
+        function = getattr(importlib.import_module(module_name), function_name)
+    except Exception as exc:   # any import-time error of the user's module
+        raise BenchError(f"{where}: cannot load: {type(exc).__name__}: {exc}") from None
+    if not callable(function):
+        raise BenchError(f"{where}: not a function")
+
+    def secret(level: int, seed: bytes, params: Any = None) -> bytes:
+        try:
+            key = function(level, seed, params)
+        except Exception as exc:   # the user's algorithm failed: one line naming it, never a traceback
+            raise BenchError(f"{where} raised {type(exc).__name__}: {exc} (seed {seed.hex()})") from None
+        if not isinstance(key, (bytes, bytearray)):
+            raise BenchError(f"{where} returned {type(key).__name__}, not bytes (seed {seed.hex()})")
+        return bytes(key)
+
+    return secret
+
+
+def open_client(bench: Bench, station: Station, declaration: Declaration, node_name: str, *,
+                functional: bool = False, security: dict[str, str] | None = None,
+                external: bool = False, response_name: str = "") -> BenchClient:
+    """An opened udsoncan client to one node: physical (or functional) requests, the node's DIDs as codecs,
+    its key algorithm, P2/P2* from the declaration plus the tester's margins."""
+    try:
+        node = declaration.node(node_name)
+    except KeyError as exc:
+        raise BenchError(str(exc.args[0])) from None
+    protocol = declaration.protocol
+    params = IsoTpParams(padding=protocol.padding, block_size=0, stmin=0.0, n_bs=protocol.n_bs, n_cr=protocol.n_cr)
+    tx_id = protocol.functional_request if functional else node.request
+    connection = BenchConnection(bench, station, tx_id, node.response, params, node_name)
+    config: dict[str, Any] = dict(udsoncan.configs.default_client_config)
+    config.update({
+        "data_identifiers": did_codecs(node),
+        "security_algo": key_function(node, security or {}, external),
+        "request_timeout": None,      # the per-wait limits below count bench time; udsoncan's would count wall time
+        "p2_timeout": protocol.p2 + P2_MARGIN,
+        "p2_star_timeout": protocol.p2_star + P2_STAR_MARGIN,
+        "use_server_timing": False,   # the declaration is the contract; a server's own figures are judged, not used
+        "standard_version": 2013,
+        "dtc_snapshot_did_size": 2,
+        "extended_data_size": {dtc.number: 1 for dtc in node.dtcs},
+    })
+    client = BenchClient(connection, config=cast(ClientConfig, config))
+    client.node, client.external = node_name, external
+    client.response_name = response_name or f"response 0x{node.response:03X}"
+    client.open()
+    return client
