@@ -16,12 +16,16 @@ from typing import Literal
 
 import numpy as np
 from pytest import fail
+from udsoncan.client import Client
 
 from bench.checks.monitor import InvalidFrame
 from bench.checks.steps import StepLog, percentile, tolerance_text, within
 from bench.checks.timing import LATE_FLOOR, Late, SelfTiming
 from bench.database.codec import SignalCodec
-from bench.errors import BenchError, Inconclusive
+from bench.diag.declaration import NodeDiagnostics, Protocol
+from bench.diag.describe import describe
+from bench.diag.tester import BenchConnection, open_client
+from bench.errors import BenchError, Inconclusive, did_you_mean
 from bench.faults.plan import KINDS, Fault
 from bench.results.model import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
@@ -92,6 +96,7 @@ class Case:
         self._mark_counts()
         self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
         self._closed = False
+        self._testers: list[Client] = []
         plan = session.faults
         self._fault_frames0 = {id(f): f.frames for f in plan.faults}   # run faults: their frames before the case
         plan.begin_case(self.start)
@@ -200,6 +205,67 @@ class Case:
 
         return cancel
 
+    # -- diagnostics ---------------------------------------------------------------------------------
+    def diag(self, node: str, *, functional: bool = False) -> Client:
+        """A udsoncan client to `node`'s diagnostics (UDS on ISO-TP, docs/contract/diagnostics.md), opened: e.g.
+        `bench.diag(NODE).get_dtc_by_status_mask(0xFF)`. Its waits run the
+        bench in bench time (P2/P2* of the declaration); its DIDs decode to physical values; `functional` sends
+        on the functional address (single frames) and reads `node`'s answer. A negative response raises
+        udsoncan's NegativeResponseException (its `.response.code` is the NRC), no response its TimeoutException.
+        The exchange goes on the case's record in the report, decoded. Records no step."""
+        declaration = self.session.declaration
+        if declaration is None:
+            raise BenchError(f"bench.diag({node!r}): {self.session.project.path} has no [diagnostics] file")
+        known = node in declaration.nodes
+        response = self.session.codebook.by_id.get(declaration.node(node).response) if known else None
+        client = open_client(self.session, self._runner, declaration, node, functional=functional,
+                             security=self.session.project.security, external=node in self.session.external,
+                             response_name=response.name if response is not None else "")
+        self._testers.append(client)
+        return client
+
+    def value_table(self, message: str, signal: str) -> dict[str, int]:
+        """The signal's value table (name -> raw number) from the databases; empty when it has none.
+        Records no step."""
+        codec = self._monitor.codebook[message]
+        if signal not in codec.by_name:
+            raise BenchError(f"{message} has no signal {signal!r}{did_you_mean(signal, codec.by_name)}")
+        return dict(codec.by_name[signal].choices)
+
+    def diagnostics(self, node: str) -> NodeDiagnostics:
+        """What the project's diagnostic declaration (bench.toml [diagnostics] file) says of `node`: its DTCs
+        (code, name, confirmation time), DIDs and routines, the expected values of its diagnostic cases.
+        Records no step."""
+        declaration = self.session.declaration
+        if declaration is None:
+            raise BenchError(f"bench.diagnostics({node!r}): {self.session.project.path} has no [diagnostics] file")
+        try:
+            return declaration.node(node)
+        except KeyError as exc:
+            raise BenchError(str(exc.args[0])) from None
+
+    @property
+    def diagnostic_protocol(self) -> Protocol:
+        """The diagnostic timing and fault-memory rules every node shares (P2, S3, aging, security attempts).
+        Records no step."""
+        declaration = self.session.declaration
+        if declaration is None:
+            raise BenchError(f"{self.session.project.path} has no [diagnostics] file")
+        return declaration.protocol
+
+    def _close_testers(self) -> None:
+        rows: list[list[object]] = []
+        for client in self._testers:
+            connection = client.conn
+            assert isinstance(connection, BenchConnection)
+            rows += [[f"{t - self.start:.3f}", connection.name, direction, describe(payload)]
+                     for t, direction, payload in connection.exchanges]
+            client.close()
+        self._testers = []
+        if rows:
+            rows.sort(key=lambda row: float(str(row[0])))
+            self.table("Diagnostic exchange", ["t (s)", "connection", "", "message"], rows)
+
     def close(self) -> None:
         """End of the case (the pytest plugin calls it; a case need not): its timers stop, its case+ fault
         windows close, and the faults that were active and the invalid frames seen during it go on its
@@ -207,6 +273,7 @@ class Case:
         self._stop_timers()
         if self._closed:
             return
+        self._close_testers()
         self._closed = True
         self._monitor.history_from = math.inf   # between cases only the last HISTORY_CAP frames are kept
         now = self.now

@@ -92,6 +92,10 @@ class ProjectConfig:
     e2e: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: [calibration.NODE]: a real ECU's calibration the cases need to judge it (node -> name -> (value, unit))
     calibration: dict[str, dict[str, tuple[float, str]]] = field(default_factory=dict)
+    #: [diagnostics] file: the diagnostic declaration (bench.diag.declaration); None: no node has diagnostics
+    diagnostics: Path | None = None
+    #: [diagnostics] security: an external node's seed/key function as "module:function" (its algorithm is secret)
+    security: dict[str, str] = field(default_factory=dict)
 
     @cached_property
     def requirement_ids(self) -> frozenset[str]:
@@ -179,7 +183,29 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         e2e=_e2e_table(path, data.get("e2e", {})),
         calibration=_calibration(path, data.get("calibration", {})),
         **_contract(path, text, data.get("contract", {})),
+        **_diagnostics(path, data.get("diagnostics", {})),
     )
+
+
+def _diagnostics(path: Path, table: Any) -> dict[str, Any]:
+    """[diagnostics] file = "dbc/diagnostics.toml" (relative to bench.toml), security = { NODE = "module:function" }:
+    the declaration is read when a session starts (bench.diag.declaration), the functions when a case unlocks."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [diagnostics] must be a table")
+    _known_keys(f"{path}: [diagnostics]", table, ("file", "security"))
+    if "file" not in table:
+        return {}
+    name = table["file"]
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"{path}: [diagnostics] file must be a path (a string), got {name!r}")
+    file = path.parent / name
+    if not file.is_file():
+        raise ConfigError(f"{path}: [diagnostics] file: no such file {file}")
+    security = table.get("security", {})
+    if not isinstance(security, dict) or not all(isinstance(v, str) and ":" in v for v in security.values()):
+        raise ConfigError(f"{path}: [diagnostics] security must be a table of NODE = \"module:function\", "
+                          f"got {security!r}")
+    return {"diagnostics": file, "security": dict(security)}
 
 
 def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
@@ -213,7 +239,7 @@ _BUS_CLI_ONLY = ("interface", "channel")
 
 
 #: bench.toml's tables; any other is a typo
-TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e", "calibration")
+TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e", "calibration", "diagnostics")
 
 
 #: [e2e.MESSAGE] keys whose value is a name; DataIDList is hex text or a list of bytes; every other key a number.

@@ -7,13 +7,18 @@ simulated by an in-process plant station unless declared external; with every no
 
 from __future__ import annotations
 
+import functools
 import itertools
+import math
 from collections.abc import Callable, Sequence
 
 from bench.checks.monitor import FrameSink, Monitor
 from bench.checks.timing import SelfTiming
 from bench.config import ProjectConfig, RunSettings
 from bench.database.codec import Codebook, load_codebook
+from bench.diag.declaration import Declaration, Did, load_declaration
+from bench.diag.isotp import IsoTpParams
+from bench.diag.server import UdsServer
 from bench.errors import BenchError, ConfigError, InputProblems
 from bench.faults.plan import FaultPlan
 from bench.plugins import load_plant
@@ -50,6 +55,28 @@ def simulated_nodes(codebook: Codebook, stimulus: Sequence[str], external: set[s
     return frozenset(plant | set(stimulus) if role == "runner" else plant)
 
 
+def _live_value(station: Station, did: Did, now: Callable[[], float]) -> Callable[[], float] | None:
+    """Where a simulated node's DID gets its value when the declaration says (else its behaviour provides it): a
+    signal it sends (what its restbus sends), one it reads (its monitor's latest valid value; NaN when timed out:
+    the node has no value, NRC 0x22), or the bench's clock (its operating time since power-up, bench time 0)."""
+    if did.source == "operating_time":
+        return now
+    if did.signal:
+        message, _, signal = did.signal.partition(".")
+        if message in station.restbus.periodic:
+            return functools.partial(station.restbus.value, message, signal)
+    if did.input:
+        message, _, signal = did.input.partition(".")
+        monitor = station.monitor
+
+        def latest() -> float:
+            values = monitor.latest(message, station.t)
+            return math.nan if values is None else float(values.get(signal, math.nan))
+
+        return latest
+    return None
+
+
 def resolve_bus_options(project: ProjectConfig, given: BusOptions, codebook: Codebook) -> BusOptions:
     """The bus settings of a run: the command line's over bench.toml's [bus] over the databases' (the contract)."""
     options = given.over(project.bus).over(contract_options(codebook.databases))
@@ -66,6 +93,10 @@ class BenchSession:
         self.settings = settings
         self.codebook = load_codebook(project.databases, project.e2e)
         problems = project.problems(self.codebook)
+        self.declaration: Declaration | None = None
+        if project.diagnostics is not None:
+            self.declaration = load_declaration(project.diagnostics)
+            problems += self.declaration.problems(self.codebook)
         if problems:
             raise InputProblems(problems)
         self.external = resolve_external(self.codebook, project.stimulus, settings.external)
@@ -87,12 +118,15 @@ class BenchSession:
                 raise ConfigError(f"plant {project.plant!r}: {exc}") from None
             self.plant = self._station("plant", plant_nodes, Monitor(self.codebook, keep_intervals=False), behaviours)
             self.stations.append(self.plant)
-        if role == "runner":
+        if role in ("runner", "tester"):   # a tester (bench diag) sends only its requests: no stimulus restbus
             monitor = Monitor(self.codebook, keep_history=keep_history, sink=sink)
-            self.runner = self._station("runner", set(project.stimulus), monitor, (), every_tick=False)
+            nodes = set(project.stimulus) if role == "runner" else set()
+            self.runner = self._station("runner", nodes, monitor, (), every_tick=False)
             self.stations.append(self.runner)
         if not self.stations:
             raise ConfigError("nothing to simulate: every node is external")
+        if self.declaration is not None:
+            self._diagnostics(self.declaration, plant_nodes)
         self.faults = FaultPlan(self.codebook, simulated_nodes(self.codebook, project.stimulus, self.external, role))
         for station in self.stations:
             station.faults = self.faults
@@ -108,6 +142,26 @@ class BenchSession:
                 station.send_clock = self.clock.now
                 station.recent = self.clock.recent
                 station.timing_label = "stimulus" if station is self.runner else "simulated"
+
+    def _diagnostics(self, declaration: Declaration, plant_nodes: set[str]) -> None:
+        """The diagnostic side of every simulated node the declaration describes (its UDS server on the plant's
+        station), and the ISO-TP framing check of every node's connection on the runner's monitor."""
+        protocol = declaration.protocol
+        if self.plant is not None:
+            plant = self.plant
+            for name, node in declaration.nodes.items():
+                if name in plant_nodes:
+                    server = UdsServer(node, protocol, plant.send_now)
+                    for did in node.dids:
+                        source = _live_value(plant, did, self.now)
+                        if source is not None:
+                            server.provide(did.name, source)
+                    plant.listen(server)
+                    plant.diagnostics[name] = server
+        if self.runner is not None:
+            params = IsoTpParams(padding=protocol.padding, n_bs=protocol.n_bs, n_cr=protocol.n_cr)
+            for node in declaration.nodes.values():
+                self.runner.monitor.watch_framing(node.request, node.response, params)
 
     def _station(self, name: str, nodes: set[str], monitor: Monitor, behaviours: Sequence[Behaviour], *,
                  every_tick: bool = True) -> Station:

@@ -26,6 +26,7 @@ from typing import Any
 
 from bench import e2e
 from bench.database.codec import Codebook, DecodeError, MessageCodec
+from bench.diag.isotp import IsoTpFraming, IsoTpParams
 from bench.errors import BenchError, BenchLimit
 
 TIMEOUT_CYCLES = 3   # docs/spec/k-matrix.md: a message not seen for 3 x its cycle time is timed out
@@ -152,7 +153,13 @@ class Monitor:
         self.keep_history = keep_history
         self.keep_intervals = keep_intervals   # a plant's ECUs need no cycle-time statistics
         self.sink = sink
-        self.states: dict[int, MessageState] = {cid: MessageState(c) for cid, c in codebook.by_id.items()}
+        self.states: dict[int, MessageState] = {cid: MessageState(c) for cid, c in codebook.by_id.items()
+                                                if not c.diagnostic}
+        # Diagnostic messages (ISO-TP, bench.diag) are judged by their framing, not by cycle, E2E or range: their
+        # checker per identifier (`watch_framing`); without one a diagnostic frame is logged as valid.
+        self.diagnostic: dict[int, MessageCodec] = {cid: c for cid, c in codebook.by_id.items() if c.diagnostic}
+        self.framing: dict[int, IsoTpFraming] = {}
+        self._connections: list[tuple[int, IsoTpFraming]] = []
         self.by_name: dict[str, MessageState] = {s.codec.name: s for s in self.states.values()}
         self.unknown_frames = 0
         self.invalid_log: list[InvalidFrame] = []
@@ -174,6 +181,8 @@ class Monitor:
         sink = self.sink
         state = None if (is_extended or is_error) else self.states.get(arbitration_id)
         if state is None:
+            if not is_error and arbitration_id in self.diagnostic:
+                return self._diagnostic_frame(t, arbitration_id, data, direction)
             self.unknown_frames += 1
             reason = "error frame" if is_error else "unknown identifier"
             self._invalid(InvalidFrame(t, arbitration_id, "error frame" if is_error else
@@ -309,6 +318,24 @@ class Monitor:
         name = state.codec.name if state else f"0x{arbitration_id:X}"
         self._invalid(InvalidFrame(t, arbitration_id, name, f"send failed: {reason}"))
 
+    def watch_framing(self, a_id: int, b_id: int, params: IsoTpParams) -> None:
+        """Check the ISO-TP framing of one diagnostic connection (request and response identifiers)."""
+        checker = IsoTpFraming(a_id, b_id, params)
+        self.framing[a_id] = self.framing[b_id] = checker
+        self._connections.append((a_id, checker))
+
+    def _diagnostic_frame(self, t: float, arbitration_id: int, data: bytes, direction: str) -> bool:
+        codec = self.diagnostic[arbitration_id]
+        checker = self.framing.get(arbitration_id)
+        problems = checker.on_frame(t, arbitration_id, data) if checker is not None else ()
+        reason = "; ".join(f"ISO-TP {p.rule}: {p.text}" for p in problems)
+        if reason:
+            self._invalid(InvalidFrame(t, arbitration_id, codec.name, reason))
+        if self.sink:
+            # (no codec: a diagnostic frame is in no cycle-time statistics)
+            self.sink(CheckedFrame(t, arbitration_id, data, direction, not reason, reason, None, None))
+        return not reason
+
     def _invalid(self, record: InvalidFrame) -> None:
         self.invalid_log.append(record)
         if len(self.invalid_log) > 2 * INVALID_CAP:
@@ -324,6 +351,10 @@ class Monitor:
                 continue
             if now - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
                 self._time_out(state)
+        for a_id, checker in self._connections:   # ISO-TP's N_Bs / N_Cr of a diagnostic exchange in progress
+            for problem in checker.check_timeouts(now):
+                self._invalid(InvalidFrame(problem.t, a_id, self.diagnostic[a_id].name,
+                                           f"ISO-TP {problem.rule}: {problem.text}"))
 
     @staticmethod
     def _time_out(state: MessageState) -> None:

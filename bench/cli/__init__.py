@@ -12,7 +12,7 @@ from rich.markup import escape
 
 from bench.errors import BenchError, did_you_mean
 
-SUBCOMMANDS = ("run", "plant", "dbc", "log", "monitor", "replay", "report")
+SUBCOMMANDS = ("run", "plant", "diag", "dbc", "log", "monitor", "replay", "report")
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:

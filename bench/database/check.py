@@ -45,7 +45,7 @@ from typing import Any
 import cantools
 from cantools.database.can import Database, Message, Signal
 
-from bench.database.codec import RANGE_SLACK
+from bench.database.codec import RANGE_SLACK, diagnostic_kind
 from bench.e2e import config as e2e_config
 from bench.e2e.profiles import P01_MODES, PROFILES, Field, Protection
 from bench.errors import DatabaseError, did_you_mean
@@ -91,10 +91,13 @@ class MessageProtection:
     frame_id: int
     protection: Protection | None
     refused: bool = False
+    diagnostic: bool = False   # ISO-TP traffic: no E2E by design, its framing is judged instead
 
     def describe(self) -> str:
         if self.refused:
             return "declared protection refused (see the error)"
+        if self.diagnostic and self.protection is None:
+            return "diagnostic (ISO-TP: its framing is checked, no E2E)"
         if self.protection is None:
             return "unprotected"
         return f"{self.protection.describe()} [{self.protection.source}]"
@@ -118,7 +121,11 @@ class CheckResult:
 
     @property
     def unprotected(self) -> int:
-        return sum(p.protection is None and not p.refused for p in self.protections)
+        return sum(p.protection is None and not p.refused and not p.diagnostic for p in self.protections)
+
+    @property
+    def diagnostic(self) -> int:
+        return sum(p.protection is None and p.diagnostic for p in self.protections)
 
     @property
     def errors(self) -> list[Finding]:
@@ -419,6 +426,8 @@ def _attribute(message: Message, name: str, defaults: dict[str, object]) -> tupl
 
 
 def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], add: _Add) -> None:
+    if diagnostic_kind(message):   # ISO-TP traffic on request: no cycle time, no send type (bench.diag)
+        return
     if message.dbc is None:   # ARXML: the cycle time of the frame's timing, no send type attribute
         if message.cycle_time is None or message.cycle_time <= 0:
             add(ERROR, "cycle-time", "no cyclic timing: the restbus cannot send it periodically")
@@ -654,11 +663,11 @@ def _check_e2e(message: Message, definitions: Mapping[str, Any], override: Mappi
                                 line, name))
         return MessageProtection(name, message.frame_id, None, refused=True)
     if protection is None:
-        if required:
+        if required and not diagnostic_kind(message):   # ISO-TP carries no E2E (its framing is checked instead)
             findings.append(Finding(ERROR, "e2e", "no E2E protection declared (E2E_Profile, ARXML E2E properties "
                                     "or bench.toml [e2e]): --e2e required wants a profile on every message",
                                     line, name))
-        return MessageProtection(name, message.frame_id, None)
+        return MessageProtection(name, message.frame_id, None, diagnostic=bool(diagnostic_kind(message)))
     for what, place in (("CRC", protection.crc), ("counter", protection.counter)):
         span = set(range(place.start, place.start + place.length))
         for signal in message.signals:
@@ -697,7 +706,8 @@ def summary_line(result: CheckResult) -> str:
     verdict = "accepted" if result.accepted else "rejected"
     return (f"{result.path}: {verdict}: {errors} error{'s' * (errors != 1)}, {warnings} "
             f"warning{'s' * (warnings != 1)} ({result.messages} messages: {result.protected} protected, "
-            f"{result.unprotected} unprotected; {result.signals} signals; end-to-end {result.e2e})")
+            f"{result.unprotected} unprotected{f', {result.diagnostic} diagnostic' if result.diagnostic else ''}; "
+            f"{result.signals} signals; end-to-end {result.e2e})")
 
 
 def format_finding(result: CheckResult, finding: Finding) -> str:

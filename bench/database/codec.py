@@ -97,6 +97,21 @@ class SignalCodec:
         return True
 
 
+#: Vector's message attributes that mark a database's diagnostic messages (CANoe's and CANdb++'s convention)
+DIAGNOSTIC_ATTRIBUTES = {"DiagRequest": "request", "DiagResponse": "response", "DiagState": "response"}
+
+
+def diagnostic_kind(message: Message) -> str:
+    """"request" or "response" for a diagnostic message (ISO-TP traffic, no cycle time, no E2E), else "".
+    A DBC marks it with Vector's `DiagRequest` / `DiagResponse` / `DiagState` attribute set to Yes."""
+    attributes = message.dbc.attributes if message.dbc is not None else {}
+    for name, kind in DIAGNOSTIC_ATTRIBUTES.items():
+        attribute = attributes.get(name)
+        if attribute is not None and attribute.value in (1, "Yes", "yes"):
+            return kind
+    return ""
+
+
 class MessageCodec:
     """Encode and decode one message; E2E bytes are left to `bench.e2e`."""
 
@@ -109,6 +124,8 @@ class MessageCodec:
         self.senders: tuple[str, ...] = tuple(message.senders)
         cycle_ms = message.cycle_time
         self.cycle_time: float | None = cycle_ms / 1000.0 if cycle_ms else None
+        #: "request" / "response": ISO-TP traffic (bench.diag), judged by its framing, never by cycle, E2E or range
+        self.diagnostic: str = diagnostic_kind(message)
         self.signals: tuple[SignalCodec, ...] = tuple(
             SignalCodec(
                 name=s.name, start=s.start, length=s.length, signed=s.is_signed,

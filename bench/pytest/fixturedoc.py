@@ -51,7 +51,7 @@ import pytest
 pytestmark = [pytest.mark.dut("NODE"), pytest.mark.req("NODE-REQ-01", "NODE-REQ-02")]
 
 
-@pytest.mark.reference_only("NODE", reason="configures the simulated NODE through a bench-private message")
+@pytest.mark.reference_only("NODE", reason="injects a fault into frames only the simulated NODE sends")
 def test_something(bench): ...
 ```
 

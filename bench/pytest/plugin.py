@@ -26,6 +26,7 @@ from bench.case import Case
 from bench.checks.steps import step_values
 from bench.config import ProjectConfig, RunSettings, load_config
 from bench.database.codec import load_codebook
+from bench.diag.tester import DiagnosticError
 from bench.errors import BenchError, Inconclusive
 from bench.faults.plan import parse_fault
 from bench.options import add_pytest_options
@@ -375,7 +376,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
                               ) -> Generator[None, Result[pytest.TestReport], None]:
     outcome = yield
     report: pytest.TestReport = outcome.get_result()
-    if call.excinfo is not None and call.excinfo.errisinstance((FailedSteps, Inconclusive)):
+    if call.excinfo is not None and call.excinfo.errisinstance((FailedSteps, Inconclusive, DiagnosticError)):
         report.longrepr = str(call.excinfo.value)   # the steps say it all: no traceback through pytest's hooks
         if call.excinfo.errisinstance(Inconclusive):
             # pytest's own outcome stays "failed" (a plain pytest run must not pass it); the bench's records and

@@ -7,8 +7,31 @@ so a behaviour never deals with frames, counters or checksums.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Protocol, runtime_checkable
+
+
+class DiagnosticSide(Protocol):
+    """The diagnostic side of a simulated node (UDS server and fault memory, bench.diag.server), built by the bench
+    from the project's diagnostic declaration. The behaviour feeds it what only the ECU knows: its monitors'
+    results, its live values, its coding and routines."""
+
+    def report(self, t: float, *failed: str) -> None:
+        """The node's fault monitors ran at bench time t: the DTCs named (by DTC name) failed, all others passed.
+        Cheap when nothing changed: call it every step."""
+
+    def provide(self, name: str, source: Callable[[], float | str]) -> None:
+        """Where a DID's value comes from (by DID name): read on ReadDataByIdentifier and into snapshots."""
+
+    def coding(self, name: str) -> float:
+        """A coding DID's current value (its default until a tester writes it)."""
+
+    def on_routine(self, name: str, start: Callable[[], None]) -> None:
+        """Called when a tester starts the routine."""
+
+    def on_reset(self, callback: Callable[[], None]) -> None:
+        """Called when an ECUReset takes effect (the node starts again as after power-up; coding and fault memory
+        are kept)."""
 
 
 class NodeIO(Protocol):
@@ -43,6 +66,10 @@ class NodeIO(Protocol):
 
     def invalid(self, message: str) -> bool:
         """True when the last frame of the message failed an end-to-end, length or range check."""
+
+    def diagnostics(self, node: str) -> DiagnosticSide | None:
+        """The diagnostic side the bench simulates for `node` (one this station plays); None when the project
+        declares no diagnostics for it."""
 
 
 @runtime_checkable

@@ -109,6 +109,15 @@ class Restbus:
         slot = self.periodic.get(message)
         (self._slot(message) if slot is None else slot).values.update(signals)
 
+    def value(self, message: str, signal: str) -> float:
+        """What the restbus sends for one signal now (physical; an enumeration's number): a simulated node's live
+        value, e.g. for its diagnostic side's ReadDataByIdentifier."""
+        slot = self._slot(message)
+        value = slot.values[signal]
+        if isinstance(value, str):
+            return float(slot.codec.by_name[signal].choices[value])
+        return float(value)
+
     def reset_values(self, message: str) -> None:
         slot = self._slot(message)
         slot.values = dict(slot.codec.start_values())

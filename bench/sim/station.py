@@ -11,13 +11,13 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import can
 
 from bench.checks.monitor import Monitor
 from bench.faults.plan import FaultPlan
-from bench.sim.node import Behaviour
+from bench.sim.node import Behaviour, DiagnosticSide
 from bench.sim.restbus import Restbus
 from bench.transport import ReceivedFrame, Transport, transport_for
 
@@ -91,6 +91,23 @@ class _StationIO:
     def invalid(self, message: str) -> bool:
         return self._station.monitor.invalid(message)
 
+    def diagnostics(self, node: str) -> DiagnosticSide | None:
+        return self._station.diagnostics.get(node)
+
+
+class FrameListener(Protocol):
+    """Takes the frames of some identifiers as they arrive, besides the monitor (an ISO-TP endpoint: a simulated
+    node's UDS server, the bench's tester), and has timers of its own that the station runs while it is busy."""
+
+    frame_ids: tuple[int, ...]
+
+    @property
+    def busy(self) -> bool: ...
+
+    def on_frame(self, t: float, frame_id: int, data: bytes) -> None: ...
+
+    def poll(self, t: float) -> None: ...
+
 
 class Station:
     def __init__(self, name: str, bus: can.BusABC | Transport, restbus: Restbus, monitor: Monitor,
@@ -151,6 +168,32 @@ class Station:
         self._outbox: list[tuple[int, bytes, bool, float, bool]] = []
         self._due: dict[int, int] = {}
         self._t_before = 0.0
+        # Frames some listeners take besides the monitor (diagnostics: ISO-TP endpoints), by identifier
+        self.listeners: dict[int, list[FrameListener]] = {}
+        self._listening: list[FrameListener] = []
+        #: the diagnostic side of each node this station simulates (bench.diag.server, set by the session)
+        self.diagnostics: dict[str, DiagnosticSide] = {}
+
+    def listen(self, listener: FrameListener) -> None:
+        """Hand the frames of the listener's identifiers to it as they arrive, and poll it every tick while busy."""
+        for frame_id in listener.frame_ids:
+            self.listeners.setdefault(frame_id, []).append(listener)
+        self._listening.append(listener)
+
+    def unlisten(self, listener: FrameListener) -> None:
+        for frame_id in listener.frame_ids:
+            taking = self.listeners.get(frame_id, [])
+            if listener in taking:
+                taking.remove(listener)
+            if not taking:
+                self.listeners.pop(frame_id, None)
+        if listener in self._listening:
+            self._listening.remove(listener)
+
+    def send_now(self, frame_id: int, data: bytes) -> None:
+        """Send one frame outside the restbus (a diagnostic message), at the station's time, through the fault
+        plan like every frame it sends."""
+        self.send(self.now(), frame_id, data)
 
     @property
     def stamped_batches(self) -> bool:
@@ -172,6 +215,7 @@ class Station:
         Returns how many were read: `limit` means more may be waiting."""
         frames: Iterable[ReceivedFrame] = self._frames(timeout, limit)
         monitor, echoes, stamp, now = self.monitor, self._echoes, self.stamp, self.now
+        listeners = self.listeners
         count = 0
         frozen = self.frozen_now
         t_poll: float | None = None
@@ -193,6 +237,9 @@ class Station:
                 else:   # one socket delivers in order: a stamp never goes back (one of another base could)
                     t = self._last_rx = max(self._last_rx, stamp(msg.timestamp))
                 monitor.on_frame(t, msg.arbitration_id, data, "rx", msg.is_extended_id, msg.is_error_frame)
+                if listeners and msg.arbitration_id in listeners and not msg.is_error_frame:
+                    for listener in listeners[msg.arbitration_id]:
+                        listener.on_frame(t, msg.arbitration_id, data)
                 if t_first is None:
                     t_first = t
         if t_first is not None and self.self_timing is not None and self.recent is not None and stamp is not None:
@@ -212,6 +259,9 @@ class Station:
         io = self.io
         for behaviour in self.behaviours:
             behaviour.step(io, t, dt)
+        for listener in self._listening:
+            if listener.busy:
+                listener.poll(t)
         faults = self.faults
         if faults is not None and (faults.any or self._delayed):
             self._tick_faults(faults, t, dt)

@@ -8,7 +8,9 @@ here, instead of one per test file.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+
+from bench.sim.node import DiagnosticSide
 
 #: (message, signal) -> (minimum, maximum) of the signal's range
 Bounds = Mapping[tuple[str, str], tuple[float, float]]
@@ -34,6 +36,8 @@ class MemoryIO:
         self.silenced: set[str] = set()
         self.invalid_set: set[str] = set()
         self.stopped: set[str] = set()
+        #: the diagnostic side of each node (a test puts a bench.diag.server.UdsServer here); none by default
+        self.diagnostic_sides: dict[str, DiagnosticSide] = {}
 
     @property
     def now(self) -> float:
@@ -68,3 +72,31 @@ class MemoryIO:
 
     def invalid(self, message: str) -> bool:
         return message in self.invalid_set
+
+    def diagnostics(self, node: str) -> DiagnosticSide | None:
+        return self.diagnostic_sides.get(node)
+
+
+class CodedSide:
+    """A diagnostic side reduced to its coding (bench.sim.node.DiagnosticSide), for a behaviour stepped on a
+    MemoryIO: `MemoryIO.diagnostic_sides[node] = CodedSide({"SomeCoding": 1})`. Reports, providers, routines and
+    resets are taken and forgotten; `failed` keeps the DTC names of the latest report."""
+
+    def __init__(self, coding: Mapping[str, float]) -> None:
+        self.values = dict(coding)
+        self.failed: tuple[str, ...] = ()
+
+    def report(self, t: float, *failed: str) -> None:
+        self.failed = failed
+
+    def provide(self, name: str, source: Callable[[], float | str]) -> None:
+        pass
+
+    def coding(self, name: str) -> float:
+        return self.values[name]
+
+    def on_routine(self, name: str, start: Callable[[], None]) -> None:
+        pass
+
+    def on_reset(self, callback: Callable[[], None]) -> None:
+        pass

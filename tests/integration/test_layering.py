@@ -226,7 +226,7 @@ def test_only_the_transport_asks_a_bus_what_it_is() -> None:
 # -- the packages of bench/ ------------------------------------------------------------------------------------
 #: The packages below the session: what a run is built of. None imports the session, the case, the runner, the
 #: command line, the reports or the pytest plugin, and none imports pytest (they run without a test runner).
-BELOW_THE_SESSION = ("transport", "log", "sim", "checks", "faults", "database", "e2e", "results")
+BELOW_THE_SESSION = ("transport", "log", "sim", "checks", "faults", "database", "e2e", "diag", "results")
 ABOVE = ("bench.session", "bench.case", "bench.run", "bench.cli", "bench.report", "bench.pytest", "bench.stop")
 #: At most this many modules at bench/'s top level (issue 28): the rest lives in packages named for what they hold.
 TOP_LEVEL_MAX = 12
