@@ -28,6 +28,12 @@ import tempfile
 from pathlib import Path
 
 LAYERS = ("B0", "B1", "B2", "B2all")
+#: per scenario: the coding of its ECUs (docs/contract/diagnostics.md DIAG-COD-01; values as numbers): the 4WS law
+#: FEEDBACK, the SBW's combined feedback YAW_RATE_LAT_ACCEL with the default G_r
+CODING: dict[str, dict[str, dict[str, float]]] = {
+    "EV4WIS_4WS": {"VCU": {"RearSteerLaw": 2}},
+    "ACLASS": {"SBW": {"SteeringMode": 2, "IdealYawGain": 0.28}},
+}
 
 #: per vehicle scenario: (vehicle, stimulus values by message and signal; enumerations by name)
 PLANT_SCENARIOS: dict[str, tuple[str, dict[str, dict[str, float | str]]]] = {
@@ -35,10 +41,8 @@ PLANT_SCENARIOS: dict[str, tuple[str, dict[str, dict[str, float | str]]]] = {
                                                 "TargetSpeed": 1.0}}),
     "EV4WIS_4WS": ("EV4WIS", {"BENCH_Control": {"InitialSpeed": 15.0},
                               "DRV_MotionRequest": {"DriveMode": "ADAPTIVE", "TargetSpeed": 15.0},
-                              "DRV_Steering": {"HandWheelAngle": 30.0},
-                              "BENCH_VcuConfig": {"RearSteerLaw": "FEEDBACK"}}),
+                              "DRV_Steering": {"HandWheelAngle": 30.0}}),
     "ACLASS": ("ACLASS", {"BENCH_Control": {"InitialSpeed": 20.0},
-                          "BENCH_SbwConfig": {"SteeringMode": "YAW_RATE_LAT_ACCEL"},
                           "BENCH_SteeringRobot": {"RobotMode": "ANGLE", "RobotAngle": 45.0}}),
     "ACLASS_ABS": ("ACLASS_ABS", {"BENCH_Control": {"InitialSpeed": 25.0, "SensorNoise": 0.5},
                                   "BENCH_SteeringRobot": {"RobotMode": "ANGLE", "RobotAngle": 30.0},
@@ -54,7 +58,7 @@ def plant_tick(scenario: str, seconds: float, digest: bool = False) -> dict[str,
     from bench.config import load_config
     from bench.database.codec import load_codebook
     from bench.plugins import load_plant
-    from bench.sim.testing import MemoryIO
+    from bench.sim.testing import CodedSide, MemoryIO
 
     vehicle, stimulus = PLANT_SCENARIOS[scenario]
     project = load_config()
@@ -67,6 +71,7 @@ def plant_tick(scenario: str, seconds: float, digest: bool = False) -> dict[str,
         values.setdefault(message, {}).update({k: codec.physical(k, v) for k, v in signals.items()})
     io = MemoryIO()
     io.values = values
+    io.diagnostic_sides = {node: CodedSide(coding) for node, coding in CODING.get(scenario, {}).items()}
     dt, ticks = 0.001, round(seconds / 0.001)
     sha = hashlib.sha256()
     cpu0 = time.process_time()

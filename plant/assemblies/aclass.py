@@ -63,8 +63,9 @@ MESSAGES = frozenset({
 #: Its bench I/O (docs/contract/plant.md PLANT-IO-SBW-01): on the bus only while the SBW is external.
 IO = {"SBW": frozenset({"IO_SbwHandWheel", "IO_SbwPinion", "IO_SbwCurrents", "IO_SbwActuators"})}
 
-#: What its behaviours read of the stimulus: the steering robot, the SBW ECU's configuration, the sensor faults.
-STIMULUS = ("BENCH_SteeringRobot", "BENCH_SbwConfig", "BENCH_SbwSensorFault")
+#: What its behaviours read of the stimulus: the steering robot and the sensor faults (the SBW's coding is
+#: diagnostic, docs/contract/sbw.md SBW-DIAG-02).
+STIMULUS = ("BENCH_SteeringRobot", "BENCH_SbwSensorFault")
 
 
 def single_track_params(p: AclassParams) -> SingleTrackParams:

@@ -36,8 +36,9 @@ MESSAGES = frozenset({
     "PLANT_Status", "PLANT_Position", "PLANT_Motion", "PLANT_Dynamics",
 })
 
-#: What its behaviours read of the stimulus: the VCU's driver requests and its bench-private configuration.
-STIMULUS = ("DRV_MotionRequest", "DRV_Steering", "BENCH_VcuConfig")
+#: What its behaviours read of the stimulus: the VCU's driver requests (its rear-steering law is diagnostic coding,
+#: docs/contract/vcu.md VCU-DIAG-02).
+STIMULUS = ("DRV_MotionRequest", "DRV_Steering")
 
 
 def build(external: Collection[str]) -> list[Behaviour]:

@@ -42,11 +42,12 @@ from collections.abc import Mapping, Sequence
 from enum import IntEnum
 from typing import Protocol
 
-from bench.sim.node import NodeIO
+from bench.sim.node import DiagnosticSide, NodeIO
 from plant import signal_ranges as ranges
 from plant.brakes import Valve
 from plant.ecus.abs_control import ControlConfig, WheelController
 from plant.ecus.abs_estimator import STRAIGHT, Estimate, EstimatorConfig, TurnStateEstimator
+from plant.ecus.diagnostics import EcuDiagnostics
 from plant.sensors import MEASURING_RANGE_KMH
 from plant.vehicles import AbsParams, AclassParams
 
@@ -132,6 +133,7 @@ class AbsEcu:
         self._a = car.cog_to_front_axle
         self.estimator = TurnStateEstimator(self.config)
         self.wheels = [WheelController(self.control) for _ in range(4)]
+        self.diagnostics = EcuDiagnostics("ABS", AbsFault, self._diagnostic_setup)
         self.reset()
 
     def reset(self) -> None:
@@ -155,8 +157,19 @@ class AbsEcu:
             return
         self._last_ms = ms
         self._control_step(io, t)
+        self.diagnostics.report(io, t, int(self.fault))
         if ms % OUTPUT_PERIOD_MS == 0:
             self._output_step(io, t)
+
+    def _diagnostic_setup(self, side: DiagnosticSide, io: NodeIO) -> None:
+        """What an ECUReset does, and the DID only the reference ABS knows (docs/contract/abs.md ABS-DIAG-*)."""
+        side.on_reset(self.reset)
+
+        def demand() -> float:
+            pedals = io.latest("DRV_Pedals")
+            return math.nan if pedals is None else brake_demand(pedals, self.params.pedal_to_pressure)
+
+        side.provide("BrakeDemand", demand)
 
     def _control_step(self, io: NodeIO, t: float) -> None:
         p = self.params

@@ -1,6 +1,8 @@
 """[P3] §2's rear-steering laws for the reference VCU's ADAPTIVE mode above its low-speed range.
 
-Selected by the bench-private coding BENCH_VcuConfig.RearSteerLaw (dbc/bench.dbc; a real VCU ignores it):
+Selected by the VCU's diagnostic coding RearSteerLaw (DID 0xFDC0, dbc/diagnostics.toml, docs/contract/vcu.md
+VCU-DIAG-02), which a tester writes with WriteDataByIdentifier; a real VCU has the same coding (FEEDFORWARD
+required, OFF and FEEDBACK optional, docs/contract/vcu-4ws.md VCU-4WS-10):
 
 - OFF (2WS): δ_r = 0; the centre lies on the rear-axle line (like NORMAL).
 - FEEDFORWARD: δ_r = k(u) δ_f with the zero-sideslip ratio of docs/spec/formulas.md §5 ([P3] §2, Fig. 3a)
@@ -41,14 +43,14 @@ from plant.vehicles import Ev4wisParams
 
 
 class Strategy(IntEnum):
-    """BENCH_VcuConfig.RearSteerLaw value table (dbc/bench.dbc)."""
+    """The coding DID RearSteerLaw's value table (dbc/diagnostics.toml, docs/contract/vcu.md VCU-DIAG-02)."""
 
     OFF = 0
     FEEDFORWARD = 1
     FEEDBACK = 2
 
 
-DEFAULT_LAW = Strategy.FEEDFORWARD   # BENCH_VcuConfig absent (its DBC start value)
+DEFAULT_LAW = Strategy.FEEDFORWARD   # the coding's default (dbc/diagnostics.toml); also without diagnostics
 C1 = 1.0                                  # [P3] §2
 
 

@@ -15,10 +15,12 @@ These loops run at `control_rate` (≥ 1 kHz) inside the plant's time step: plan
 calls `control` every substep. Once per plant tick `step` reads the bus, runs the yaw-rate feedback and
 publishes SBW_HandWheel and SBW_Pinion (sent every 10 ms by the restbus).
 
-Steering mode (BENCH_SbwConfig.SteeringMode, bench-private coding; DIRECT when the message is absent):
+Steering mode: the diagnostic coding SteeringMode (DID 0xFDC0, docs/contract/sbw.md SBW-DIAG-02), written by a
+tester with WriteDataByIdentifier; DIRECT, its default, until one writes another (and DIRECT with the parameter
+file's G_r in a project that declares no diagnostics):
 - DIRECT: ratio 1 (pinion = hand wheel, the mechanical 15:1 car), Δ = 0.
-- YAW_RATE ([P3] §1.1): an "ideal steering ratio": reference yaw rate r* = G_r·θ_h (G_r
-  BENCH_SbwConfig.IdealYawGain, default 0.28 1/s), through a first-order lag (`yaw_reference_lag`); the
+- YAW_RATE ([P3] §1.1): an "ideal steering ratio": reference yaw rate r* = G_r·θ_h (G_r the coding
+  IdealYawGain, DID 0xFDC1, default 0.28 1/s), through a first-order lag (`yaw_reference_lag`); the
   front wheels get the additional angle δ_fa = PI(r* − r) (gains `yaw_feedback_kp/ki`), the pinion the
   offset Δ = i_s·δ_fa from the hand wheel (limited to `additional_angle_limit` and `_rate`, road wheel).
 - YAW_RATE_LAT_ACCEL ([P3] §1.2, whose formula the OCR lost): the same PI on the blended error
@@ -42,11 +44,13 @@ clears when its condition does. Nothing NaN or out of range reaches the bus (eve
 
 from __future__ import annotations
 
+import functools
 import math
 from enum import IntEnum
 
-from bench.sim.node import NodeIO
+from bench.sim.node import DiagnosticSide, NodeIO
 from plant import signal_ranges as ranges
+from plant.ecus.diagnostics import EcuDiagnostics
 from plant.sbw import SbwSensors
 from plant.vehicles import SbwParams
 
@@ -71,7 +75,7 @@ _PINION_RANGE, _INPUT_TIMEOUT = int(SbwFault.PINION_RANGE), int(SbwFault.INPUT_T
 
 
 class SteeringMode(IntEnum):
-    """BENCH_SbwConfig.SteeringMode (dbc/bench.dbc)."""
+    """The coding DID SteeringMode's value table (dbc/diagnostics.toml, docs/contract/sbw.md SBW-DIAG-02)."""
 
     DIRECT = 0
     YAW_RATE = 1
@@ -145,6 +149,7 @@ class SbwEcu:
         self._additional_angle_limit = p.additional_angle_limit * _RAD
         self._dt = -1.0                     # the tick the factors below are for (the plant's dt is fixed)
         self._reference_factor = self._smoothing = self._angle_step = self._rack_factor = 0.0
+        self.diagnostics = EcuDiagnostics("SBW", SbwFault, self._diagnostic_setup)
         self.reset()
 
     def _set_dt(self, dt: float) -> None:
@@ -182,6 +187,8 @@ class SbwEcu:
         self._yaw_integral = 0.0
         self.feedback_active = False
         self.speed = 0.0                    # m/s, from ABS_WheelSpeeds
+        # hand-wheel sensor, column estimate, pinion sensor, steering motor's rotor angle (pinion), rad
+        self.sensors = (0.0, 0.0, 0.0, 0.0)
 
     # -- fast loops (plant.sbw.MotorController) -----------------------------------------------------------
     def control(self, s: SbwSensors, h: float) -> tuple[float, float]:
@@ -191,6 +198,7 @@ class SbwEcu:
         column = s.column
         estimate = column + t_d / self.k_h              # hand wheel from the column and the torsion bar
         hw = s.hand_wheel
+        self.sensors = (hw, estimate, s.pinion, s.motor_pinion)   # the readings this period (diagnostics)
         if hw != self._hw_last:
             self._hw_last, self._est_at_change, self._stuck = hw, estimate, False
         elif not self._stuck and abs(estimate - self._est_at_change) > self.stuck_motion:
@@ -237,10 +245,12 @@ class SbwEcu:
 
     # -- bus side (bench.sim.node.Behaviour) --------------------------------------------------------------
     def _read_config(self, io: NodeIO) -> None:
-        config = io.latest("BENCH_SbwConfig")
+        """The steering mode and G_r from the coding (docs/contract/sbw.md SBW-DIAG-02, written by a tester with
+        WriteDataByIdentifier); DIRECT and the parameter file's G_r for a project without diagnostics."""
         mode, gain = _DIRECT, self.p.ideal_yaw_gain
-        if config is not None:
-            raw_mode, raw_gain = config.get("SteeringMode", 0.0), config.get("IdealYawGain", gain)
+        side = self.diagnostics.side(io)
+        if side is not None:
+            raw_mode, raw_gain = side.coding("SteeringMode"), side.coding("IdealYawGain")
             if raw_mode in _MODES and ranges.finite(raw_gain) and raw_gain > 0.0:
                 mode, gain = _MODES[int(raw_mode)], raw_gain
         self.mode, self.ideal_gain = mode, gain
@@ -300,6 +310,19 @@ class SbwEcu:
         load = -(self.kt_p * self.steer_current - self.b_p * self.pinion_rate) / self.p.pinion_radius
         self.rack_force += (load - self.rack_force) * self._rack_factor
         self._publish(io)
+        self.diagnostics.report(io, t, self._fault_code())
+
+    def _diagnostic_setup(self, side: DiagnosticSide, io: NodeIO) -> None:
+        """The reference SBW's diagnostic values (docs/contract/sbw.md SBW-DIAG-*): what an ECUReset does, and
+        the DIDs only it knows (the bench serves those that equal a signal it sends or reads)."""
+        side.on_reset(self.reset)
+        side.provide("VehicleSpeed", lambda: self.speed * 3.6)
+        for index, name in enumerate(("HandWheelSensorAngle", "ColumnAngleEstimate", "PinionSensorAngle",
+                                      "ActuatorAngle")):
+            side.provide(name, functools.partial(self._sensor_deg, index))
+
+    def _sensor_deg(self, index: int) -> float:
+        return self.sensors[index] * _DEG
 
     @property
     def fault(self) -> SbwFault:

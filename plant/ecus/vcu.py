@@ -5,8 +5,9 @@ This docstring summarises it for the code; where they differ, the contract is ri
 
 Inputs: DRV_MotionRequest (DriveMode, PivotX, PivotY, TargetSpeed), DRV_Steering (HandWheelAngle, in
 NORMAL and ADAPTIVE only), WHL_Status_xx (faults and the VehicleSpeed estimate), IMU_Motion (yaw rate,
-for ADAPTIVE's feedback law or hook), BENCH_VcuConfig (ADAPTIVE's rear-steering law). TargetSpeed is the
-signed centre speed v (docs/spec/k-matrix.md).
+for ADAPTIVE's feedback law or hook); ADAPTIVE's rear-steering law is the diagnostic coding RearSteerLaw (DID
+0xFDC0, docs/contract/vcu.md VCU-DIAG-02), written by a tester. TargetSpeed is the signed centre speed v
+(docs/spec/k-matrix.md).
 
 Modes (every one a rotation about a point, [P0] §1.2):
 - NORMAL: curvature angle X = HandWheelAngle / hand_wheel_ratio at the front-axle centre, centre on the
@@ -17,12 +18,12 @@ Modes (every one a rotation about a point, [P0] §1.2):
 - ADAPTIVE: below adaptive_low_speed_limit (20 km/h) opposite-phase 4WS, the centre on y = 0 with the
   front-axle curvature angle X = HandWheelAngle / ratio ([P0] §3's U-turn). Above it the front-axle
   angle stays X (fixed ratio 15) and the rear-axle angle comes from [P3] §2's law chosen by the
-  bench-private coding BENCH_VcuConfig.RearSteerLaw (plant/ecus/rear_steer.py: OFF = 2WS, FEEDFORWARD =
-  zero-sideslip k(u) X, FEEDBACK = −X + C2 u r with the IMU_Motion yaw rate; FEEDFORWARD when the message
-  is absent; REQUEST_INVALID when its last frame is invalid or its value unknown), or, when the VCU is
-  built with a hook `high_speed_law(X, |u|, measured yaw rate)` (u: the vehicle speed estimate of
-  rear_steer.py), from the hook instead; all four wheels steer about the one centre of the two axle
-  headings (VCU_RotationCentre).
+  coding RearSteerLaw (plant/ecus/rear_steer.py: OFF = 2WS, FEEDFORWARD = zero-sideslip k(u) X, FEEDBACK =
+  −X + C2 u r with the IMU_Motion yaw rate; FEEDFORWARD, the default, until a tester writes another and in a
+  project that declares no diagnostics; REQUEST_INVALID should the coding hold a value without a law, which a
+  tester cannot write), or, when the VCU is built with a hook `high_speed_law(X, |u|, measured yaw rate)`
+  (u: the vehicle speed estimate of rear_steer.py), from the hook instead; all four wheels steer about the one
+  centre of the two axle headings (VCU_RotationCentre).
 In NORMAL and ADAPTIVE a positive v drives forward: v_o = v * sign(x_centre) in §2's convention.
 
 Faults (VCU_VehicleState.VcuFault), checked in this order, the first found is sent:
@@ -30,8 +31,8 @@ Faults (VCU_VehicleState.VcuFault), checked in this order, the first found is se
   4 REQUEST_INVALID  its last frame failed E2E/range checks, a value is non-finite, the mode is unknown,
                      or the request needs more than hub_motor_max_speed on a wheel or more than
                      max_yaw_rate (e.g. a centre a few cm off the origin), or (ADAPTIVE above its low-speed
-                     range) BENCH_VcuConfig's last frame is invalid or names no law: never an out-of-range
-                     command. The limit check runs after 1-3 (their centres have no speeds):
+                     range) the coding RearSteerLaw names no law (a tester cannot write one): never an
+                     out-of-range command. The limit check runs after 1-3 (their centres have no speeds):
                      docs/contract/vcu.md VCU-FLT-03.
   1 CENTRE_AT_ORIGIN centre within 1 cm of the origin with v != 0 (v = 0 sets the spin-in-place angles).
   2 CENTRE_ON_WHEEL  centre within 1 cm of a contact point.
@@ -66,9 +67,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 
-from bench.sim.node import NodeIO
+from bench.sim.node import DiagnosticSide, NodeIO
 from plant import signal_ranges as ranges
 from plant.body import VelocityFit
+from plant.ecus.diagnostics import EcuDiagnostics
 from plant.ecus.rear_steer import DEFAULT_LAW, SeedLaws, Strategy, VehicleSpeedEstimate
 from plant.kinematics import (
     CORNERS,
@@ -148,7 +150,17 @@ class Vcu:
         self._fit = VelocityFit(self.geometry)
         self._status = tuple(f"WHL_Status_{c}" for c in CORNERS)
         self._cmd = tuple(f"VCU_WheelCmd_{c}" for c in CORNERS)
+        self.diagnostics = EcuDiagnostics("VCU", VcuFault, self._diagnostic_setup)
         self.reset()
+
+    def _diagnostic_setup(self, side: DiagnosticSide, io: NodeIO) -> None:
+        """What an ECUReset does, and the DID only the reference VCU knows (docs/contract/vcu.md VCU-DIAG-*)."""
+        side.on_reset(self.reset)
+
+        def timed_out() -> float:   # bit 0 FL .. bit 3 RR
+            return float(sum(1 << i for i, name in enumerate(self._status) if io.timed_out(name)))
+
+        side.provide("WheelStatusTimedOut", timed_out)
 
     def reset(self) -> None:
         self.held: Plan = _STRAIGHT
@@ -207,16 +219,14 @@ class Vcu:
             return math.nan
         return rear
 
-    @staticmethod
-    def _strategy(io: NodeIO) -> Strategy | None:
-        """BENCH_VcuConfig.RearSteerLaw; DEFAULT_LAW when absent, None when invalid or unknown."""
-        config = io.latest("BENCH_VcuConfig")
-        if config is None:
+    def _strategy(self, io: NodeIO) -> Strategy | None:
+        """The rear-steering law from the coding (docs/contract/vcu.md VCU-DIAG-02, written by a tester with
+        WriteDataByIdentifier); DEFAULT_LAW for a project without diagnostics; None when the coding names no law."""
+        side = self.diagnostics.side(io)
+        if side is None:
             return DEFAULT_LAW
-        value = config.get("RearSteerLaw", math.nan)
-        if io.invalid("BENCH_VcuConfig") or value not in (0, 1, 2):
-            return None
-        return Strategy(int(value))
+        value = side.coding("RearSteerLaw")
+        return Strategy(int(value)) if value in (0, 1, 2) else None
 
     def _plan(self, mode: int, px: float, py: float, v: float, x_deg: float,
               rear: float) -> tuple[VcuFault, Plan | None]:
@@ -296,6 +306,7 @@ class Vcu:
         if fault == VcuFault.OK and self._wheel_fault(io, t):
             fault = VcuFault.WHEEL_FAULT
         self.fault = fault
+        self.diagnostics.report(io, t, int(fault))
         if fault == VcuFault.OK and plan is not None:
             self.held = plan
             rpm, yaw = plan.rpm, plan.yaw_rate

@@ -25,8 +25,9 @@ from __future__ import annotations
 import math
 from enum import IntEnum
 
-from bench.sim.node import NodeIO
+from bench.sim.node import DiagnosticSide, NodeIO
 from plant import signal_ranges as ranges
+from plant.ecus.diagnostics import EcuDiagnostics
 from plant.vehicles import Ev4wisParams
 
 
@@ -66,6 +67,7 @@ class WheelEcu:
         self._mps_per_rpm = math.pi * params.wheel_radius / 30.0
         self._dt = -1.0
         self._servo_gain = self._motor_gain = self._max_move = self._ramp_step = 0.0
+        self.diagnostics = EcuDiagnostics(self.nodes[0], WheelFault, self._diagnostic_setup)
         self.reset()
 
     def reset(self) -> None:
@@ -75,6 +77,9 @@ class WheelEcu:
         self.rate_dps = 0.0
         self.current = 0.0
         self.fault = WheelFault.OK
+
+    def _diagnostic_setup(self, side: DiagnosticSide, io: NodeIO) -> None:
+        side.on_reset(self.reset)
 
     def preset(self, angle_deg: float, speed_rpm: float) -> None:
         """Start a scenario in this state (BENCH_Control.InitialSpeed)."""
@@ -112,6 +117,7 @@ class WheelEcu:
             self._ramp_step = self._ramp * dt
         fault, target = self._command(io)
         self.fault = fault
+        self.diagnostics.report(io, t, _FAULT_CODE[fault])
         if target is None:          # hold the angle, ramp the speed down
             move = 0.0
             ramp = self._ramp_step

@@ -8,6 +8,7 @@ Real ECUs are built against chassis.dbc, so every structural rule is checked on 
 from __future__ import annotations
 
 import math
+import tomllib
 
 import cantools
 import pytest
@@ -21,7 +22,9 @@ WHEELS = ("FL", "FR", "RL", "RR")
 MODES = {0: "NORMAL", 1: "LATERAL", 2: "ADAPTIVE", 3: "PIVOT"}
 ENUM = None  # an enumeration: any unit will do (the DBC writes "-")
 
-NODES = {"DRIVER", "VCU", "WHL_FL", "WHL_FR", "WHL_RL", "WHL_RR", "SBW", "ABS", "IMU"}
+NODES = {"DRIVER", "VCU", "WHL_FL", "WHL_FR", "WHL_RL", "WHL_RR", "SBW", "ABS", "IMU", "TESTER"}
+#: the diagnostic declaration (docs/contract/diagnostics.md DIAG-TP-01): its identifiers, read here independently
+DECLARATION = tomllib.loads((CHASSIS_DBC.parent / "diagnostics.toml").read_text(encoding="utf-8"))
 
 # id, name, sender, cycle ms, {contract signal: unit}
 CONTRACT: list[tuple[int, str, str, int, dict[str, str | None]]] = [
@@ -126,7 +129,14 @@ def _load(path: object) -> Database:
 
 CHASSIS = _load(CHASSIS_DBC)
 BENCH_DB = _load(BENCH_DBC)
-ALL_MESSAGES = [(db_name, m) for db_name, db in (("chassis", CHASSIS), ("bench", BENCH_DB)) for m in db.messages]
+#: every periodic message of both databases (the diagnostic ones follow DIAG-TP-01, tested apart below)
+ALL_MESSAGES = [(db_name, m) for db_name, db in (("chassis", CHASSIS), ("bench", BENCH_DB)) for m in db.messages
+                if not m.name.startswith("DIAG_")]
+DIAGNOSTIC = {f"DIAG_{node}_{kind}": (table[key], "TESTER" if kind == "Req" else node,
+                                      "DiagRequest" if kind == "Req" else "DiagResponse")
+              for node, table in DECLARATION["nodes"].items()
+              for kind, key in (("Req", "request"), ("Resp", "response"))}
+DIAGNOSTIC["DIAG_Functional"] = (DECLARATION["protocol"]["functional_request"], "TESTER", "DiagRequest")
 
 
 def _bits(signal: Signal) -> set[int]:
@@ -160,7 +170,19 @@ def test_chassis_nodes() -> None:
 
 
 def test_chassis_has_exactly_the_contract_messages() -> None:
-    assert {m.name for m in CHASSIS.messages} == {row[1] for row in CONTRACT}
+    assert {m.name for m in CHASSIS.messages} == {row[1] for row in CONTRACT} | set(DIAGNOSTIC)
+
+
+@pytest.mark.parametrize("name", sorted(DIAGNOSTIC))
+def test_diagnostic_message(name: str) -> None:
+    """DIAG-TP-01: each declared identifier is a diagnostic message of its sender, marked with Vector's attribute,
+    8 bytes, no signals, no cycle time and no E2E (ISO-TP carries it)."""
+    frame_id, sender, attribute = DIAGNOSTIC[name]
+    message = CHASSIS.get_message_by_name(name)
+    assert (message.frame_id, message.senders, message.length, message.signals) == (frame_id, [sender], 8, [])
+    assert not message.is_extended_frame and not message.is_fd and message.comment
+    assert message.dbc.attributes[attribute].value == 1
+    assert "GenMsgCycleTime" not in message.dbc.attributes and "E2E_Profile" not in message.dbc.attributes
 
 
 @pytest.mark.parametrize("frame_id, name, sender, cycle, signals", CONTRACT, ids=[row[1] for row in CONTRACT])
@@ -304,6 +326,8 @@ def test_every_message_declares_profile_11_with_a_data_id_of_its_own() -> None:
         definitions = db.dbc.attribute_definitions
         assert definitions["E2E_Offset"].default_value == 48 and definitions["E2E_DataIDMode"].default_value == "BOTH"
         for message in db.messages:
+            if message.name in DIAGNOSTIC:
+                continue   # ISO-TP (test_diagnostic_message)
             attributes = message.dbc.attributes
             profile = definitions["E2E_Profile"].choices[attributes["E2E_Profile"].value]
             data_id = attributes["E2E_DataID"].value

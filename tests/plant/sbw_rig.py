@@ -3,7 +3,7 @@ plant's SBW tests (test_sbw_model, test_sbw_io)."""
 
 from __future__ import annotations
 
-from bench.sim.testing import MemoryIO
+from bench.sim.testing import CodedSide, MemoryIO
 from plant import signal_ranges as ranges
 from plant.assemblies import aclass
 from plant.driver import ANGLE
@@ -27,7 +27,8 @@ class Rig:
         self.ecu: SbwEcu | None = by_node.get("SBW")  # type: ignore[assignment]
         self.io.values["BENCH_Control"] = {"ScenarioId": scenario, "InitialSpeed": round(kmh / 3.6, 2), "Vehicle": 1,
                                            "RoadMu": 1.0, "SensorNoise": 0.0}
-        self.io.values["BENCH_SbwConfig"] = {"SteeringMode": mode, "IdealYawGain": 0.28}
+        self.coding = CodedSide({"SteeringMode": mode, "IdealYawGain": 0.28})   # the SBW's (SBW-DIAG-02)
+        self.io.diagnostic_sides["SBW"] = self.coding
         self.robot(ANGLE, 0.0)
 
     def robot(self, mode: int, angle: float = 0.0, torque: float = 0.0) -> None:

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from bench.sim.testing import MemoryIO
+from bench.sim.testing import CodedSide, MemoryIO
 from plant import signal_ranges as ranges
 from plant.dynamic_body import (
     DYNAMIC_OFF_SPEED,
@@ -245,8 +245,8 @@ def _vcu_rear(config: dict[str, float] | None, imu: dict[str, float] | None = No
     io = MemoryIO(ranges.BY_SIGNAL)
     io.values["DRV_MotionRequest"] = {"DriveMode": 2, "PivotX": 0.0, "PivotY": 0.0, "TargetSpeed": speed}
     io.values["DRV_Steering"] = {"HandWheelAngle": 30.0, "HandWheelRate": 0.0, "DriverTorque": 0.0}
-    if config is not None:
-        io.values["BENCH_VcuConfig"] = config
+    if config is not None:   # the VCU's coding (docs/contract/vcu.md VCU-DIAG-02)
+        io.diagnostic_sides["VCU"] = CodedSide(config)
     if imu is not None:
         io.values["IMU_Motion"] = imu
     vcu = Vcu(P)

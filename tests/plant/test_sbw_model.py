@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import time
+import tomllib
 from dataclasses import replace
 from pathlib import Path
 
@@ -65,8 +66,9 @@ def test_mirrored_ranges_match_the_dbc() -> None:
         assert (signals[key].minimum, signals[key].maximum) == (lo, hi), key
     fault = signals[("SBW_Pinion", "SbwFault")]
     assert {int(k): str(v) for k, v in fault.choices.items()} == {f.value: f.name for f in SbwFault}
-    mode = signals[("BENCH_SbwConfig", "SteeringMode")]
-    assert {int(k): str(v) for k, v in mode.choices.items()} == {m.value: m.name for m in SteeringMode}
+    coding = tomllib.loads((REPO / "dbc" / "diagnostics.toml").read_text())["nodes"]["SBW"]["did"]
+    mode = next(d for d in coding if d["name"] == "SteeringMode")
+    assert mode["values"] == {m.name: m.value for m in SteeringMode}
     injected = signals[("BENCH_SbwSensorFault", "SensorFault")]
     assert {int(k): str(v) for k, v in injected.choices.items()} == {
         SensorFault.NONE: "NONE", SensorFault.HANDWHEEL_STUCK: "HANDWHEEL_STUCK",
@@ -271,7 +273,7 @@ def test_hand_wheel_returns_when_released() -> None:
        gain=st.sampled_from([0.22, 0.28, 0.34]))
 def test_ideal_steering_ratio_reaches_g_r(kmh: float, mode: int, gain: float) -> None:
     rig = Rig(kmh, mode)
-    rig.io.values["BENCH_SbwConfig"]["IdealYawGain"] = gain
+    rig.coding.values["IdealYawGain"] = gain
     rig.robot(ANGLE, 20.0)
     rig.run(3.0)
     ratio = rig.v("IMU_Motion", "YawRate") / rig.v("SBW_HandWheel", "HandWheelAngle")

@@ -60,7 +60,8 @@ def test_a_vehicle_sends_what_its_ecus_set_and_nothing_of_the_others(vehicle: st
 def test_a_vehicle_reads_the_stimulus_its_declaration_names(vehicle: str) -> None:
     """Every stimulus message the behaviours ask for (io.latest), besides BENCH_Control, is declared: a scenario
     that sends only the declared messages leaves none of their inputs silent. (Some declared ones are read only in
-    some states, e.g. BENCH_VcuConfig in ADAPTIVE at speed, so the converse is not asked of a 0.5 s run.)"""
+    some states, e.g. DRV_Steering, which the VCU reads in NORMAL and ADAPTIVE only, so the converse is not asked
+    of a 0.5 s run.)"""
     session, _ = _session(vehicle)
     stimulus_messages = {c.name for c in session.codebook.sent_by(session.project.stimulus)}
     read: set[str] = set()
