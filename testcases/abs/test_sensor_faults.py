@@ -25,6 +25,7 @@ import pytest
 
 from bench.case import Case
 from testcases.abs import steps
+from testcases.fault_memory import FaultMemory
 
 SPEED = 60.0              # km/h
 SETTLE = 1.0              # s before the fault
@@ -69,8 +70,10 @@ def _expect_cleared(bench: Case, kind: str, wheel: str) -> None:
 def test_abs_sensor_short(bench: Case) -> None:
     report = steps.limit("fault_report_max")
     _drive(bench)
+    memory = FaultMemory(bench, "ABS")
     t_fault = _fault(bench, "FR", SHORT)
     bench.run(0.3)
+    memory.during("WHEEL_SPEED_INVALID", t_fault)
     bench.expect_between("SHORT FR: AbsFault WHEEL_SPEED_INVALID after", _first(bench, t_fault, WHEEL_SPEED_INVALID),
                          0.0, report, unit="s", detail=steps.source("fault_report_max"))
     t_brake = bench.now
@@ -94,6 +97,8 @@ def test_abs_sensor_short(bench: Case) -> None:
         bench.expect(f"braking in the fault: {w} pressure - master pressure, largest", gap, 0.0, abs_tol=tol,
                      unit="bar", detail=steps.source("passive_pressure_tol"))
     _expect_cleared(bench, "SHORT", "FR")
+    memory.after("WHEEL_SPEED_INVALID", t_fault)
+    memory.clear_and_reset()
 
 
 @pytest.mark.dut("ABS")
@@ -101,18 +106,23 @@ def test_abs_sensor_short(bench: Case) -> None:
 def test_abs_sensor_open_line(bench: Case) -> None:
     report, confirm = steps.limit("fault_report_max"), steps.limit("open_line_confirm")
     _drive(bench)
+    memory = FaultMemory(bench, "ABS")
     t_fault = _fault(bench, "RL", OPEN_LINE)
     bench.run(confirm + 0.3)
+    memory.during("WHEEL_SPEED_INVALID", t_fault)
     bench.expect_between("OPEN_LINE RL: AbsFault WHEEL_SPEED_INVALID after", _first(bench, t_fault,
                          WHEEL_SPEED_INVALID), confirm, confirm + report, unit="s",
                          detail=f"{steps.source('open_line_confirm')}; {steps.source('fault_report_max')}")
     _expect_cleared(bench, "OPEN_LINE", "RL")
+    memory.after("WHEEL_SPEED_INVALID", t_fault)
+    memory.clear_and_reset()
 
 
 @pytest.mark.dut("ABS")
 @pytest.mark.req("ABS-FLT-01")
 def test_abs_sensor_stuck_at_constant_speed(bench: Case) -> None:
     _drive(bench)
+    memory = FaultMemory(bench, "ABS")
     t_fault = _fault(bench, "FL", STUCK)
     bench.run(2.0)
     faults = steps.samples(bench, "ABS_SteerState", ["AbsFault"], since=t_fault, required=True)
@@ -121,3 +131,4 @@ def test_abs_sensor_stuck_at_constant_speed(bench: Case) -> None:
     sensor = steps.samples(bench, "ABS_WheelSpeeds", ["WheelSpeedFL"], since=t_fault + 0.1, required=True)
     bench.note(f"the stuck FL reading: {len(set(sensor['WheelSpeedFL'].tolist()))} distinct value(s) over "
                f"{sensor['WheelSpeedFL'].size} frames")
+    memory.nothing_stored("a valid reading is no fault")

@@ -17,11 +17,15 @@ from dataclasses import dataclass
 import pytest
 
 from bench.case import Case
+from testcases.fault_memory import FaultMemory
 from testcases.stimulus import STIMULUS
 
 TICK = 0.001
 CYCLE = {"DRV_MotionRequest": 0.020, "VCU_WheelCmd_FL": 0.010, "WHL_Status_FR": 0.010, "DRV_Steering": 0.010}
 REQUEST_INVALID, REQUEST_TIMEOUT, WHEEL_FAULT, CMD_TIMEOUT = 4, 5, 6, 3
+#: reaction -> the node and the DTC that records it (docs/contract/vcu.md VCU-DIAG-01, wheel.md WHL-DIAG-01)
+DTC = {"vcu_request": ("VCU", "REQUEST_INVALID"), "vcu_timeout": ("VCU", "REQUEST_TIMEOUT"),
+       "vcu_wheel": ("VCU", "WHEEL_FAULT"), "wheel_timeout": ("WHL_FL", "CMD_TIMEOUT")}
 REACTION_S = 0.2   # s the ECUs get to show their reaction on the bus (task period + message cycle + timeout)
 
 
@@ -161,12 +165,16 @@ def _param(case: FaultCase):
 @pytest.mark.parametrize("case", [_param(c) for c in CASES])
 def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
     _drive(bench)
+    node, dtc = DTC[case.reaction]
+    memory = FaultMemory(bench, node)
     held = {c: bench.value(f"VCU_WheelCmd_{c}", "SteerAngleCmd") for c in ("FL", "FR", "RL", "RR")}
     fault = bench.inject(case.kind, case.target, after=0.0, duration=case.duration, param=case.param)
     if case.after_window:
         bench.run(fault.end - bench.now)
         bench.wait_until(lambda: not bench.timed_out("VCU_VehicleState"), 0.05)
     _reaction(bench, case)
+    if not case.after_window:   # (after a flood the cause is over: the node's next frame clears the code)
+        memory.during(dtc, fault.start)
     t_zero = bench.now
     bench.run(max(0.0, fault.end - bench.now) + 0.3)    # past the window: the bus recovers
     if case.kind == "counter_freeze":
@@ -184,6 +192,8 @@ def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
                   case.bound * 1000]])
     bench.eventually("no fault once the window is over", lambda: bench.value("VCU_VehicleState", "VcuFault") == 0,
                      1.0)
+    memory.after(dtc, fault.start)
+    memory.clear_and_reset()
     bench.plot("VCU fault and FL wheel", [("VCU_VehicleState", "VcuFault"), ("WHL_Status_FL", "WheelFault"),
                                           ("VCU_WheelCmd_FL", "WheelSpeedCmd")])
 

@@ -1,10 +1,11 @@
 """Shared steps of the four-wheel-steering cases (testcases/rear_steer_4ws/test_*.py, [P3] §2 on the 4WIS EV of
 docs/spec/vehicles.md A).
 
-Stimulus: BENCH_Control (Vehicle EV4WIS, InitialSpeed, RoadMu), BENCH_VcuConfig.RearSteerLaw (the reference
-VCU's law in ADAPTIVE above 20 km/h), DRV_MotionRequest (ADAPTIVE, TargetSpeed = the speed held) and
-DRV_Steering.HandWheelAngle. Observed: ground truth PLANT_* (dbc/bench.dbc), VCU_WheelCmd_xx, WHL_Status_xx,
-VCU_RotationCentre, VCU_VehicleState. Expected values come from testcases/rear_steer_4ws/oracle.py, never from
+Stimulus: BENCH_Control (Vehicle EV4WIS, InitialSpeed, RoadMu), DRV_MotionRequest (ADAPTIVE, TargetSpeed = the
+speed held) and DRV_Steering.HandWheelAngle; the VCU's law in ADAPTIVE above 20 km/h is coded in RearSteerLaw
+(docs/contract/vcu.md VCU-DIAG-02) with WriteDataByIdentifier at each scenario start (testcases/coding.py).
+Observed: ground truth PLANT_* (dbc/bench.dbc), VCU_WheelCmd_xx, WHL_Status_xx, VCU_RotationCentre,
+VCU_VehicleState. Expected values come from testcases/rear_steer_4ws/oracle.py, never from
 plant/.
 """
 
@@ -17,6 +18,7 @@ import numpy as np
 
 from bench.case import Case
 from bench.results.model import Series
+from testcases.coding import code
 from testcases.ev4wis.oracle import rpm_from_speed
 from testcases.limits import limit_value, limits_file, load_limits
 from testcases.rear_steer_4ws import oracle
@@ -34,7 +36,7 @@ def limit(name: str) -> float:
 
 VEHICLE = "EV4WIS"
 STRATEGIES = ("2WS", "FEEDFORWARD", "FEEDBACK")
-#: strategy -> BENCH_VcuConfig.RearSteerLaw value name (dbc/bench.dbc)
+#: strategy -> the VCU's coding RearSteerLaw (docs/contract/vcu.md VCU-DIAG-02, dbc/diagnostics.toml)
 LAW = {"2WS": "OFF", "FEEDFORWARD": "FEEDFORWARD", "FEEDBACK": "FEEDBACK"}
 WHEELS = ("FL", "FR", "RL", "RR")
 SPEED_SETTLE_S = 3.0        # s the hub motors get to bring the speed back after the scenario start
@@ -55,7 +57,7 @@ def start(bench: Case, speed_kmh: float, strategy: str, mu: float = 1.0) -> floa
     motors first brake it a little. Returns the speed as the bus carries it, m/s (the oracle uses this value)."""
     u = round(oracle.mps(speed_kmh), 2)
     bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=u, RoadMu=mu)
-    bench.set("BENCH_VcuConfig", RearSteerLaw=LAW[strategy])
+    code(bench, "VCU", RearSteerLaw=LAW[strategy])
     bench.set("DRV_Steering", HandWheelAngle=0.0)
     bench.set("DRV_MotionRequest", DriveMode="ADAPTIVE", TargetSpeed=u)
     rpm = rpm_from_speed(u)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import pytest
 
+from testcases.coding import code
 from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.steps import limit, mean_since
 from testcases.stimulus import STIMULUS
@@ -53,7 +54,7 @@ def test_aclass_crosscheck_of_the_closed_forms(bench):
     for speed_kmh, hand_wheel in SPEEDS:
         u = round(oracle.mps(speed_kmh), 2)
         bench.start_scenario(Vehicle="ACLASS", stimulus=STIMULUS["ACLASS"], InitialSpeed=u)
-        bench.set("BENCH_SbwConfig", SteeringMode="DIRECT")
+        code(bench, "SBW", SteeringMode="DIRECT")
         bench.set("BENCH_SteeringRobot", RobotMode="ANGLE", RobotAngle=0.0)
         bench.run(0.3)
         bench.set("BENCH_SteeringRobot", RobotMode="ANGLE", RobotAngle=hand_wheel)

@@ -1,12 +1,12 @@
 """4WS feedforward: the zero-sideslip ratio k(u) on the bus ([P3] §2, docs/spec/formulas.md §5).
 
-The VCU in ADAPTIVE with its default law (FEEDFORWARD, docs/contract/vcu-4ws.md VCU-4WS-02; the case also sends
-BENCH_VcuConfig.RearSteerLaw = FEEDFORWARD, which a real VCU ignores) steers the rear axle by k(u) times the front
-axle at 20 km/h and above, about one common rotation centre, with u the VEHICLE's speed (VCU-4WS-01). Measured:
-the axle angles (mean of the two wheels of an axle) commanded in VCU_WheelCmd_xx and reached in WHL_Status_xx,
-and the vehicle's true speed PLANT_Motion.Speed; expected: k(u) = (−b + m a u²/(C_r L)) / (a + m b u²/(C_f L))
-at that speed with docs/spec/vehicles.md A, opposite phase below u_0 = √(b C_r L/(m a)) = 46.76 km/h and same
-phase above (testcases/rear_steer_4ws/oracle.py).
+The VCU in ADAPTIVE with its default law (FEEDFORWARD, docs/contract/vcu-4ws.md VCU-4WS-02; the case codes
+RearSteerLaw = FEEDFORWARD at each scenario start, docs/contract/vcu.md VCU-DIAG-02, as an earlier case may have
+coded another law) steers the rear axle by k(u) times the front axle at 20 km/h and above, about one common
+rotation centre, with u the VEHICLE's speed (VCU-4WS-01). Measured: the axle angles (mean of the two wheels of an
+axle) commanded in VCU_WheelCmd_xx and reached in WHL_Status_xx, and the vehicle's true speed PLANT_Motion.Speed;
+expected: k(u) = (−b + m a u²/(C_r L)) / (a + m b u²/(C_f L)) at that speed with docs/spec/vehicles.md A, opposite
+phase below u_0 = √(b C_r L/(m a)) = 46.76 km/h and same phase above (testcases/rear_steer_4ws/oracle.py).
 Issue 5's checks: opposite phase at 40 km/h, same phase at 100 km/h, sign change within 1 km/h of u_0. The car
 really drives each speed (the speed changes at most at the tyres' μ g): held speeds for the 40/100 km/h checks,
 slow TargetSpeed ramps for the 25-120 km/h sweep and the scan through u_0.

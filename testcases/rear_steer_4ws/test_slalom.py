@@ -26,9 +26,7 @@ from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.path_driver import Path, PreviewDriver, Transition
 from testcases.rear_steer_4ws.steps import STRATEGIES, Run, driver_model, plot_side_by_side, start
 
-pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-14"),
-              pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
-                                          "BENCH_VcuConfig (OFF, FEEDBACK), which a real VCU ignores")]
+pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-14")]
 
 SPEED_KMH = 40.0          # issue 5 / [P3] Fig. 8
 MU = 0.3                  # issue 5 (low friction)

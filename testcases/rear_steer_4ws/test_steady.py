@@ -80,8 +80,6 @@ def test_feedforward_zero_sideslip(bench):
 
 @pytest.mark.dut("VCU")
 @pytest.mark.req("VCU-4WS-10", "VCU-4WS-11")
-@pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
-                                          "BENCH_VcuConfig (OFF, FEEDBACK), which a real VCU ignores")
 def test_feedback_steady_yaw_gain(bench):
     results, runs = [], []
     c2 = oracle.c2(oracle.EV)

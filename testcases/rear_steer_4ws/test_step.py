@@ -1,8 +1,9 @@
 """4WS against 2WS: hand-wheel step at 80 km/h ([P3] §2: "4WS lowers the sideslip angle against 2WS").
 
 The same hand-wheel step (HAND_WHEEL at STEER_RATE, an ISO 7401 step-steer rate) for the three rear-steering
-laws of the reference VCU (BENCH_VcuConfig.RearSteerLaw: OFF = 2WS, FEEDFORWARD, FEEDBACK), each from steady
-straight running at 80 km/h on the dry road. Issue 5: the peak sideslip of 4WS at most half of 2WS; the yaw-rate
+laws of the VCU (coded in RearSteerLaw, docs/contract/vcu.md VCU-DIAG-02: OFF = 2WS, FEEDFORWARD, FEEDBACK),
+each from steady straight running at 80 km/h on the dry road. A VCU without OFF or FEEDBACK (optional laws)
+refuses the coding and the case is skipped. Issue 5: the peak sideslip of 4WS at most half of 2WS; the yaw-rate
 response time (ISO 7401: from 50 % of the hand-wheel input to 90 % of the steady yaw rate) reported for both.
 The steady yaw rates are checked against docs/spec/formulas.md §5 for each law (3 %, as issue 5's feedback check).
 """
@@ -16,9 +17,7 @@ import pytest
 from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.steps import STRATEGIES, Run, limit, mean_since, plot_side_by_side, start
 
-pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-12"),
-              pytest.mark.reference_only("VCU", reason="selects the reference VCU's rear-steering law through "
-                                          "BENCH_VcuConfig (OFF, FEEDBACK), which a real VCU ignores")]
+pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-10", "VCU-4WS-12")]
 
 SPEED_KMH = 80.0            # issue 5
 HAND_WHEEL = 20.0           # deg: δ_f = 1.33°, 2WS a_y ≈ 3.2 m/s² (linear range), chosen

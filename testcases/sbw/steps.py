@@ -2,8 +2,9 @@
 testcases/sbw/limits.toml cited next to what was measured, and the plots every SBW case shows.
 
 Only the bench's public API and DBC names are used (dbc/chassis.dbc: SBW_*, IMU_Motion; dbc/bench.dbc:
-BENCH_SteeringRobot, BENCH_SbwConfig, BENCH_SbwSensorFault, PLANT_*). Expected values come from
-testcases/sbw/oracle.py, never from plant/.
+BENCH_SteeringRobot, BENCH_SbwSensorFault, PLANT_*), and the SBW's coding SteeringMode and IdealYawGain
+(dbc/diagnostics.toml, docs/contract/sbw.md SBW-DIAG-02), written at each scenario start (testcases/coding.py).
+Expected values come from testcases/sbw/oracle.py, never from plant/.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 
 from bench.case import Case
 from bench.results.model import Series
+from testcases.coding import code
 from testcases.limits import limit_value, limits_file, load_limits
 from testcases.sbw import oracle
 from testcases.stimulus import STIMULUS
@@ -90,15 +92,17 @@ class Limits:
 
 # -- scenario and stimulus -------------------------------------------------------------------------------
 
-def start(bench: Case, speed_kmh: float, mode: str = "DIRECT", ideal_gain: float | None = None) -> float:
-    """Fresh ACLASS at `speed_kmh`, the SBW in `mode`, the robot holding the hand wheel at 0°.
+def start(bench: Case, speed_kmh: float, mode: str = "DIRECT", ideal_gain: float | None = None, *,
+          or_direct: bool = False) -> float:
+    """Fresh ACLASS at `speed_kmh`, the SBW coded to `mode`, the robot holding the hand wheel at 0°. `or_direct`: an
+    SBW that refuses `mode` (an optional feedback it does not have) runs DIRECT instead of skipping the case.
     Returns the speed as the bus carries it (BENCH_Control.InitialSpeed, 0.01 m/s), for the oracle."""
     u = round(speed_kmh / 3.6, 2)
     bench.start_scenario(Vehicle=VEHICLE, stimulus=STIMULUS[VEHICLE], InitialSpeed=u)
-    config: dict[str, float | str] = {"SteeringMode": mode}
-    if ideal_gain is not None:
-        config["IdealYawGain"] = ideal_gain
-    bench.set("BENCH_SbwConfig", **config)
+    declared = bench.diagnostics("SBW").did("IdealYawGain").default
+    gain = declared if ideal_gain is None else ideal_gain
+    code(bench, "SBW", {"SteeringMode": "DIRECT", "IdealYawGain": gain} if or_direct else None, SteeringMode=mode,
+         IdealYawGain=gain)
     bench.set("BENCH_SteeringRobot", RobotMode="ANGLE", RobotAngle=0.0, RobotTorque=0.0)
     return u
 

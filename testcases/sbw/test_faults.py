@@ -15,12 +15,12 @@ SBW_Pinion.SbwFault value table of dbc/chassis.dbc; issues 4, 26).
   Each: SbwFault within 0.05 s of the condition, held while it lasts, the substitute on the bus within
   substitute_error_max of the truth (0.1007°, its coding chain), the pinion target = the hand wheel (no
   feedback; one LSB, counted in whole LSB), steering on (true |θ_h − θ_p| ≤ 0.5°), SbwFault 0 once the sensor
-  is healthy. The cases select the reference SBW's YAW_RATE mode (BENCH_SbwConfig, which a real
-  SBW ignores) so that "feedback off" is a real check on the reference; a real SBW without feedback passes it
-  trivially.
+  is healthy. The cases code the SBW's YAW_RATE mode (SteeringMode, docs/contract/sbw.md SBW-DIAG-02) so that
+  "feedback off" is a real check; an SBW without the feedback (optional, SBW-CTL-05) refuses that coding
+  (NRC 0x31) and the case is skipped with that reason.
 - IMU_Motion dropped for 300 ms in YAW_RATE mode: the bench times it out; the ECU flags INPUT_TIMEOUT, the
-  pinion target returns to the hand-wheel angle (fixed ratio); the feedback resumes after (reference only: the
-  feedback mode is the reference SBW's coding).
+  pinion target returns to the hand-wheel angle (fixed ratio); the feedback resumes after. Coded YAW_RATE as
+  above, so skipped on an SBW without the feedback.
 Limits: testcases/sbw/limits.toml [sbw] (the same numbers as docs/contract/sbw.md).
 """
 
@@ -31,6 +31,7 @@ import math
 import numpy as np
 import pytest
 
+from testcases.fault_memory import FaultMemory
 from testcases.sbw.steps import SBW_FAULT, Limits, plot_steering, robot_angle, signal, start
 
 SPEED_KMH = 50.0
@@ -97,7 +98,8 @@ def _sensor_fault(bench, lim: Limits, *, fault: str, offset: float, code: str, c
     `condition_at(t_inject)` gives the bench time the fault's condition holds from (from the ground truth);
     `code` the SbwFault expected; the reaction window starts 0.5 s after the last robot motion or 0.2 s after
     the detection, whichever is later."""
-    start(bench, SPEED_KMH, "YAW_RATE")
+    start(bench, SPEED_KMH, "YAW_RATE", or_direct=True)
+    memory = FaultMemory(bench, "SBW")
     robot_angle(bench, HAND_WHEEL)
     bench.run(1.5)
     t_inject = bench.now
@@ -108,6 +110,7 @@ def _sensor_fault(bench, lim: Limits, *, fault: str, offset: float, code: str, c
         robot_angle(bench, move_to)
         t_settled = bench.now + 0.5
     bench.run(hold)
+    memory.during(code, t_inject)
     t_clear = bench.now
     bench.set("BENCH_SbwSensorFault", SensorFault="NONE", SensorOffset=0.0)
     bench.run(0.5)
@@ -156,6 +159,8 @@ def _sensor_fault(bench, lim: Limits, *, fault: str, offset: float, code: str, c
                 float(np.max(np.abs(hw_true[window_true] - pin_true[window_true]))))
     bench.expect("SbwFault after the sensor recovered", bench.value("SBW_Pinion", "SbwFault"), SBW_FAULT["OK"])
     bench.expect_clean_bus()
+    memory.after(code, t_inject)
+    memory.clear_and_reset()
     lim.report()
     plot_steering(bench, fault)
     sensor = "PinionSensor" if code == "PINION_RANGE" else "HandWheelSensor"
@@ -222,16 +227,17 @@ def test_sbw_pinion_sensor_implausible(bench) -> None:
 
 @pytest.mark.dut("SBW")
 @pytest.mark.req("SBW-FLT-04", "SBW-CTL-05", "COM-RX-02")
-@pytest.mark.reference_only("SBW", reason="selects the reference SBW's yaw-rate feedback through "
-                                          "BENCH_SbwConfig, which a real SBW ignores")
 def test_sbw_input_timeout(bench) -> None:
     lim = Limits(bench)
     start(bench, SPEED_KMH, "YAW_RATE")
+    memory = FaultMemory(bench, "SBW")
     robot_angle(bench, HAND_WHEEL)
     bench.run(1.5)
     offset_before = bench.value("SBW_Pinion", "PinionAngleTarget") - bench.value("SBW_HandWheel", "HandWheelAngle")
     fault = bench.inject("drop", "IMU_Motion", duration=0.3)
-    bench.run(0.3)
+    bench.run(0.2)
+    memory.during("INPUT_TIMEOUT", fault.start)
+    bench.run(fault.end - bench.now)
     target_end = bench.value("SBW_Pinion", "PinionAngleTarget") - bench.value("SBW_HandWheel", "HandWheelAngle")
     bench.run(1.5)
     bench.note(f"IMU_Motion dropped from {fault.start - bench.start:.3f} s to {fault.end - bench.start:.3f} s "
@@ -251,6 +257,8 @@ def test_sbw_input_timeout(bench) -> None:
     offset_after = bench.value("SBW_Pinion", "PinionAngleTarget") - bench.value("SBW_HandWheel", "HandWheelAngle")
     bench.expect("feedback resumed: pinion target − hand wheel as before the drop", offset_after, offset_before,
                  abs_tol=0.2, unit="deg")
+    memory.after("INPUT_TIMEOUT", fault.start)
+    memory.clear_and_reset()
     lim.report()
     plot_steering(bench, "IMU_Motion dropped")
     bench.plot("yaw-rate feedback around the drop", [("SBW_Pinion", "PinionAngleTarget", "pinion target"),

@@ -1,12 +1,14 @@
 """Yaw-rate feedback with an ideal steering ratio ([P3] §1.1) and its combined yaw-rate and lateral-
 acceleration variant (§1.2), at 40, 60, 80 and 100 km/h (docs/spec/formulas.md §5; issue 4).
 
-An ideal steering ratio makes the steady yaw rate per hand-wheel angle a constant G_r at every speed
-(BENCH_SbwConfig.IdealYawGain, default 0.28 1/s). For each speed the robot holds the hand wheel at a fixed
-angle; the steady r/θ_h (IMU_Motion.YawRate / SBW_HandWheel.HandWheelAngle) must be within 5 % of G_r with
-the feedback. The plain 15:1 car (DIRECT) is run beside the §1.1 variant: its r/θ_h follows the closed form
-(u/L)/(1 + K_s u²)/15 of docs/spec/formulas.md §5 and varies with speed by far more, as the tables show (the §1.2 case
-lists the closed form of the plain car beside its own figures).
+An ideal steering ratio makes the steady yaw rate per hand-wheel angle a constant G_r at every speed (the SBW's
+coding IdealYawGain, 0xFDC1, default 0.28 1/s; docs/contract/sbw.md SBW-DIAG-02). For each speed the robot holds
+the hand wheel at a fixed angle; the steady r/θ_h (IMU_Motion.YawRate / SBW_HandWheel.HandWheelAngle) must be
+within 5 % of G_r with the feedback. The plain 15:1 car (DIRECT) is run beside the §1.1 variant: its r/θ_h follows
+the closed form (u/L)/(1 + K_s u²)/15 of docs/spec/formulas.md §5 and varies with speed by far more, as the tables
+show (the §1.2 case lists the closed form of the plain car beside its own figures).
+The feedback is optional for a real SBW (SBW-CTL-05): one without the variant refuses its SteeringMode coding
+(NRC 0x31) and the case is skipped with that reason.
 Limits: testcases/sbw/limits.toml [sbw].
 """
 
@@ -38,8 +40,6 @@ def _steady_gain(bench, speed_kmh: float, mode: str, g_r: float) -> tuple[float,
 @pytest.mark.parametrize("variant", sorted(VARIANTS))
 @pytest.mark.dut("SBW")
 @pytest.mark.req("SBW-CTL-05", "COM-E2E-01", "COM-E2E-02", "COM-VAL-01")
-@pytest.mark.reference_only("SBW", reason="selects the reference SBW's yaw-rate feedback and G_r through "
-                                          "BENCH_SbwConfig, which a real SBW ignores")
 def test_sbw_yaw_gain_across_speeds(bench, variant: str) -> None:
     lim = Limits(bench)
     g_r = lim["ideal_yaw_gain"]
@@ -55,14 +55,14 @@ def test_sbw_yaw_gain_across_speeds(bench, variant: str) -> None:
                          plain, closed_form, "1/s", detail="docs/spec/formulas.md §5")
         _, fb, fault = _steady_gain(bench, speed, variant, g_r)
         lim.relative(f"{variant} at {speed:g} km/h: r/θ_h vs G_r", "yaw_gain_rel_tol", fb, g_r, "1/s",
-                     detail=f"{VARIANTS[variant]}; G_r sent in BENCH_SbwConfig.IdealYawGain")
+                     detail=f"{VARIANTS[variant]}; G_r coded in IdealYawGain (0xFDC1)")
         bench.expect(f"{variant} at {speed:g} km/h: SbwFault OK", fault, SBW_FAULT["OK"],
                      detail="SBW_Pinion.SbwFault value table")
         plain_gains.append(plain if measure_plain else closed_form)
         fb_gains.append(fb)
         rows.append([speed, closed_form, plain if measure_plain else "(see YAW_RATE case)",
                      f"{(plain_gains[-1] - g_r) / g_r:+.1%}", fb, f"{(fb - g_r) / g_r:+.1%}"])
-    lim.condition("G_r sent in BENCH_SbwConfig.IdealYawGain", "ideal_yaw_gain", g_r)
+    lim.condition("G_r coded in IdealYawGain (0xFDC1)", "ideal_yaw_gain", g_r)
     rows.append(["spread (max − min) / G_r", "", "", f"{(max(plain_gains) - min(plain_gains)) / g_r:.1%}", "",
                  f"{(max(fb_gains) - min(fb_gains)) / g_r:.1%}"])
     bench.table(f"steady yaw rate per hand-wheel angle r/θ_h [1/s]: plain 15:1 car vs {variant} (G_r = {g_r:g} 1/s)",
