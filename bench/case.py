@@ -24,7 +24,7 @@ from bench.checks.timing import LATE_FLOOR, Late, SelfTiming
 from bench.database.codec import SignalCodec
 from bench.diag.declaration import NodeDiagnostics, Protocol
 from bench.diag.describe import describe
-from bench.diag.tester import BenchConnection, open_client
+from bench.diag.tester import BenchConnection, TesterPort, open_client, tester_port
 from bench.errors import BenchError, Inconclusive, did_you_mean
 from bench.faults.plan import KINDS, Fault
 from bench.results.model import CaseResult, FaultRecord, Plot, Series, Table
@@ -96,7 +96,8 @@ class Case:
         self._mark_counts()
         self._case_invalid_mark = self._invalid_mark     # start_scenario moves _invalid_mark, not this
         self._closed = False
-        self._testers: list[Client] = []
+        self._testers: dict[tuple[str, bool], Client] = {}   # bench.diag's clients: (node, functional)
+        self._ports: dict[str, TesterPort] = {}
         plan = session.faults
         self._fault_frames0 = {id(f): f.frames for f in plan.faults}   # run faults: their frames before the case
         plan.begin_case(self.start)
@@ -208,20 +209,27 @@ class Case:
     # -- diagnostics ---------------------------------------------------------------------------------
     def diag(self, node: str, *, functional: bool = False) -> Client:
         """A udsoncan client to `node`'s diagnostics (UDS on ISO-TP, docs/contract/diagnostics.md), opened: e.g.
-        `bench.diag(NODE).get_dtc_by_status_mask(0xFF)`. Its waits run the
-        bench in bench time (P2/P2* of the declaration); its DIDs decode to physical values; `functional` sends
-        on the functional address (single frames) and reads `node`'s answer. A negative response raises
-        udsoncan's NegativeResponseException (its `.response.code` is the NRC), no response its TimeoutException.
-        The exchange goes on the case's record in the report, decoded. Records no step."""
+        `bench.diag(NODE).get_dtc_by_status_mask(0xFF)`. Its waits run the bench in bench time (P2/P2* of the
+        declaration); its DIDs decode to physical values; `functional` sends on the functional address (single
+        frames) and reads `node`'s answer. The same client for the same arguments within a case (one ISO-TP
+        endpoint per node: two would both answer a response with a flow control). A negative response raises
+        udsoncan's NegativeResponseException (its `.response.code` is the NRC), no response its TimeoutException,
+        each naming the node and the request. The exchange goes on the case's record in the report, decoded.
+        Records no step."""
         declaration = self.session.declaration
         if declaration is None:
             raise BenchError(f"bench.diag({node!r}): {self.session.project.path} has no [diagnostics] file")
-        known = node in declaration.nodes
-        response = self.session.codebook.by_id.get(declaration.node(node).response) if known else None
-        client = open_client(self.session, self._runner, declaration, node, functional=functional,
+        client = self._testers.get((node, functional))
+        if client is not None:
+            return client
+        port = self._ports.get(node)
+        if port is None:
+            port = self._ports[node] = tester_port(self._runner, declaration, node)
+        response = self.session.codebook.by_id.get(declaration.node(node).response)
+        client = open_client(self.session, port, declaration, node, functional=functional,
                              security=self.session.project.security, external=node in self.session.external,
                              response_name=response.name if response is not None else "")
-        self._testers.append(client)
+        self._testers[(node, functional)] = client
         return client
 
     def value_table(self, message: str, signal: str) -> dict[str, int]:
@@ -255,13 +263,13 @@ class Case:
 
     def _close_testers(self) -> None:
         rows: list[list[object]] = []
-        for client in self._testers:
+        for client in self._testers.values():
             connection = client.conn
             assert isinstance(connection, BenchConnection)
             rows += [[f"{t - self.start:.3f}", connection.name, direction, describe(payload)]
                      for t, direction, payload in connection.exchanges]
             client.close()
-        self._testers = []
+        self._testers, self._ports = {}, {}
         if rows:
             rows.sort(key=lambda row: float(str(row[0])))
             self.table("Diagnostic exchange", ["t (s)", "connection", "", "message"], rows)

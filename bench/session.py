@@ -16,7 +16,8 @@ from bench.checks.monitor import FrameSink, Monitor
 from bench.checks.timing import SelfTiming
 from bench.config import ProjectConfig, RunSettings
 from bench.database.codec import Codebook, load_codebook
-from bench.diag.declaration import Declaration, Did, load_declaration
+from bench.diag.declaration import Declaration, Did, NodeDiagnostics, load_declaration
+from bench.diag.declaration import Protocol as DiagnosticProtocol
 from bench.diag.isotp import IsoTpParams
 from bench.diag.server import UdsServer
 from bench.errors import BenchError, ConfigError, InputProblems
@@ -53,6 +54,21 @@ def simulated_nodes(codebook: Codebook, stimulus: Sequence[str], external: set[s
     the runner's process (`bench run`), the stimulus nodes, which it sends even when named external."""
     plant = set(codebook.nodes) - set(stimulus) - external
     return frozenset(plant | set(stimulus) if role == "runner" else plant)
+
+
+def serve_diagnostics(station: Station, node: NodeDiagnostics, protocol: DiagnosticProtocol,
+                      now: Callable[[], float], server: type[UdsServer] = UdsServer) -> UdsServer:
+    """A simulated node's diagnostic side on the station that plays it: its UDS server, listening to its request and
+    the functional identifier, with every DID the bench can serve itself (`_live_value`); the node's behaviour finds
+    it with `NodeIO.diagnostics` and feeds the rest."""
+    side = server(node, protocol, station.send_now)
+    for did in node.dids:
+        source = _live_value(station, did, now)
+        if source is not None:
+            side.provide(did.name, source)
+    station.listen(side)
+    station.diagnostics[node.node] = side
+    return side
 
 
 def _live_value(station: Station, did: Did, now: Callable[[], float]) -> Callable[[], float] | None:
@@ -151,13 +167,7 @@ class BenchSession:
             plant = self.plant
             for name, node in declaration.nodes.items():
                 if name in plant_nodes:
-                    server = UdsServer(node, protocol, plant.send_now)
-                    for did in node.dids:
-                        source = _live_value(plant, did, self.now)
-                        if source is not None:
-                            server.provide(did.name, source)
-                    plant.listen(server)
-                    plant.diagnostics[name] = server
+                    serve_diagnostics(plant, node, protocol, self.now)
         if self.runner is not None:
             params = IsoTpParams(padding=protocol.padding, n_bs=protocol.n_bs, n_cr=protocol.n_cr)
             for node in declaration.nodes.values():

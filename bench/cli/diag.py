@@ -27,7 +27,7 @@ from udsoncan.services.ReadDTCInformation import ReadDTCInformation
 from bench.cli.common import add_bus_options, add_node_options, given_bus_options
 from bench.config import RunSettings, load_config
 from bench.diag.declaration import Did, NodeDiagnostics, dtc_code, dtc_number
-from bench.diag.tester import open_client
+from bench.diag.tester import open_client, tester_port
 from bench.errors import BenchError, ConfigError
 from bench.faults.plan import CASE, CASE_PREFIX, Fault, parse_fault
 from bench.session import BenchSession
@@ -112,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
         _check_arguments(args, node)
         session.start()
         session.run_until(session.now() + SETTLE)
-        client = open_client(session, session.runner, declaration, node.node, security=project.security,
+        port = tester_port(session.runner, declaration, node.node)
+        client = open_client(session, port, declaration, node.node, security=project.security,
                              external=node.node in session.external)
         if not client.logger.handlers:
             # udsoncan logs every failed request at ERROR; with no handler configured Python's last resort printed

@@ -50,6 +50,8 @@ class Bench(Protocol):
 
 
 class Station(Protocol):
+    """Where the tester's frames go and come from: the runner's station (bench.sim.station.Station)."""
+
     def listen(self, listener: Any) -> None: ...
 
     def unlisten(self, listener: Any) -> None: ...
@@ -74,12 +76,16 @@ class DidValue(DidCodec):
         return self.did.length
 
 
-class _Port:
-    """The tester's ISO-TP endpoint as a station listener (its response identifier)."""
+class TesterPort:
+    """The tester's ISO-TP endpoint for one node (its physical request and response identifiers), listening on the
+    runner's station while a connection uses it. One per node and case: two endpoints on one response identifier
+    would both answer a multi-frame response with a flow control."""
 
-    def __init__(self, endpoint: IsoTpEndpoint, rx_id: int) -> None:
-        self.endpoint = endpoint
+    def __init__(self, station: Station, tx_id: int, rx_id: int, params: IsoTpParams) -> None:
+        self.station = station
+        self.endpoint = IsoTpEndpoint(tx_id, rx_id, station.send_now, params)
         self.frame_ids = (rx_id,)
+        self.users = 0
 
     @property
     def busy(self) -> bool:
@@ -91,29 +97,38 @@ class _Port:
     def poll(self, t: float) -> None:
         self.endpoint.poll(t)
 
+    def acquire(self) -> None:
+        if not self.users:
+            self.station.listen(self)
+        self.users += 1
+
+    def release(self) -> None:
+        self.users -= 1
+        if not self.users:
+            self.station.unlisten(self)
+
 
 class BenchConnection(BaseConnection):
-    """A udsoncan connection whose waits run the bench for their time, in bench time."""
+    """A udsoncan connection whose waits run the bench for their time, in bench time. With `functional_id` its
+    requests go out on the functional identifier, as single frames; the answers come through the node's port."""
 
-    def __init__(self, bench: Bench, station: Station, tx_id: int, rx_id: int, params: IsoTpParams,
-                 name: str) -> None:
+    def __init__(self, bench: Bench, port: TesterPort, name: str, functional_id: int | None = None) -> None:
         super().__init__(name)
-        self.bench, self.station = bench, station
-        self.endpoint = IsoTpEndpoint(tx_id, rx_id, station.send_now, params)
-        self.port = _Port(self.endpoint, rx_id)
+        self.bench, self.port, self.functional_id = bench, port, functional_id
+        self.endpoint = port.endpoint
         self.opened = False
         #: (bench time, "request" or "response", payload) of every exchange, for the report and the log
         self.exchanges: list[tuple[float, str, bytes]] = []
 
     def open(self) -> BenchConnection:
         if not self.opened:
-            self.station.listen(self.port)
+            self.port.acquire()
             self.opened = True
         return self
 
     def close(self) -> None:
         if self.opened:
-            self.station.unlisten(self.port)
+            self.port.release()
             self.opened = False
 
     def is_open(self) -> bool:
@@ -125,7 +140,14 @@ class BenchConnection(BaseConnection):
     def specific_send(self, payload: bytes, timeout: float | None = None) -> None:
         t = self.bench.now()
         self.exchanges.append((t, "request", bytes(payload)))
-        self.endpoint.transmit(t, bytes(payload))
+        if self.functional_id is None:
+            self.endpoint.transmit(t, bytes(payload))
+            return
+        if not 0 < len(payload) <= 7:
+            raise BenchError(f"a functional request is one single frame (1 to 7 bytes), not {len(payload)} bytes")
+        padding = self.endpoint.params.padding
+        frame = bytes([len(payload)]) + bytes(payload)
+        self.port.station.send_now(self.functional_id, frame if padding is None else frame.ljust(8, bytes([padding])))
 
     def specific_wait_frame(self, timeout: float | None = None) -> bytes | None:
         received = self.endpoint.received
@@ -228,19 +250,25 @@ def key_function(node: NodeDiagnostics, security: dict[str, str], external: bool
     return secret
 
 
-def open_client(bench: Bench, station: Station, declaration: Declaration, node_name: str, *,
-                functional: bool = False, security: dict[str, str] | None = None,
-                external: bool = False, response_name: str = "") -> BenchClient:
-    """An opened udsoncan client to one node: physical (or functional) requests, the node's DIDs as codecs,
-    its key algorithm, P2/P2* from the declaration plus the tester's margins."""
+def tester_port(station: Station, declaration: Declaration, node_name: str) -> TesterPort:
+    """The tester's ISO-TP endpoint for one node of the declaration (BenchError for a node it does not have)."""
     try:
         node = declaration.node(node_name)
     except KeyError as exc:
         raise BenchError(str(exc.args[0])) from None
     protocol = declaration.protocol
     params = IsoTpParams(padding=protocol.padding, block_size=0, stmin=0.0, n_bs=protocol.n_bs, n_cr=protocol.n_cr)
-    tx_id = protocol.functional_request if functional else node.request
-    connection = BenchConnection(bench, station, tx_id, node.response, params, node_name)
+    return TesterPort(station, node.request, node.response, params)
+
+
+def open_client(bench: Bench, port: TesterPort, declaration: Declaration, node_name: str, *,
+                functional: bool = False, security: dict[str, str] | None = None,
+                external: bool = False, response_name: str = "") -> BenchClient:
+    """An opened udsoncan client to one node through its port: physical (or functional) requests, the node's DIDs as
+    codecs, its key algorithm, P2/P2* from the declaration plus the tester's margins."""
+    node = declaration.node(node_name)
+    protocol = declaration.protocol
+    connection = BenchConnection(bench, port, node_name, protocol.functional_request if functional else None)
     config: dict[str, Any] = dict(udsoncan.configs.default_client_config)
     config.update({
         "data_identifiers": did_codecs(node),

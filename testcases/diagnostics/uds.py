@@ -26,7 +26,7 @@ ROUTINE_REQ = {"VCU": "VCU-DIAG-03", "WHL": "WHL-DIAG-02", "SBW": "SBW-DIAG-03",
                "IMU": "IMU-DIAG-02"}
 LIVE_REQ = {"VCU": "VCU-DIAG-04", "WHL": "WHL-DIAG-03", "SBW": "SBW-DIAG-04", "ABS": "ABS-DIAG-03",
             "IMU": "IMU-DIAG-03"}
-EXTENDED = 0x03
+DEFAULT, EXTENDED = 0x01, 0x03
 RESPONSE_PENDING = 0x78
 
 
@@ -42,11 +42,14 @@ def nodes(*requirements: str, only: tuple[str, ...] = NODES) -> list[Any]:
 
 
 def start(bench: Case, node: str) -> Client:
-    """The node's vehicle at rest (its monitors run), and a client to the node."""
+    """The node's vehicle at rest (its monitors run), and a client to the node in the default session (a node is
+    never reset between cases: the last case may have left it in another)."""
     vehicle = VEHICLE[node]
     bench.start_scenario(Vehicle=vehicle, stimulus=STIMULUS[vehicle])
     bench.run(0.3)
-    return bench.diag(node)
+    client = bench.diag(node)
+    client.change_session(DEFAULT)
+    return client
 
 
 def nrc(call: Callable[[], object]) -> int | str:

@@ -52,8 +52,11 @@ def test_the_sbw_campaign_judges_an_external_sbw_on_the_io(tmp_path: Path) -> No
     for name in ("test_sbw_step_50kmh", "test_sbw_road_feel_50kmh", "test_sbw_handwheel_out_of_range",
                  "test_sbw_handwheel_stuck", "test_sbw_pinion_sensor_implausible"):
         assert name in campaign.ran, campaign.ran
-    assert set(campaign.skipped) == _reference_only_cases_of_the_readme("SBW")
-    assert len(campaign.skipped) == 4
+    # reference-only (docs/contract/README.md), or coding the yaw-rate feedback this SBW does not have (NRC 0x31)
+    feedback = {n for n in campaign.skipped if n.startswith(("test_sbw_yaw_gain_across_speeds",
+                                                             "test_sbw_input_timeout"))}
+    assert set(campaign.skipped) - feedback == _reference_only_cases_of_the_readme("SBW")
+    assert feedback == {n for n in campaign.skipped if n not in _reference_only_cases_of_the_readme("SBW")}
 
 
 def test_the_plants_aclass_case_runs_with_an_external_sbw(tmp_path: Path) -> None:
