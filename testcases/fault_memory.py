@@ -20,12 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.case import Case
+from testcases.diagnostics.uds import limit
 
 #: status bits a failure sets (testFailed, TFTOC, pendingDTC, confirmedDTC, TFSLC): "stored" means any of them
 STORED = 0x2F
 TF, TFTOC, PENDING, CONFIRMED, TNCSLC, TFSLC, TNCTOC, WIR = (1 << bit for bit in range(8))
 ALL_DTCS = 0xFFFFFF
-RESET_SETTLE = 1.0     # s a node may take to answer again after an ECUReset (DIAG-RST-02)
 
 
 @dataclass(frozen=True)
@@ -169,7 +169,7 @@ class FaultMemory:
                 elapsed_bench = bench.now - seen.latest
                 # the snapshot is taken when the ECU's condition is met, up to one cycle before its frame; the read
                 # of the operating time now and the frame's receive time each add up to one tick and P2
-                tol = 0.02 + bench.diagnostic_protocol.p2 + 2 * did.scale
+                tol = limit("snapshot_time_slack") + bench.diagnostic_protocol.p2 + 2 * did.scale
                 what = f"{self.node}: {name} snapshot OperatingTime against the bench's clock (time since the fault)"
                 if seen.latest_may_be_late:
                     bench.expect_between(what, elapsed_node, elapsed_bench - tol, math.inf, unit="s",
@@ -182,7 +182,8 @@ class FaultMemory:
                 first = seen.latest
                 message, _, signal = did.signal.partition(".")
                 t, values = bench.history(message, signal, first - 0.1)
-                window = values[(t >= first - 0.03) & (t <= first + 0.03)]
+                span = limit("snapshot_window")
+                window = values[(t >= first - span) & (t <= first + span)]
                 if not len(window):
                     continue
                 low, high = float(window.min()), float(window.max())
@@ -204,7 +205,7 @@ class FaultMemory:
         bench.expect_true(f"{self.node}: no DTC stored after ClearDiagnosticInformation", not stored,
                           measured=self._text(stored) or "none", expected="none")
         self.client.ecu_reset(1)
-        bench.run(RESET_SETTLE)
+        bench.run(limit("reset_silence_max"))
         stored = self.stored()
         bench.expect_true(f"{self.node}: still none after an ECUReset", not stored,
                           measured=self._text(stored) or "none", expected="none")

@@ -15,6 +15,7 @@ from bench.case import Case
 from testcases.diagnostics.uds import (
     EXTENDED,
     expect_answer,
+    limit,
     negative,
     nodes,
     nrc,
@@ -86,7 +87,7 @@ def test_sessions_timing_and_s3(bench: Case, node: str) -> None:
     bench.expect("P2* in the positive response", data.p2_star_server_max, protocol.p2_star, abs_tol=0.005, unit="s")
     expect_answer(bench, "requestSeed allowed in the extended session", nrc(lambda: client.request_seed(1)), "positive")
     for _ in range(3):  # TesterPresent keeps it for longer than S3
-        bench.run(protocol.s3 * 0.6)
+        bench.run(protocol.s3 * limit("tester_present_every"))
         client.tester_present()
     expect_answer(
         bench,
@@ -144,7 +145,7 @@ def test_security_access(bench: Case, node: str) -> None:
         seed = client.request_seed(1).service_data.seed
         nrc(lambda seed=seed: client.send_key(2, bytes(b ^ 0xFF for b in _key(seed, declared.security_constant))))
     client.ecu_reset(1)
-    bench.run(1.0)
+    bench.run(limit("reset_silence_max"))
     client.change_session(EXTENDED)
     expect_answer(bench, "after an ECUReset the delay is over", nrc(lambda: client.request_seed(1)), "positive")
 
@@ -271,7 +272,7 @@ def test_routine(bench: Case, node: str) -> None:
         "longest gap between 0x78s and the final response",
         max(b - a for a, b in zip(ends, ends[1:])),
         0.0,
-        1.0,
+        limit("pending_gap_max"),
         unit="s",
     )
     bench.expect_between(
@@ -311,27 +312,40 @@ def test_coding_persists(bench: Case, node: str) -> None:
             bench.note(f"{did.name}: the node accepts only its default (every other value refused with 0x31)")
             continue
         expect_answer(bench, f"{did.name} = {written[did.id]:g} written", "positive", "positive")
-        bench.expect(f"{did.name} reads back as written", client.read_data_by_identifier_first(did.id),
-                     written[did.id], abs_tol=did.scale / 2)
+        bench.expect(
+            f"{did.name} reads back as written",
+            client.read_data_by_identifier_first(did.id),
+            written[did.id],
+            abs_tol=did.scale / 2,
+        )
         choices = sorted(did.values.values())
         beyond = (max(choices) + 1) if choices else did.maximum + 10 * did.scale
         raw_value = int(beyond) if choices else round((beyond - did.offset) / did.scale)
-        request = b"\x2E" + did.id.to_bytes(2, "big") + raw_value.to_bytes(did.length, "big", signed=False)
+        request = b"\x2e" + did.id.to_bytes(2, "big") + raw_value.to_bytes(did.length, "big", signed=False)
         expect_answer(bench, f"{did.name} = {beyond:g} (out of range)", negative(raw(client, request), 0x2E), 0x31)
     response = client.ecu_reset(1)
     bench.expect("ECUReset hardReset answered 51 01", response.service_data.reset_type_echo, 1)
-    bench.run(1.0)
-    expect_answer(bench, "default session after the reset (requestSeed refused)", nrc(lambda: client.request_seed(1)),
-                  0x7F)
+    bench.run(limit("reset_silence_max"))
+    expect_answer(
+        bench, "default session after the reset (requestSeed refused)", nrc(lambda: client.request_seed(1)), 0x7F
+    )
     for did in coding:
         if did.id in written:
-            bench.expect(f"{did.name} kept across the ECUReset", client.read_data_by_identifier_first(did.id),
-                         written[did.id], abs_tol=did.scale / 2)
+            bench.expect(
+                f"{did.name} kept across the ECUReset",
+                client.read_data_by_identifier_first(did.id),
+                written[did.id],
+                abs_tol=did.scale / 2,
+            )
     unlock(client)
     for did in coding:
         client.write_data_by_identifier(did.id, did.default)
-        bench.expect(f"{did.name} back to its default", client.read_data_by_identifier_first(did.id), did.default,
-                     abs_tol=did.scale / 2)
+        bench.expect(
+            f"{did.name} back to its default",
+            client.read_data_by_identifier_first(did.id),
+            did.default,
+            abs_tol=did.scale / 2,
+        )
 
 
 @pytest.mark.parametrize("node", nodes("DIAG-SVC-02", "{live}"))

@@ -14,7 +14,16 @@ from udsoncan.client import Client
 from udsoncan.exceptions import NegativeResponseException, TimeoutException
 
 from bench.case import Case
+from testcases.limits import limit_value, limits_file, load_limits
 from testcases.stimulus import STIMULUS
+
+LIMITS_FILE = limits_file(__file__)
+LIMITS = load_limits(LIMITS_FILE, "diagnostics")
+
+
+def limit(name: str) -> float:
+    """One limit of testcases/diagnostics/limits.toml [diagnostics] (its source is cited there)."""
+    return limit_value(LIMITS, name, LIMITS_FILE, "diagnostics")
 
 VEHICLE = {"VCU": "EV4WIS", "WHL_FL": "EV4WIS", "WHL_FR": "EV4WIS", "WHL_RL": "EV4WIS", "WHL_RR": "EV4WIS",
            "IMU": "EV4WIS", "SBW": "ACLASS", "ABS": "ACLASS_ABS"}

@@ -20,7 +20,7 @@ TESTCASES = ROOT / "testcases"
 #: campaign -> its package under testcases/ (the issue's four campaigns)
 PACKAGES = {"4WIS": "ev4wis", "4WS": "rear_steer_4ws", "SBW": "sbw", "ABS": "abs", "diagnostics": "diagnostics"}
 #: campaign -> the table of its package's limits.toml
-LIMIT_TABLES = {"4WIS": "4wis", "4WS": "4ws", "SBW": "sbw", "ABS": "abs"}
+LIMIT_TABLES = {"4WIS": "4wis", "4WS": "4ws", "SBW": "sbw", "ABS": "abs", "diagnostics": "diagnostics"}
 
 
 @dataclass(eq=False)   # pytest keeps plugins in sets
