@@ -282,6 +282,7 @@ class Case:
         if self._closed:
             return
         self._close_testers()
+        self._monitor.check_timeouts(self.now)   # an ISO-TP N_Bs / N_Cr that ran out in this case is this case's
         self._closed = True
         self._monitor.history_from = math.inf   # between cases only the last HISTORY_CAP frames are kept
         now = self.now
@@ -525,6 +526,7 @@ class Case:
         started, each with its bench time (s), identifier, message and reason (the monitor's `invalid_log`
         since then; `invalid_frames` is always a count, e.g. the case's in the report). Records no step."""
         monitor = self._monitor
+        monitor.check_timeouts(self.now)   # (an ISO-TP exchange's N_Bs / N_Cr that ran out is an invalid frame)
         return monitor.invalid_log[max(0, self._invalid_mark - monitor.invalid_dropped):]
 
     # -- checks ------------------------------------------------------------------------------------

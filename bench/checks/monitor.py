@@ -26,7 +26,7 @@ from typing import Any
 
 from bench import e2e
 from bench.database.codec import Codebook, DecodeError, MessageCodec
-from bench.diag.isotp import IsoTpFraming, IsoTpParams
+from bench.diag.isotp import IsoTpFraming, IsoTpParams, IsoTpProblem
 from bench.errors import BenchError, BenchLimit
 
 TIMEOUT_CYCLES = 3   # docs/spec/k-matrix.md: a message not seen for 3 x its cycle time is timed out
@@ -159,7 +159,8 @@ class Monitor:
         # checker per identifier (`watch_framing`); without one a diagnostic frame is logged as valid.
         self.diagnostic: dict[int, MessageCodec] = {cid: c for cid, c in codebook.by_id.items() if c.diagnostic}
         self.framing: dict[int, IsoTpFraming] = {}
-        self._connections: list[tuple[int, IsoTpFraming]] = []
+        self._connections: list[tuple[tuple[int, int], IsoTpFraming]] = []   # ((request, response), its checker)
+        self._pair: dict[int, tuple[int, int]] = {}                           # either id -> (request, response)
         self.by_name: dict[str, MessageState] = {s.codec.name: s for s in self.states.values()}
         self.unknown_frames = 0
         self.invalid_log: list[InvalidFrame] = []
@@ -322,13 +323,22 @@ class Monitor:
         """Check the ISO-TP framing of one diagnostic connection (request and response identifiers)."""
         checker = IsoTpFraming(a_id, b_id, params)
         self.framing[a_id] = self.framing[b_id] = checker
-        self._connections.append((a_id, checker))
+        self._pair[a_id] = self._pair[b_id] = (a_id, b_id)
+        self._connections.append(((a_id, b_id), checker))
 
     def _diagnostic_frame(self, t: float, arbitration_id: int, data: bytes, direction: str) -> bool:
         codec = self.diagnostic[arbitration_id]
         checker = self.framing.get(arbitration_id)
-        problems = checker.on_frame(t, arbitration_id, data) if checker is not None else ()
-        reason = "; ".join(f"ISO-TP {p.rule}: {p.text}" for p in problems)
+        problems = checker.on_frame(t, arbitration_id, data) if checker is not None else []
+        own = []
+        for problem in problems:   # (a timeout this frame revealed may be the other side's: its own record)
+            at_fault = _at_fault(problem, self._pair[arbitration_id], arbitration_id)
+            if at_fault == arbitration_id:
+                own.append(problem)
+            else:
+                self._invalid(InvalidFrame(problem.t, at_fault, self.diagnostic[at_fault].name,
+                                           f"ISO-TP {problem.rule}: {problem.text}"))
+        reason = "; ".join(f"ISO-TP {p.rule}: {p.text}" for p in own)
         if reason:
             self._invalid(InvalidFrame(t, arbitration_id, codec.name, reason))
         if self.sink:
@@ -351,9 +361,10 @@ class Monitor:
                 continue
             if now - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
                 self._time_out(state)
-        for a_id, checker in self._connections:   # ISO-TP's N_Bs / N_Cr of a diagnostic exchange in progress
+        for ids, checker in self._connections:   # ISO-TP's N_Bs / N_Cr of a diagnostic exchange in progress
             for problem in checker.check_timeouts(now):
-                self._invalid(InvalidFrame(problem.t, a_id, self.diagnostic[a_id].name,
+                at_fault = _at_fault(problem, ids, ids[0])
+                self._invalid(InvalidFrame(problem.t, at_fault, self.diagnostic[at_fault].name,
                                            f"ISO-TP {problem.rule}: {problem.text}"))
 
     @staticmethod
@@ -430,6 +441,20 @@ def _e2e_rejection(rx: e2e.Receiver, status: e2e.Status, found: int | None, expe
     if status is e2e.Status.WRONGSEQUENCE:
         return "counter", f"E2E WRONGSEQUENCE: counter {found}, expected {expected}, state {state}"
     return "state", f"E2E {status.value}: counter {found} in sequence, state {state} (not VALID yet)"
+
+
+def _at_fault(problem: IsoTpProblem, ids: tuple[int, ...], default: int) -> int:
+    """The identifier of a connection whose sender broke the rule, so that the problem is recorded as that message's
+    (and judged as its sender's, bench.case.Case.expect_clean_bus): a timeout's is the side that owed the missing
+    frame, which its text names (N_Bs: "no flow control on 0x70D within N_Bs ...", N_Cr: "no CF on 0x70D within
+    N_Cr ..."); any other problem's is the frame that showed it (`default`). The tester's flow control is the last
+    frame before a response's N_Cr timeout: recorded as the request's, the ECU's fault was judged the tester's."""
+    if problem.rule in ("N_Bs timeout", "N_Cr timeout"):
+        for frame_id in ids:
+            shown = f"0x{frame_id:08X}" if frame_id > 0x7FF else f"0x{frame_id:03X}"
+            if f" on {shown} within N_" in problem.text:
+                return frame_id
+    return default
 
 
 def _trim(items: list[Any], keep: int) -> int:

@@ -39,6 +39,9 @@ P2_MARGIN = 0.050
 P2_STAR_MARGIN = 0.500
 #: Bench time the tester waits for the rest of a multi-frame response once its first frame came (N_Cr per frame).
 RESPONSE_LIMIT = 30.0
+#: Bench time a request may wait for its final response, responsePending (NRC 0x78) included: the contract's
+#: longest routine is 2.5 s, and an ECU that answers 0x78 for ever must not hold the bench.
+REQUEST_LIMIT = 60.0
 
 
 class Bench(Protocol):
@@ -119,6 +122,10 @@ class BenchConnection(BaseConnection):
         self.opened = False
         #: (bench time, "request" or "response", payload) of every exchange, for the report and the log
         self.exchanges: list[tuple[float, str, bytes]] = []
+        self._problems_from = 0   # the endpoint's ISO-TP problems from this index on came after the last request
+        self._asked_at = 0.0      # bench time of the last request: no request waits longer than REQUEST_LIMIT
+        #: why the last wait ended without a response although frames came ("": nothing came in time)
+        self.unanswered = ""
 
     def open(self) -> BenchConnection:
         if not self.opened:
@@ -140,9 +147,13 @@ class BenchConnection(BaseConnection):
     def specific_send(self, payload: bytes, timeout: float | None = None) -> None:
         t = self.bench.now()
         self.exchanges.append((t, "request", bytes(payload)))
+        self.unanswered = ""
+        self._asked_at = t
         if self.functional_id is None:
             self.endpoint.transmit(t, bytes(payload))
+            self._problems_from = len(self.endpoint.problems)   # (transmit first records an earlier one's timeouts)
             return
+        self._problems_from = len(self.endpoint.problems)
         if not 0 < len(payload) <= 7:
             raise BenchError(f"a functional request is one single frame (1 to 7 bytes), not {len(payload)} bytes")
         padding = self.endpoint.params.padding
@@ -154,16 +165,34 @@ class BenchConnection(BaseConnection):
         if not received:
             limit = RESPONSE_LIMIT if timeout is None else float(timeout)
             bench, endpoint = self.bench, self.endpoint
+            if bench.now() - self._asked_at > REQUEST_LIMIT:   # a node answering responsePending for ever
+                self.unanswered = (f"still responsePending (NRC 0x78) {bench.now() - self._asked_at:.1f} s after the "
+                                   f"request, over the tester's limit of {REQUEST_LIMIT:g} s")
+                raise TimeoutException(self.unanswered)  # type: ignore[no-untyped-call]
             bench.run_until(bench.now() + limit, lambda: bool(received))
             extra = bench.now() + RESPONSE_LIMIT
             while not received and endpoint.busy and bench.now() < extra:
                 # the first frame came in time: the rest of a multi-frame response, each frame within N_Cr
                 bench.run_until(bench.now() + endpoint.params.n_cr, lambda: bool(received) or not endpoint.busy)
             if not received:
+                self.unanswered = self._why_unanswered(endpoint.busy)
                 raise TimeoutException(f"no response within {limit:.3f} s of bench time")  # type: ignore[no-untyped-call]
         t, payload = received.popleft()
         self.exchanges.append((t, "response", payload))
         return payload
+
+    def _why_unanswered(self, busy: bool) -> str:
+        """The ISO-TP problems of the exchange since the request (a response that began and was dropped: its
+        frame and the rule it broke), or a multi-frame message still in progress at RESPONSE_LIMIT; "" when
+        nothing of a response came."""
+        problems = self.endpoint.problems[self._problems_from:]
+        if problems:
+            first = problems[0]
+            more = f" (and {len(problems) - 1} more ISO-TP problem(s))" if len(problems) > 1 else ""
+            return f"ISO-TP {first.rule}: {first.text}{more}"
+        if busy:
+            return f"a multi-frame message still incomplete after {RESPONSE_LIMIT:g} s of bench time"
+        return ""
 
 
 class DiagnosticError(BenchError):
@@ -205,6 +234,9 @@ class BenchClient(Client):
             asked = describe(request.get_payload())
             who = f"{'the external ' if self.external else ''}{self.node}"
             if isinstance(exc, TimeoutException):
+                why = self.conn.unanswered if isinstance(self.conn, BenchConnection) else ""
+                if why:   # frames came, but no whole response: the frame and the ISO-TP rule it broke
+                    raise NoResponse(f"no complete {self.response_name} from {who}: {asked}: {why}") from None
                 waited = float(self.config["p2_timeout"] or 0.0)   # (plus P2* after a responsePending)
                 raise NoResponse(f"no {self.response_name} from {who} in {waited:.1f} s: {asked}") from None
             response: Response = exc.response

@@ -34,6 +34,7 @@ from bench.config import RunSettings, load_config
 from bench.diag.tester import P2_MARGIN, BadResponse, DiagnosticError, NoResponse, Refused
 from bench.results.model import CaseResult
 from bench.session import BenchSession
+from bench.sim.station import Station
 from tests.repo import ROOT
 
 NODE = "SBW"            # has diagnostics (dbc/diagnostics.toml [nodes.SBW]); declared external here
@@ -62,7 +63,7 @@ GARBAGE: dict[str, Answer] = {
     "truncated": Answer(first=((OWN, "10 14 62 F1 87 53 42 57"),)),
     # (3) a first frame, then after the flow control a consecutive frame with SN 2 where 1 is due
     "mis-sequenced": Answer(first=((OWN, "10 14 62 F1 87 53 42 57"),), after_fc=((OWN, "22 2D 30 30 30 30 30 31"),)),
-    # (4) a (right) answer, but on another node's response identifier
+    # (4) an answer to SBW's request, but on another node's (ABS's) response identifier
     "another node's": Answer(first=((ELSEWHERE, "07 62 F1 87 53 42 57 2D"),)),
     # (5) nothing at all
     "silent": Answer(),
@@ -77,10 +78,10 @@ class GarbageEcu:
     """A station listener (bench.sim.station.FrameListener) on SBW's request identifier that answers every single
     frame with the next of `answers` and the tester's flow control with that answer's `after_fc`."""
 
-    def __init__(self, station: object, request: int, response: int, elsewhere: int, padding: int | None,
+    def __init__(self, station: Station, request: int, response: int, elsewhere: int, padding: int | None,
                  answers: list[Answer]) -> None:
         self.station = station
-        self.frame_ids = (request,)
+        self.frame_ids: tuple[int, ...] = (request,)
         self.ids = {OWN: response, ELSEWHERE: elsewhere}
         self.padding = padding
         self.answers = deque(answers)
@@ -113,7 +114,7 @@ class GarbageEcu:
         while self._due and self._due[0][0] <= t + 1e-9:
             _, frame_id, data = self._due.popleft()
             self.sent.append((t, frame_id, data))
-            self.station.send_now(frame_id, data)   # type: ignore[attr-defined]
+            self.station.send_now(frame_id, data)
 
 
 def add_garbage_ecu(session: BenchSession, answers: list[Answer]) -> GarbageEcu:
@@ -249,7 +250,7 @@ def test_in_turn_to_one_tester_then_a_right_answer_is_read() -> None:
             rules = [reason.split(":")[0] + ": " for _, reason in _framing(session)[seen:]]
             assert rules == ([expected.rule] if expected.rule else []), (name, rules)
         response = case.diag(NODE).read_data_by_identifier(DID)
-        assert response.service_data.values[DID].strip() == "SBW-000001"   # type: ignore[union-attr]
+        assert response.service_data.values[DID].strip() == "SBW-000001"
         assert len(_framing(session)) == 2                                  # (2) and (3) only: the answer is clean
 
 
