@@ -98,6 +98,7 @@ class Case:
         self._closed = False
         self._testers: dict[tuple[str, bool], Client] = {}   # bench.diag's clients: (node, functional)
         self._ports: dict[str, TesterPort] = {}
+        self._resets: list[tuple[float, str]] = []   # (bench time of the positive response, node) of its ECUResets
         plan = session.faults
         self._fault_frames0 = {id(f): f.frames for f in plan.faults}   # run faults: their frames before the case
         plan.begin_case(self.start)
@@ -263,9 +264,11 @@ class Case:
 
     def _close_testers(self) -> None:
         rows: list[list[object]] = []
-        for client in self._testers.values():
+        for (node, _), client in self._testers.items():
             connection = client.conn
             assert isinstance(connection, BenchConnection)
+            self._resets += [(t, node) for t, direction, payload in connection.exchanges
+                             if direction == "response" and payload[:1] == b"\x51"]
             rows += [[f"{t - self.start:.3f}", connection.name, direction, describe(payload)]
                      for t, direction, payload in connection.exchanges]
             client.close()
@@ -296,6 +299,10 @@ class Case:
             record = fault.record()
             record.frames = fault.frames - self._fault_frames0.get(id(fault), 0)
             records.append(record)
+        # an ECUReset the case made is a disturbance of the bus like an injected fault: the node may restart its
+        # AliveCounters and go silent for a while (docs/contract/diagnostics.md DIAG-RST-02)
+        records += [FaultRecord(f"ecu_reset:{node}@{t:.3f}", self.result.nodeid, "ecu_reset", node, t, None)
+                    for t, node in sorted(self._resets)]
         self.result.faults = records
         monitor = self._monitor
         self.result.invalid_frames = monitor.invalid_frames - self._case_invalid_mark
