@@ -48,8 +48,25 @@ Run it as the external ABS of the bench (three processes on one host):
     python examples/abs_ecu.py --interface udp_multicast --channel 239.255.1.3
     bench run --interface udp_multicast --channel 239.255.1.3 --external all --dut ABS
 
+Diagnostics (abs.md ABS-DIAG-01..03, docs/contract/diagnostics.md): a UDS server on ISO-TP (`examples/uds_server.py`,
+shared by the three examples) on 0x706/0x70E and the functional 0x7DF: sessions, ECUReset, the fault memory fed at
+every 5 ms step with the AbsFault it sends (WHEEL_SPEED_INVALID, INPUT_TIMEOUT), identification and live DIDs,
+SecurityAccess with the documented seed/key, routine 0x0202 ValveAndPumpTest (precondition: standstill, RefVehicleSpeed
+below 1 km/h, and the brake switch open, else NRC 0x22; the valves stay as the control sets them: the rig's unit has
+nothing to show). The ABS has no coding. ECUReset restarts the control and the receivers as at power-up (the
+AliveCounters carry on); the fault memory is kept (`--nvm FILE`: also across process restarts). The ISO-TP layer
+(can-isotp) runs inside the 5 ms step and never blocks: the step, the bus's only reader, hands it the frames of 0x706
+and 0x7DF it drains and calls the server's `poll()` after sending its frames, so the frames keep their grid and no
+second reader or thread competes with the step for the bus or the interpreter; a request is answered within one step
+(5 ms) of its last frame, well within P2 = 50 ms, and a diagnostic frame never reaches the E2E receivers.
+
+Diagnostic defect for checking a tester (off by default): `--diag-defect confirmed-never`: confirmedDTC (status bit 3)
+is never set, so a fault that lasts beyond its 500 ms shows 0x27 instead of 0xAF and warningIndicatorRequested
+(bit 7) is never requested either (DIAG-DTC-04).
+
 It prints a line with `running` once it is on the bus; SIGINT or SIGTERM stops it ("stopped", exit 0). Needs
-python-can, cantools, autosar-e2e (import name `e2e`) and the standard library only; nothing of the bench.
+python-can, cantools, autosar-e2e (import name `e2e`), can-isotp (import name `isotp`) and the standard library only;
+nothing of the bench.
 """
 
 from __future__ import annotations
@@ -58,6 +75,7 @@ import argparse
 import math
 import signal
 import socket
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -68,6 +86,15 @@ from pathlib import Path
 import can
 import cantools
 from e2e import p01, p02, p05, p11
+
+if str(Path(__file__).resolve().parent) not in sys.path:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))  # the examples' shared diagnostic server
+import uds_server  # noqa: E402
+
+#: DIAG-ID-01: this ABS's own identification (the VIN is the vehicle's, programmed at the end of the line: --vin)
+IDENTIFICATION = {"SparePartNumber": "ABS-EX0001", "EcuSerialNumber": "ABS-EX000001",
+                  "VehicleIdentificationNumber": "BENCH000000000001", "SoftwareVersionNumber": "EX-2.0"}
+TEST_MAX_SPEED = 1.0  # km/h, ABS-DIAG-02's precondition (RefVehicleSpeed), with the brake switch open
 
 # --- Vehicle B (docs/spec/vehicles.md B, docs/spec/formulas.md §6) ----------------------------------------------
 A_CG, B_CG = 1.06, 1.59  # m, centre of gravity to the front / rear axle
@@ -1004,6 +1031,7 @@ class Transmitter:
         self.state = E2ESender(chassis, chassis.get_message_by_name("ABS_SteerState"))
         self.valves = E2ESender(bench, bench.get_message_by_name("IO_AbsValves"))
         self.by_id = {s.message.frame_id: s for s in (self.speeds, self.state, self.valves)}
+        self.values: dict[str, dict[str, float]] = {}  # the signals of each message's latest frame (DIAG-SVC-02)
 
     def sent(self, frame: can.Message) -> None:
         self.by_id[frame.arbitration_id].sent(frame)
@@ -1018,18 +1046,29 @@ class Transmitter:
         return self.valves.frame(values)
 
     def chassis_frames(self, ecu: Abs) -> list[can.Message]:
-        out = ecu.out
-        speeds = self.speeds.frame({f"WheelSpeed{w}": v for w, v in zip(WHEELS, ecu.readings)})  # ABS-OUT-01
-        state: dict[str, float] = {"TurnDirection": out.turn, "RefVehicleSpeed": out.ref_speed,
-                                   "FrontWheelAngleEst": out.angle, "AbsActive": out.active, "AbsFault": out.fault}
-        state.update({f"PressureState{w}": s for w, s in zip(WHEELS, out.states)})
-        return [speeds, self.state.frame(state)]  # ABS-OUT-02
+        speeds, state = wheel_speed_values(ecu), steer_state_values(ecu)
+        self.values["ABS_WheelSpeeds"], self.values["ABS_SteerState"] = speeds, state
+        return [self.speeds.frame(speeds), self.state.frame(state)]  # ABS-OUT-01, -02
+
+
+def wheel_speed_values(ecu: Abs) -> dict[str, float]:
+    """ABS_WheelSpeeds' signals (ABS-OUT-01): the sensors' last readings."""
+    return {f"WheelSpeed{w}": v for w, v in zip(WHEELS, ecu.readings)}
+
+
+def steer_state_values(ecu: Abs) -> dict[str, float]:
+    """ABS_SteerState's signals (ABS-OUT-02)."""
+    out = ecu.out
+    state: dict[str, float] = {"TurnDirection": out.turn, "RefVehicleSpeed": out.ref_speed,
+                               "FrontWheelAngleEst": out.angle, "AbsActive": out.active, "AbsFault": out.fault}
+    state.update({f"PressureState{w}": s for w, s in zip(WHEELS, out.states)})
+    return state
 
 
 # ==============================================================================================================
 # Running on a bus
 # ==============================================================================================================
-def drain(bus: can.BusABC, ecu: Abs, now: float) -> None:
+def drain(bus: can.BusABC, ecu: Abs, now: float, diag: uds_server.Diagnostics | None = None) -> None:
     """Judge every frame that arrived since the last step, in order, each at its receive time (COM-RX-02: the
     driver's timestamp, epoch seconds; a stamp more than a second from `now` is of another clock and the frame
     gets `now`)."""
@@ -1040,6 +1079,8 @@ def drain(bus: can.BusABC, ecu: Abs, now: float) -> None:
             return
         if msg is None:
             return
+        if diag is not None and diag.on_frame(msg):
+            continue  # a diagnostic request's frame: the UDS server's, never an input's
         ecu.receive(msg, msg.timestamp if abs(now - msg.timestamp) < 1.0 else now)
 
 
@@ -1060,11 +1101,50 @@ class TaskStats:
         return line
 
 
-def control_loop(bus: can.BusABC, ecu: Abs, tx: Transmitter, stop: threading.Event,
-                 send: Callable[[can.Message], bool], stats_every: float = 0.0) -> None:
+class Node:
+    """The ABS's software on its bus: the control (Abs) and the frames' senders (Transmitter). `restart` is what
+    power-up does, and what an ECUReset does (DIAG-RST-02): the estimate, the slip control and the outputs from
+    their power-up state, receivers that have applied no frame. The AliveCounters, which the contract leaves free
+    to start anew, carry on (this ABS's choice): the receivers of its messages see no WRONGSEQUENCE."""
+
+    def __init__(self, chassis: cantools.database.Database, bench: cantools.database.Database) -> None:
+        self.chassis, self.bench = chassis, bench
+        self.ecu, self.tx = Abs(chassis, bench), Transmitter(chassis, bench)
+
+    def restart(self) -> None:
+        self.ecu = Abs(self.chassis, self.bench)
+
+    # --- what the diagnostic server reads (ABS-DIAG-03) ---
+    def outputs(self, message: str) -> dict[str, float] | None:
+        """The signals of the message's latest frame (sent in the last 10 ms): a DID with a signal equals one of the
+        ABS's frames (DIAG-SVC-02). None before the first: the DBC start value."""
+        return self.tx.values.get(message)
+
+    def inputs(self, message: str) -> dict[str, float] | None:
+        rx = self.ecu.rx.get(message)
+        return None if rx is None else rx.values
+
+    def brake_demand(self) -> float:
+        """0xFD01: the driver's brake demand from the last valid DRV_Pedals (ABS-GEN-01), bar; 0 before the first."""
+        values = self.ecu.rx["DRV_Pedals"].values
+        if values is None:
+            return 0.0
+        pressure = float(values["BrakePressure"])
+        return pressure if pressure > 0 else float(values["BrakePedal"]) * BAR_PER_PEDAL_PCT
+
+    def may_test(self) -> bool:
+        """ABS-DIAG-02: at standstill and not braking (the brake switch open: no demand of 2 bar or more)."""
+        demand = self.ecu.brake_demand(time.time())
+        return self.ecu.out.ref_speed < TEST_MAX_SPEED and not (demand is not None and demand >= BRAKE_SWITCH_BAR)
+
+
+def control_loop(bus: can.BusABC, node: Node, stop: threading.Event, send: Callable[[can.Message], bool],
+                 stats_every: float = 0.0, diag: uds_server.Diagnostics | None = None) -> None:
     """The 5 ms control step on an absolute grid: read the bus, evaluate, send IO_AbsValves at once
     (PLANT-IO-ABS-02: after each control step), and ABS_WheelSpeeds / ABS_SteerState every 2nd step (10 ms,
-    ABS-GEN-01), so no output is older than one step after the newest reading it uses (ABS-EST-01)."""
+    ABS-GEN-01), so no output is older than one step after the newest reading it uses (ABS-EST-01). Then the
+    fault memory gets the step's AbsFault and the diagnostic server answers what it received (after the frames:
+    a diagnostic response never delays them)."""
     tick, next_t = 0, time.monotonic()
     stats, next_stats = TaskStats(), next_t + stats_every
     while not stop.is_set():
@@ -1076,7 +1156,8 @@ def control_loop(bus: can.BusABC, ecu: Abs, tx: Transmitter, stop: threading.Eve
         if late * 1000.0 > stats.max_late_ms:
             stats.max_late_ms, stats.max_late_at = late * 1000.0, time.time()
         wall = time.time()
-        drain(bus, ecu, wall)
+        ecu, tx = node.ecu, node.tx
+        drain(bus, ecu, wall, diag)
         ecu.step(wall)
         stats.faults[ecu.out.fault] += 1
         frames = [tx.valve_frame(ecu)]
@@ -1085,12 +1166,15 @@ def control_loop(bus: can.BusABC, ecu: Abs, tx: Transmitter, stop: threading.Eve
         for frame in frames:
             if send(frame):
                 tx.sent(frame)
+        if diag is not None:
+            diag.control_step(diag.failing({"ABS_SteerState.AbsFault": ecu.out.fault}))  # DIAG-DTC-02
+            diag.poll()  # ISO-TP and UDS, never blocking; an ECUReset restarts `node.ecu` for the next step
         missed = max(0, int(late / CONTROL_S) - 1)  # a late step skips the slots it missed instead of a burst
         stats.skipped_slots += missed
         tick += 1 + missed
         next_t += CONTROL_S * (1 + missed)
         if stats_every and now >= next_stats:
-            print(stats.report(ecu), flush=True)
+            print(stats.report(node.ecu), flush=True)
             next_stats = now + stats_every
 
 
@@ -1115,6 +1199,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--bench-dbc", type=Path, default=dbc / "bench.dbc", help="the bench I/O DBC")
     parser.add_argument("--stats", type=float, default=0.0, metavar="S",
                         help="print faults, late steps and received frames every S seconds (diagnosis)")
+    parser.add_argument("--vin", default=IDENTIFICATION["VehicleIdentificationNumber"],
+                        help="the VIN this ABS holds (0xF190, 17 characters; '' for none programmed)")
+    parser.add_argument("--nvm", type=Path, default=None, metavar="FILE",
+                        help="non-volatile memory (the fault memory) kept in FILE across restarts; "
+                             "default: none, every start is an ABS as delivered")
+    parser.add_argument("--diag-defect", choices=("confirmed-never",), default=None,
+                        help="a deliberate diagnostic defect (off by default) for checking a tester: confirmed-never "
+                             "never sets confirmedDTC (status bit 3) nor, therefore, warningIndicatorRequested (bit 7)")
     return parser.parse_args(argv)
 
 
@@ -1159,8 +1251,8 @@ def main(argv: list[str] | None = None) -> int:
         if not isinstance(chassis, cantools.database.can.Database) or \
                 not isinstance(bench, cantools.database.can.Database):
             raise E2EConfigError(f"{args.dbc}, {args.bench_dbc}: not CAN databases")
-        ecu, tx = Abs(chassis, bench), Transmitter(chassis, bench)
-    except (OSError, KeyError, E2EConfigError, cantools.database.errors.Error) as exc:
+        node = Node(chassis, bench)
+    except (OSError, KeyError, ValueError, cantools.database.errors.Error) as exc:  # E2EConfigError, DiagConfigError
         print(f"abs_ecu: {exc}", flush=True)
         return 2
     try:
@@ -1169,13 +1261,24 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{args.interface} {args.channel}" if args.channel else args.interface
         print(f"abs_ecu: cannot open {where}: {exc}", flush=True)
         return 2
+    try:
+        diag = uds_server.Diagnostics(
+            "ABS", make_sender(bus), identification={**IDENTIFICATION, "VehicleIdentificationNumber": args.vin},
+            live={"BrakeDemand": node.brake_demand}, outputs=node.outputs, inputs=node.inputs,
+            signals=[chassis, bench], preconditions={"ValveAndPumpTest": node.may_test}, on_reset=node.restart,
+            defect=args.diag_defect, nvm=args.nvm)
+    except (OSError, ValueError) as exc:  # a DiagConfigError is a ValueError
+        bus.shutdown()
+        print(f"abs_ecu: {exc}", flush=True)
+        return 2
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):  # also when started in the background (SIGINT ignored there)
         signal.signal(signum, lambda *_: stop.set())
     print(f"ABS running on {args.interface} {args.channel or ''}".rstrip(), flush=True)
     try:
-        control_loop(bus, ecu, tx, stop, make_sender(bus), args.stats)
+        control_loop(bus, node, stop, make_sender(bus), args.stats, diag)
     finally:
+        diag.close()
         bus.shutdown()
         print("ABS stopped", flush=True)
     return 0

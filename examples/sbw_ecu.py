@@ -9,14 +9,34 @@ Node `SBW` of `dbc/chassis.dbc`, built only from README.md, `docs/contract/sbw.m
   the request extrapolated over the sample's age (a late task does not steer to where the hand wheel was).
 - Chassis bus (SBW-GEN-01): sends `SBW_HandWheel` and `SBW_Pinion` on its own 10 ms clock, both carrying the
   values of the same complete 5 ms sample (SBW-OUT-03: no age difference between them); reads `IMU_Motion` and
-  `ABS_WheelSpeeds` for the optional yaw-rate feedback (`--mode YAW_RATE`, this supplier's coding of SBW-CTL-05;
-  default DIRECT).
+  `ABS_WheelSpeeds` for the optional yaw-rate feedback (SBW-CTL-05: coded `SteeringMode` YAW_RATE, see
+  Diagnostics; DIRECT as delivered).
 - Steering (SBW-CTL-01): the pinion is requested to the hand-wheel angle (ratio 1); the rig's position servo
   follows it (PLANT-IO-SBW-03). Road feel (SBW-CTL-04): the driver holds a quarter of the rack's load torque
   (from the steering motor's current) plus a light centring spring; the road-feel motor also damps the column on
   its torsion bar (PLANT-IO-SBW-04) and the hand wheel, so that it returns when let go.
 - Faults (SBW-FLT-01..04): plausibility of both angle sensors against the independent channels (column estimate,
   actuator rotor angle), in the priority 3, 2, 1, 4.
+- Diagnostics (SBW-DIAG-01..04, docs/contract/diagnostics.md): a UDS server on ISO-TP (`examples/uds_server.py`,
+  shared by the three examples; can-isotp driven from this loop, see below) on 0x705/0x70D and the functional
+  0x7DF. Coding: `SteeringMode` (0xFDC0) DIRECT or YAW_RATE (this SBW has no YAW_RATE_LAT_ACCEL: a write of it is
+  refused with NRC 0x31) and `IdealYawGain` (0xFDC1), in force from the next hand-wheel sample; `--mode` and
+  `--ideal-yaw-gain` are the coding as delivered. Fault memory fed every 10 ms (the SBW_Pinion clock) from the
+  SbwFault it sends, and SENSOR_SIGNAL_LOST (SBW-FLT-06's condition: an IO_Sbw* input timed out; only the DTC:
+  this SBW's bus reaction to it is unchanged, SbwFault does not go to INPUT_TIMEOUT for it). Routine 0x0201
+  SteeringAngleSensorZero checks its precondition (VehicleSpeed below 1 km/h, else NRC 0x22) and changes nothing
+  (the rig's sensors read 0 straight ahead). ECUReset restarts the steering and the receivers as at power-up (the
+  AliveCounters carry on); coding and fault memory are kept (`--nvm FILE`: also across process restarts).
+
+  Why the ISO-TP layer runs in this loop and not in a thread of its own: this loop is the bus's only reader (a
+  NotifierBasedCanStack would need a second reader, a can.Notifier, and a thread that competes with the 5 ms task
+  for the interpreter); the loop passes every frame of 0x705 and 0x7DF to the server and calls its `poll()` once
+  per pass, which never blocks. The loop wakes at least every 7 ms (its clocks), well within P2 = 50 ms and the
+  ISO-TP timeouts; a diagnostic frame never reaches the E2E receivers (its identifier is none of theirs).
+
+Diagnostic defect for checking a tester (off by default): `--diag-defect wrong-nrc`: WriteDataByIdentifier and
+RoutineControl in the default session are answered with NRC 0x33 (securityAccessDenied) instead of 0x7F
+(serviceNotSupportedInActiveSession, DIAG-NRC-01 item 3 before item 7).
 
 End-to-end protection as an AUTOSAR stack does it (docs/spec/e2e.md, COM-E2E-*, COM-RX-*): each message's profile
 and parameters are the DBC's `E2E_*` attributes (through cantools), CRC and counter are the `autosar-e2e`
@@ -30,7 +50,8 @@ Run it as the external SBW of the bench (three processes on one host):
     bench run --interface udp_multicast --channel 239.255.1.3 --external all --dut SBW
 
 It prints a line with `running` once it is on the bus and `stopped` at the end (SIGINT or SIGTERM, exit 0).
-Needs python-can, cantools, autosar-e2e (import name `e2e`) and the standard library only; nothing of the bench.
+Needs python-can, cantools, autosar-e2e (import name `e2e`), can-isotp (import name `isotp`) and the standard
+library only; nothing of the bench.
 """
 
 from __future__ import annotations
@@ -53,6 +74,15 @@ import cantools
 from e2e import p01, p11
 
 ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT / "examples") not in sys.path:
+    sys.path.insert(0, str(ROOT / "examples"))  # the examples' shared diagnostic server
+import uds_server  # noqa: E402
+
+#: DIAG-ID-01: this SBW's own identification (the VIN is the vehicle's, programmed at the end of the line: --vin)
+IDENTIFICATION = {"SparePartNumber": "SBW-EX0001", "EcuSerialNumber": "SBW-EX000001",
+                  "VehicleIdentificationNumber": "BENCH000000000001", "SoftwareVersionNumber": "EX-2.0"}
+STEERING_MODES = {0: "DIRECT", 1: "YAW_RATE"}  # SteeringMode (0xFDC0) values this SBW has (SBW-DIAG-02)
+ZERO_LEARN_MAX_SPEED = 1.0  # km/h, SBW-DIAG-03's precondition
 
 # --- The steering system (sbw.md, "The steering system the SBW drives") ----------------------------------------
 K_H = 372.0 * math.pi / 180.0  # torsion bar, N·m per hand-wheel degree (6.49)
@@ -437,21 +467,43 @@ class Node:
     every message keeps its cycle whatever the inputs do (COM-FRM-02)."""
 
     def __init__(self, chassis: Any, bench: Any, sbw: Sbw, bus: can.BusABC) -> None:
+        self.chassis, self.bench = chassis, bench
         self.sbw, self.bus = sbw, bus
+        self.diag: uds_server.Diagnostics | None = None
+        self.send_errors = 0
+        self.max_age = 0.0  # s, for --stats
+        self.restart()
+
+    def restart(self) -> None:
+        """Power-up (and ECUReset, DIAG-RST-02): steering state and receivers from the start; the coding stays (the
+        diagnostic server puts it in force again). The AliveCounters, which the contract leaves free to start
+        anew, carry on over an ECUReset (this SBW's choice): the receivers of its messages, the rig's included,
+        see no WRONGSEQUENCE."""
+        chassis, bench = self.chassis, self.bench
+        self.sbw = Sbw(self.sbw.mode, self.sbw.g_r)
         self.rx: dict[int, Receiver] = {}
         for db, names in ((bench, IO_INPUTS), (chassis, BUS_INPUTS)):
             for name in names:
                 message = db.get_message_by_name(name)
                 self.rx[message.frame_id] = Receiver(db, message)
         self.by_name = {r.message.name: r for r in self.rx.values()}
-        self.actuators = Sender(bench, bench.get_message_by_name("IO_SbwActuators"))
-        self.handwheel_tx = Sender(chassis, chassis.get_message_by_name("SBW_HandWheel"))
-        self.pinion_tx = Sender(chassis, chassis.get_message_by_name("SBW_Pinion"))
+        if not hasattr(self, "actuators"):  # power-up only
+            self.actuators = Sender(bench, bench.get_message_by_name("IO_SbwActuators"))
+            self.handwheel_tx = Sender(chassis, chassis.get_message_by_name("SBW_HandWheel"))
+            self.pinion_tx = Sender(chassis, chassis.get_message_by_name("SBW_Pinion"))
         self.last_act = -1.0  # time.monotonic() of the last IO_SbwActuators
         self.next_out = time.monotonic()  # the next slot of SBW_HandWheel and SBW_Pinion (own 10 ms grid)
         self.snapshot = self.outputs()  # the values of the last complete I/O sample
-        self.send_errors = 0
-        self.max_age = 0.0  # s, for --stats
+        self.sent_values: dict[str, dict[str, float]] = {}  # the signals of each message's latest frame
+
+    def send_frame(self, frame: can.Message) -> bool:
+        """A frame of the diagnostic server (ISO-TP); the same bus and the same non-blocking send."""
+        try:
+            self.bus.send(frame, timeout=0.005)
+        except can.CanError:
+            self.send_errors += 1
+            return False
+        return True
 
     def send(self, sender: Sender, values: dict[str, float]) -> None:
         frame = sender.frame(values)
@@ -523,16 +575,56 @@ class Node:
         hand, pinion = self.snapshot
         self.send(self.handwheel_tx, hand)
         self.send(self.pinion_tx, pinion)
+        self.sent_values = {"SBW_HandWheel": hand, "SBW_Pinion": pinion}
+
+    def monitor(self) -> None:
+        """The fault memory's control step (DIAG-DTC-02), every 10 ms after SBW_Pinion: SbwFault as just sent, and
+        SENSOR_SIGNAL_LOST while an IO_Sbw* input is timed out (SBW-FLT-06's condition). The frames that arrived
+        meanwhile are taken in first: a late task must not judge an input's age before reading it (COM-RX-02)."""
+        assert self.diag is not None
+        while True:
+            try:
+                msg = self.bus.recv(timeout=0.0)
+            except can.CanError:
+                break
+            if msg is None:
+                break
+            if not self.diag.on_frame(msg):
+                self.receive(msg, time.time())
+        wall = time.time()
+        io_lost = any(self.by_name[name].timed_out(wall) for name in IO_INPUTS)
+        fault = int(self.sent_values["SBW_Pinion"]["SbwFault"])
+        self.diag.control_step(self.diag.failing({"SBW_Pinion.SbwFault": fault},
+                                                 {"SENSOR_SIGNAL_LOST"} if io_lost else set()))
+
+    # --- what the diagnostic server reads (SBW-DIAG-04) ---
+    def vehicle_speed(self) -> float:
+        """0xFD00: the mean of the rear wheels of the last valid ABS_WheelSpeeds, km/h (0 before the first)."""
+        values = self.by_name["ABS_WheelSpeeds"].values
+        return 0.0 if values is None else (values["WheelSpeedRL"] + values["WheelSpeedRR"]) / 2.0
+
+    def output_values(self, message: str) -> dict[str, float] | None:
+        """The signals of the message's latest frame (sent in the last 10 ms): a DID with a signal equals one of
+        the SBW's frames (DIAG-SVC-02). None before the first: the DBC start value."""
+        return self.sent_values.get(message)
+
+    def input_values(self, message: str) -> dict[str, float] | None:
+        rx = self.by_name.get(message)
+        return None if rx is None else rx.values
 
     def run(self, stop: Callable[[], bool]) -> None:
         """Read frames as they come (IO_SbwActuators goes out at each hand-wheel sample); the clock sends SBW_*
         every 10 ms and IO_SbwActuators when no sample triggered it for 7 ms (then every 5 ms)."""
         while not stop():
+            if self.diag is not None:
+                self.diag.poll()  # ISO-TP and UDS, never blocking (a reset restarts this node's state)
             mono = time.monotonic()
             if mono >= self.next_out:
                 self.send_outputs(time.time())
                 missed = int((mono - self.next_out) / OUT_PERIOD)  # a late task skips the slots it missed
                 self.next_out += OUT_PERIOD * (1 + missed)
+                if self.diag is not None:
+                    self.monitor()
             if mono - self.last_act >= 0.007:
                 hand_in = not self.by_name["IO_SbwHandWheel"].timed_out(time.time())
                 self.send_actuators(mono - 0.002, hand_in)  # then every 5 ms until the samples come back
@@ -541,7 +633,7 @@ class Node:
                 msg = self.bus.recv(timeout=timeout)
             except can.CanError:
                 msg = None
-            if msg is not None:
+            if msg is not None and not (self.diag is not None and self.diag.on_frame(msg)):
                 self.receive(msg, time.time())
 
 
@@ -571,10 +663,48 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--dbc", type=Path, default=ROOT / "dbc" / "chassis.dbc", help="the chassis DBC")
     parser.add_argument("--io-dbc", type=Path, default=ROOT / "dbc" / "bench.dbc", help="the bench I/O DBC")
     parser.add_argument("--mode", choices=("DIRECT", "YAW_RATE"), default="DIRECT",
-                        help="coding: DIRECT (SBW-CTL-01) or the yaw-rate feedback (SBW-CTL-05)")
-    parser.add_argument("--ideal-yaw-gain", type=float, default=0.28, help="G_r of YAW_RATE, 1/s")
+                        help="SteeringMode as delivered: DIRECT (SBW-CTL-01, the contract's default) or the yaw-rate "
+                             "feedback (SBW-CTL-05); a tester codes it with WriteDataByIdentifier 0xFDC0")
+    parser.add_argument("--ideal-yaw-gain", type=float, default=0.28,
+                        help="IdealYawGain G_r as delivered, 1/s (0.05-0.5; coded with WriteDataByIdentifier 0xFDC1)")
+    parser.add_argument("--vin", default=IDENTIFICATION["VehicleIdentificationNumber"],
+                        help="the VIN this SBW holds (0xF190, 17 characters; '' for none programmed)")
+    parser.add_argument("--nvm", type=Path, default=None, metavar="FILE",
+                        help="non-volatile memory (coding, fault memory) kept in FILE across restarts; "
+                             "default: none, every start is an SBW as delivered")
+    parser.add_argument("--diag-defect", choices=("wrong-nrc",), default=None,
+                        help="a deliberate diagnostic defect (off by default) for checking a tester: wrong-nrc "
+                             "answers WriteDataByIdentifier and RoutineControl in the default session with NRC 0x33 "
+                             "instead of 0x7F")
     parser.add_argument("--stats", type=float, default=0.0, metavar="S", help="print receive counts every S s")
     return parser.parse_args(argv)
+
+
+def make_diagnostics(node: Node, args: argparse.Namespace) -> uds_server.Diagnostics:
+    """The SBW's diagnostic server (SBW-DIAG-01..04): its values, its coding and its routine's precondition."""
+
+    def apply_coding(name: str, value: float) -> None:
+        if name == "SteeringMode":
+            node.sbw.mode = STEERING_MODES[int(value)]
+        elif name == "IdealYawGain":
+            node.sbw.g_r = value
+
+    def supported(name: str, value: float) -> bool:  # SBW-DIAG-02: YAW_RATE_LAT_ACCEL is not in this SBW
+        return name != "SteeringMode" or int(value) in STEERING_MODES
+
+    live = {"VehicleSpeed": node.vehicle_speed,
+            "HandWheelSensorAngle": lambda: node.sbw.io.handwheel,
+            "ColumnAngleEstimate": lambda: node.sbw.column_estimate(),
+            "PinionSensorAngle": lambda: node.sbw.io.pinion,
+            "ActuatorAngle": lambda: node.sbw.io.actuator}
+    modes = {name: raw for raw, name in STEERING_MODES.items()}
+    return uds_server.Diagnostics(
+        "SBW", node.send_frame, identification={**IDENTIFICATION, "VehicleIdentificationNumber": args.vin},
+        live=live, outputs=node.output_values, inputs=node.input_values, signals=[node.chassis, node.bench],
+        apply_coding=apply_coding, coding_supported=supported,
+        initial_coding={"SteeringMode": modes[args.mode], "IdealYawGain": args.ideal_yaw_gain},
+        preconditions={"SteeringAngleSensorZero": lambda: node.vehicle_speed() < ZERO_LEARN_MAX_SPEED},
+        on_reset=node.restart, defect=args.diag_defect, nvm=args.nvm)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -592,9 +722,14 @@ def main(argv: list[str] | None = None) -> int:
             kwargs["hop_limit"] = 0  # the traffic never leaves the host, as the bench's
         bus = can.Bus(**kwargs)
         node = Node(chassis, bench, sbw, bus)
+        try:
+            node.diag = make_diagnostics(node, args)
+        except ValueError:  # a DiagConfigError: the bus was opened for nothing
+            bus.shutdown()
+            raise
         gc.collect()
         gc.freeze()  # the databases' objects out of the collector's way: shorter pauses of the 5 ms task
-    except (OSError, ValueError, KeyError, can.CanError) as error:
+    except (OSError, ValueError, KeyError, can.CanError) as error:  # DiagConfigError is a ValueError
         print(f"sbw_ecu: {error}", file=sys.stderr)
         return 2
     if args.interface == "udp_multicast":
@@ -614,7 +749,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.stats and time.monotonic() >= next_stats:
             next_stats += args.stats
             counts = " ".join(f"{r.message.name}:{r.applied}/{r.rejected}/{r.state}" for r in node.rx.values())
-            print(f"stats fault={sbw.fault} send_errors={node.send_errors} max_age={node.max_age * 1e3:.1f}ms "
+            diag = node.diag
+            assert diag is not None
+            print(f"stats fault={node.sbw.fault} diag={diag.requests}/{diag.negative} "
+                  f"send_errors={node.send_errors} max_age={node.max_age * 1e3:.1f}ms "
                   f"{counts}", flush=True)
             node.max_age = 0.0
         return stopping
@@ -623,6 +761,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         node.run(stop)
     finally:
+        if node.diag is not None:
+            node.diag.close()
         bus.shutdown()
         print("SBW stopped", flush=True)
     return 0

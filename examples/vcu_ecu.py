@@ -17,8 +17,29 @@ Run it as the external VCU of the bench (three processes on one host):
     python examples/vcu_ecu.py --interface udp_multicast --channel 239.255.1.2
     bench run --interface udp_multicast --channel 239.255.1.2 --external all --dut VCU
 
+Rear steering at speed (vcu-4ws.md VCU-4WS-10): the law its coding `RearSteerLaw` (DID 0xFDC0) names, in force
+from the next 10 ms task: FEEDFORWARD (VCU-4WS-02, the default, as delivered), OFF (2WS, delta_r = 0) and FEEDBACK
+(delta_r = -X + C2 u r with IMU_Motion.YawRate, FEEDFORWARD without a valid IMU_Motion); all three are this VCU's.
+
+Diagnostics (vcu.md VCU-DIAG-01..04, docs/contract/diagnostics.md): a UDS server on ISO-TP (`examples/uds_server.py`,
+shared by the three examples) on 0x700/0x708 and the functional 0x7DF: sessions, ECUReset, the fault memory fed at
+every task with the VcuFault it evaluated (one DTC per value but OK), identification and live DIDs, the coding,
+SecurityAccess with the documented seed/key, routine 0x0204 StraightAheadLearn (precondition VehicleSpeed below
+0.05 m/s, else NRC 0x22; it changes nothing: the bench's wheels have no trim). ECUReset restarts the control and the
+receivers as at power-up (its AliveCounters carry on); coding and fault memory are kept (`--nvm FILE`: also across
+process restarts). The ISO-TP layer (can-isotp) runs inside the 10 ms task and never blocks: the task, the bus's
+only reader, hands it the frames of 0x700 and 0x7DF it drains and calls the server's `poll()` after its evaluation,
+so the periodic frames keep their grid (they go out first, at the task's start) and no second reader or thread
+competes with it for the bus or the interpreter. A request is answered within one task (10 ms) of its last frame,
+well within P2 = 50 ms; a diagnostic frame never reaches the E2E receivers (its identifier is none of theirs). On
+socketcan the kernel's acceptance filters pass the two diagnostic identifiers too.
+
+Diagnostic defect for checking a tester (off by default): `--diag-defect snapshot-stale`: a DTC's snapshot record
+(ReadDTCInformation 0x04) keeps the values of its first occurrence since power-up; later occurrences, also after a
+ClearDiagnosticInformation, show that old record instead of their own (DIAG-DTC-05: "replacing the previous record").
+
 It prints a line with `running` once it is on the bus; Ctrl-C (SIGINT) stops it. Needs python-can, cantools,
-autosar-e2e (import name `e2e`) and the standard library only; nothing of the bench.
+autosar-e2e (import name `e2e`), can-isotp (import name `isotp`) and the standard library only; nothing of the bench.
 """
 
 from __future__ import annotations
@@ -27,6 +48,7 @@ import argparse
 import math
 import signal
 import socket
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -37,6 +59,10 @@ from pathlib import Path
 import can
 import cantools
 from e2e import p01, p02, p05, p11
+
+if str(Path(__file__).resolve().parent) not in sys.path:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))  # the examples' shared diagnostic server
+import uds_server  # noqa: E402
 
 # --- Vehicle A (docs/spec/vehicles.md A, vcu.md symbols, vcu-4ws.md symbols) ---------------------------------
 K = 0.555  # half track, m
@@ -58,6 +84,14 @@ RANGE_END = 5242.87  # m, VCU-OUT-07
 
 NORMAL, LATERAL, ADAPTIVE, PIVOT = 0, 1, 2, 3
 OK, CENTRE_AT_ORIGIN, CENTRE_ON_WHEEL, ANGLE_OVER_90, REQUEST_INVALID, REQUEST_TIMEOUT, WHEEL_FAULT = range(7)
+
+# --- Rear-steering laws (vcu-4ws.md VCU-4WS-10; RearSteerLaw 0xFDC0, vcu.md VCU-DIAG-02) ----------------------
+LAW_OFF, LAW_FEEDFORWARD, LAW_FEEDBACK = 0, 1, 2
+C1, C2 = 1.0, MASS * B_CG / (C_F * WHEELBASE) + MASS * A_CG / (C_R * WHEELBASE)  # FEEDBACK, C2 = 0.018182 s^2/m
+LEARN_MAX_SPEED = 0.05  # m/s: VCU-DIAG-03's precondition (VehicleSpeed 0xFD00)
+#: DIAG-ID-01: this VCU's own identification (the VIN is the vehicle's, programmed at the end of the line: --vin)
+IDENTIFICATION = {"SparePartNumber": "VCU-EX0001", "EcuSerialNumber": "VCU-EX000001",
+                  "VehicleIdentificationNumber": "BENCH000000000001", "SoftwareVersionNumber": "EX-2.0"}
 
 TASK_S = 0.010  # VCU-GEN-02: inputs evaluated at least every 10 ms (each task, after its frames are sent)
 #: The messages the VCU reads (VCU-GEN-01: its receivers); the bus delivers only these (receive_filters)
@@ -543,15 +577,23 @@ def plan_normal(handwheel: float, v: float) -> Plan:
     return Plan(mode=NORMAL, v=v, centre=centre, curvature=x_angle, steered_by_handwheel=True)
 
 
-def plan_adaptive(handwheel: float, v: float, u: float) -> Plan:
-    """VCU-MODE-06 / VCU-4WS-04: below 20 km/h of the vehicle's speed u VCU-MODE-05, at and above VCU-4WS-02."""
+def plan_adaptive(handwheel: float, v: float, u: float, law: int = LAW_FEEDFORWARD,
+                  yaw_rate: float | None = None) -> Plan:
+    """VCU-MODE-06 / VCU-4WS-04: below 20 km/h of the vehicle's speed u VCU-MODE-05, at and above the coded law of
+    VCU-4WS-10 (FEEDFORWARD VCU-4WS-02; OFF; FEEDBACK with `yaw_rate`, deg/s of the latest valid IMU_Motion,
+    FEEDFORWARD when there is none)."""
     x_angle = handwheel / HANDWHEEL_RATIO
     if u < SWITCH_SPEED:
         if x_angle == 0.0:  # VCU-MODE-07
             return Plan(mode=ADAPTIVE, v=v, heading=0.0, curvature=0.0, steered_by_handwheel=True)
         centre = (L / _tan_deg(x_angle), 0.0)  # VCU-MODE-05: centre on y = 0, rear mirrors front
         return Plan(mode=ADAPTIVE, v=v, centre=centre, curvature=x_angle, steered_by_handwheel=True)
-    rear = zero_sideslip_ratio(u) * x_angle  # VCU-4WS-02: delta_r = k(u) X
+    if law == LAW_OFF:
+        rear = 0.0  # VCU-4WS-10 OFF (2WS): the centre on the rear-axle line, as NORMAL
+    elif law == LAW_FEEDBACK and yaw_rate is not None:
+        rear = -C1 * x_angle + C2 * abs(u) * yaw_rate  # VCU-4WS-10 FEEDBACK ([P3] §2, Fig. 3b), degrees
+    else:
+        rear = zero_sideslip_ratio(u) * x_angle  # VCU-4WS-02: delta_r = k(u) X
     tan_front, tan_rear = _tan_deg(x_angle), _tan_deg(rear)
     if tan_front == tan_rear:  # VCU-4WS-05: parallel headings are a translation (straight included)
         return Plan(mode=ADAPTIVE, v=v, heading=x_angle, curvature=x_angle, steered_by_handwheel=True,
@@ -741,8 +783,9 @@ class Outputs:
 class Vcu:
     """Receivers, the evaluation of VCU-FLT-03 and the resulting outputs."""
 
-    def __init__(self, db: cantools.database.Database, start: float) -> None:
+    def __init__(self, db: cantools.database.Database, start: float, law: int = LAW_FEEDFORWARD) -> None:
         self.start = start
+        self.law = law  # RearSteerLaw, the coding (VCU-4WS-10)
         self.rx = {name: E2EReceiver(db, db.get_message_by_name(name)) for name in INPUTS}
         self.by_id = {r.message.frame_id: r for r in self.rx.values()}
         self.last_executed = POWER_UP  # VCU-FLT-08: 0 deg before any executed command
@@ -811,7 +854,11 @@ class Vcu:
         if mode == NORMAL:
             return plan_normal(handwheel, v)
         # VCU-4WS-01's one exception: within VCU-FLT-07's grace, an undefined estimate is u = |TargetSpeed|
-        return plan_adaptive(handwheel, v, abs(v) if u is None else u)
+        yaw_rate = None
+        if self.law == LAW_FEEDBACK and self._last_eval is not None:  # the evaluation's time (evaluate sets it)
+            imu = self._imu(self._last_eval)
+            yaw_rate = None if imu is None else float(imu["YawRate"])
+        return plan_adaptive(handwheel, v, abs(v) if u is None else u, self.law, yaw_rate)
 
     def _wheel_fault(self, now: float) -> bool:
         """VCU-FLT-07: a wheel timed out or WheelFault != 0; silent or CMD_TIMEOUT ignored in the first 100 ms."""
@@ -858,6 +905,7 @@ class Transmitter:
         self.state = E2ESender(db, db.get_message_by_name("VCU_VehicleState"))
         self.centre = E2ESender(db, db.get_message_by_name("VCU_RotationCentre"))
         self.by_id = {s.message.frame_id: s for s in (*self.wheel_cmd.values(), self.state, self.centre)}
+        self.values: dict[str, dict[str, float]] = {}  # the signals of each message's latest frame (DIAG-SVC-02)
 
     def sent(self, frame: can.Message) -> None:
         """COM-E2E-01: a transmitted frame advances its message's AliveCounter."""
@@ -870,22 +918,32 @@ class Transmitter:
 
     def state_frames(self, out: Outputs) -> list[can.Message]:
         """VCU-OUT-02..07: VCU_VehicleState and VCU_RotationCentre."""
-        state = self.state.frame({
-            "VehicleSpeed": out.vehicle_speed,  # VCU-OUT-05
-            "ActiveMode": out.command.mode,  # VCU-OUT-02
-            "YawRateTarget": out.yaw_rate,  # VCU-OUT-04
-            "CurvatureAngle": out.command.curvature,  # VCU-OUT-03
-            "VcuFault": out.fault,  # VCU-FLT-*
-        })
-        x, y = out.command.centre
-        centre = self.centre.frame({"RotationCentreX": x, "RotationCentreY": y})  # VCU-OUT-06/07
-        return [state, centre]
+        state, centre = state_values(out), centre_values(out)
+        self.values["VCU_VehicleState"], self.values["VCU_RotationCentre"] = state, centre
+        return [self.state.frame(state), self.centre.frame(centre)]
+
+
+def state_values(out: Outputs) -> dict[str, float]:
+    """VCU_VehicleState's signals (VCU-OUT-02..05, VCU-FLT-*)."""
+    return {
+        "VehicleSpeed": out.vehicle_speed,  # VCU-OUT-05
+        "ActiveMode": out.command.mode,  # VCU-OUT-02
+        "YawRateTarget": out.yaw_rate,  # VCU-OUT-04
+        "CurvatureAngle": out.command.curvature,  # VCU-OUT-03
+        "VcuFault": out.fault,  # VCU-FLT-*
+    }
+
+
+def centre_values(out: Outputs) -> dict[str, float]:
+    """VCU_RotationCentre's signals (VCU-OUT-06/07)."""
+    x, y = out.command.centre
+    return {"RotationCentreX": x, "RotationCentreY": y}
 
 
 # ==============================================================================================================
 # Running on a bus
 # ==============================================================================================================
-def drain(bus: can.BusABC, vcu: Vcu, now: float) -> None:
+def drain(bus: can.BusABC, vcu: Vcu, now: float, diag: uds_server.Diagnostics | None = None) -> None:
     """Judge every frame that arrived since the last task, in order, each at its reception time.
 
     The task reads the bus itself (no receive thread): after the process was descheduled it first takes in
@@ -902,6 +960,8 @@ def drain(bus: can.BusABC, vcu: Vcu, now: float) -> None:
             return
         if msg is None:
             return
+        if diag is not None and diag.on_frame(msg):
+            continue  # a diagnostic request's frame: the UDS server's, never an input's
         vcu.receive(msg, msg.timestamp if abs(now - msg.timestamp) < 1.0 else now)
 
 
@@ -924,10 +984,44 @@ class TaskStats:
         return line
 
 
-def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Event,
-                 send: Callable[[can.Message], bool], stats_every: float = 0.0) -> None:
+class Ecu:
+    """The VCU's software on its bus: the control (Vcu) and the frames' senders (Transmitter). `restart` is what
+    power-up does, and what an ECUReset does (DIAG-RST-02): outputs from their power-up state, receivers that have
+    applied no frame; the coding is put in force again by the diagnostic server. The AliveCounters, which the
+    contract leaves free to start anew, carry on (this VCU's choice): the receivers of its messages see the new
+    outputs in sequence, without the WRONGSEQUENCE and the rejected frames of a restarted counter."""
+
+    def __init__(self, db: cantools.database.Database) -> None:
+        self.db = db
+        self.vcu, self.tx = Vcu(db, time.time()), Transmitter(db)
+        self.restarted = False
+
+    def restart(self) -> None:
+        self.vcu = Vcu(self.db, time.time(), self.vcu.law)
+        self.restarted = True
+
+    # --- what the diagnostic server reads (VCU-DIAG-04) ---
+    def outputs(self, message: str) -> dict[str, float] | None:
+        """The signals of the message's latest frame (sent in the last 20 ms, or at the next task): a DID with a
+        signal equals one of the VCU's frames (DIAG-SVC-02). None before the first: the DBC start value."""
+        return self.tx.values.get(message)
+
+    def inputs(self, message: str) -> dict[str, float] | None:
+        rx = self.vcu.rx.get(message)
+        return None if rx is None else rx.values
+
+    def wheel_status_timed_out(self) -> float:
+        """0xFD0A: bit 0 FL, 1 FR, 2 RL, 3 RR while that WHL_Status_xx is timed out (COM-RX-02), at the last task."""
+        vcu = self.vcu
+        now = vcu._last_eval if vcu._last_eval is not None else time.time()
+        return float(sum(1 << i for i, w in enumerate(WHEELS) if vcu.rx[f"WHL_Status_{w}"].timed_out(now)))
+
+
+def control_loop(bus: can.BusABC, ecu: Ecu, stop: threading.Event, send: Callable[[can.Message], bool],
+                 stats_every: float = 0.0, diag: uds_server.Diagnostics | None = None) -> None:
     """The 10 ms task on an absolute grid: send the frames of the last evaluation at once (COM-CYC-01: the
-    wheels every task, the state every 2nd), then read the bus and evaluate for the next task.
+    wheels every task, the state every 2nd), then read the bus and evaluate for the next task, then give the
+    fault memory the evaluation's result and let the diagnostic server answer what it received.
 
     Sending first keeps the frames on the grid whatever the evaluation costs; a request received after one
     task's evaluation is in the frames of the task after next, at most 20 ms later, which VCU-GEN-02 allows
@@ -939,7 +1033,7 @@ def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Eve
     socketcan `recv` and `send` still read the clock and call select() once each per frame."""
     tick, next_t = 0, time.monotonic()
     stats, next_stats = TaskStats(), next_t + stats_every
-    pending = frames_of_task(tx, vcu.out, tick)
+    pending = frames_of_task(ecu.tx, ecu.vcu.out, tick)
     while not stop.is_set():
         now = time.monotonic()
         if next_t > now:
@@ -947,20 +1041,27 @@ def control_loop(bus: can.BusABC, vcu: Vcu, tx: Transmitter, stop: threading.Eve
             now = time.monotonic()
         late = now - next_t
         stats.max_late_ms = max(stats.max_late_ms, late * 1000.0)
+        tx = ecu.tx
         for frame in pending:
             if send(frame):
                 tx.sent(frame)
         wall = time.time()
-        drain(bus, vcu, wall)  # frames received up to now (VCU-GEN-02)
-        out = vcu.evaluate(wall)
+        drain(bus, ecu.vcu, wall, diag)  # frames received up to now (VCU-GEN-02)
+        out = ecu.vcu.evaluate(wall)
         stats.faults[out.fault] += 1
         missed = max(0, int(late / TASK_S) - 1)   # the slots that passed meanwhile but the last (it runs at once)
         stats.skipped_slots += missed
         tick += 1 + missed  # a late task skips the slots it missed instead of sending a burst
         next_t += TASK_S * (1 + missed)
-        pending = frames_of_task(tx, out, tick)  # VCU-GEN-02: all outputs of one evaluation together
+        pending = frames_of_task(ecu.tx, out, tick)  # VCU-GEN-02: all outputs of one evaluation together
+        if diag is not None:
+            diag.control_step(diag.failing({"VCU_VehicleState.VcuFault": out.fault}))  # DIAG-DTC-02
+            diag.poll()  # ISO-TP and UDS, never blocking; an ECUReset restarts `ecu`
+            if ecu.restarted:  # the power-up outputs, in frames of the new AliveCounters
+                ecu.restarted = False
+                pending = frames_of_task(ecu.tx, ecu.vcu.out, tick)
         if stats_every and now >= next_stats:
-            print(stats.report(vcu), flush=True)
+            print(stats.report(ecu.vcu), flush=True)
             next_stats = now + stats_every
 
 
@@ -990,6 +1091,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--dbc", type=Path, default=default_dbc, help="the chassis DBC (default: dbc/chassis.dbc)")
     parser.add_argument("--stats", type=float, default=0.0, metavar="S",
                         help="print faults, late tasks and received frames every S seconds (diagnosis)")
+    parser.add_argument("--vin", default=IDENTIFICATION["VehicleIdentificationNumber"],
+                        help="the VIN this VCU holds (0xF190, 17 characters; '' for none programmed)")
+    parser.add_argument("--nvm", type=Path, default=None, metavar="FILE",
+                        help="non-volatile memory (coding, fault memory) kept in FILE across restarts; "
+                             "default: none, every start is a VCU as delivered")
+    parser.add_argument("--diag-defect", choices=("snapshot-stale",), default=None,
+                        help="a deliberate diagnostic defect (off by default) for checking a tester: snapshot-stale "
+                             "keeps each DTC's first snapshot record since power-up instead of the latest occurrence's")
     return parser.parse_args(argv)
 
 
@@ -1044,18 +1153,44 @@ def only_own_group(bus: can.BusABC) -> None:
             return
 
 
+def make_diagnostics(ecu: Ecu, bus: can.BusABC, args: argparse.Namespace) -> uds_server.Diagnostics:
+    """The VCU's diagnostic server (VCU-DIAG-01..04): its values, its coding and its routine's precondition."""
+
+    def apply_coding(name: str, value: float) -> None:
+        if name == "RearSteerLaw":
+            ecu.vcu.law = int(value)  # in force from the next task (DIAG-COD-01)
+
+    return uds_server.Diagnostics(
+        "VCU", make_sender(bus), identification={**IDENTIFICATION, "VehicleIdentificationNumber": args.vin},
+        live={"WheelStatusTimedOut": ecu.wheel_status_timed_out}, outputs=ecu.outputs, inputs=ecu.inputs,
+        signals=[ecu.db], apply_coding=apply_coding,
+        coding_supported=lambda name, value: name != "RearSteerLaw" or int(value) in (LAW_OFF, LAW_FEEDFORWARD,
+                                                                                     LAW_FEEDBACK),
+        preconditions={"StraightAheadLearn": lambda: abs(ecu.vcu.out.vehicle_speed) < LEARN_MAX_SPEED},
+        on_reset=ecu.restart, defect=args.diag_defect, nvm=args.nvm)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     db = cantools.database.load_file(str(args.dbc))
-    bus = open_bus(args, receive_filters(db))
+    ecu = Ecu(db)
+    # the diagnostic server's identifiers pass the acceptance filters too (the physical and the functional request)
+    bus = open_bus(args, receive_filters(db) + [{"can_id": i, "can_mask": 0x7FF, "extended": False}
+                                                for i in uds_server.Declaration.load("VCU").ids()])
+    try:
+        diag = make_diagnostics(ecu, bus, args)
+    except (OSError, ValueError) as error:  # a DiagConfigError is a ValueError
+        bus.shutdown()
+        print(f"vcu_ecu: {error}", flush=True)
+        return 2
     stop = threading.Event()
-    vcu, tx = Vcu(db, time.time()), Transmitter(db)
     for signum in (signal.SIGINT, signal.SIGTERM):  # also when started in the background (SIGINT ignored there)
         signal.signal(signum, lambda *_: stop.set())
     print(f"VCU running on {args.interface} {args.channel or ''}".rstrip(), flush=True)
     try:
-        control_loop(bus, vcu, tx, stop, make_sender(bus), args.stats)
+        control_loop(bus, ecu, stop, make_sender(bus), args.stats, diag)
     finally:
+        diag.close()
         bus.shutdown()
         print("VCU stopped", flush=True)
     return 0

@@ -173,6 +173,7 @@ class Station:
         self._listening: list[FrameListener] = []
         #: the diagnostic side of each node this station simulates (bench.diag.server, set by the session)
         self.diagnostics: dict[str, DiagnosticSide] = {}
+        self._immediate = False   # send_now in progress: its frame goes to the monitor at once (real time)
 
     def listen(self, listener: FrameListener) -> None:
         """Hand the frames of the listener's identifiers to it as they arrive, and poll it every tick while busy."""
@@ -192,8 +193,14 @@ class Station:
 
     def send_now(self, frame_id: int, data: bytes) -> None:
         """Send one frame outside the restbus (a diagnostic message), at the station's time, through the fault
-        plan like every frame it sends."""
-        self.send(self.now(), frame_id, data)
+        plan like every frame it sends. In real time it reaches the monitor (and the log) at once, with the clock
+        read after it went out, not at the end of the tick: an answer to it may be received before the tick ends,
+        and the ISO-TP framing check must see the two in the order they were on the bus."""
+        self._immediate = True
+        try:
+            self.send(self.now(), frame_id, data)
+        finally:
+            self._immediate = False
 
     @property
     def stamped_batches(self) -> bool:
@@ -352,6 +359,9 @@ class Station:
                 echoes = self._echoes[frame_id] = deque(maxlen=BABBLE_ECHO_WINDOW)
             echoes.append(data)
         if self.send_clock is not None:   # real time: logged when the tick's frames are out (_flush)
+            if self._immediate:
+                self.monitor.on_frame(self.send_clock(), frame_id, data, "tx", False, is_error)
+                return
             self._outbox.append((frame_id, data, is_error, t if due is None else due, due is None))
             return
         self.monitor.on_frame(t, frame_id, data, "tx", False, is_error)
