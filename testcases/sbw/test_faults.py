@@ -227,6 +227,7 @@ def test_sbw_pinion_sensor_implausible(bench) -> None:
 
 @pytest.mark.dut("SBW")
 @pytest.mark.req("SBW-FLT-04", "SBW-CTL-05", "COM-RX-02")
+@pytest.mark.reference_only("IMU", reason="drops IMU_Motion frames, which only an IMU simulated by this process sends")
 def test_sbw_input_timeout(bench) -> None:
     lim = Limits(bench)
     start(bench, SPEED_KMH, "YAW_RATE")
