@@ -40,6 +40,7 @@ from testcases.ev4wis.steps import (
     start,
     wait_for_targets,
 )
+from testcases.fault_memory import FaultMemory
 
 S0, V0 = (3.0, 2.0), 1.0          # the valid request before the bad one
 FAULT_WITHIN_S = limit("fault_within")    # s: 3 × 20 ms timeout + the VCU's task and 20 ms VehicleState cycle
@@ -52,12 +53,22 @@ REJECTED = ("VCU-MODE-02", "VCU-FLT-08", "VCU-FLT-09", "VCU-OUT-04", "WHL-CTL-02
 pytestmark = [pytest.mark.dut(*VCU_AND_WHEELS)]
 
 
-def _valid_first(bench) -> dict[str, float]:
-    """Drive the valid request S0 and return the commanded angles it leaves."""
+class Held(dict[str, float]):
+    """The commanded angles the valid request left, and the VCU's fault memory, cleared before the bad request."""
+
+    memory: FaultMemory
+    since: float
+
+
+def _valid_first(bench) -> Held:
+    """Drive the valid request S0 and return the commanded angles it leaves (and the cleared fault memory)."""
     start(bench)
     send_pivot(bench, *S0, V0)
     wait_for_targets(bench, oracle.rotation_targets(*S0, V0))
-    return {w: bench.value(f"VCU_WheelCmd_{w}", "SteerAngleCmd") for w in WHEELS}
+    held = Held({w: bench.value(f"VCU_WheelCmd_{w}", "SteerAngleCmd") for w in WHEELS})
+    held.memory = FaultMemory(bench, "VCU")
+    held.since = bench.now
+    return held
 
 
 def _expect_rejected(bench, fault: str, held: dict[str, float], *, plots: bool = True) -> None:
@@ -73,6 +84,8 @@ def _expect_rejected(bench, fault: str, held: dict[str, float], *, plots: bool =
                      lambda: all(abs(bench.value(f"WHL_Status_{w}", "WheelSpeed")) <= 0.1 for w in WHEELS),
                      STOP_WITHIN_S)
     expect_fault(bench, fault)
+    if isinstance(held, Held):   # the DTC side: the fault's DTC stored while the bad request lasts
+        held.memory.during(fault, held.since)
     for w in WHEELS:
         bench.expect(f"{w} angle command held", bench.value(f"VCU_WheelCmd_{w}", "SteerAngleCmd"), held[w],
                      abs_tol=ANGLE_TOL, unit="deg", detail="held at the last valid command (VCU-FLT-08)")
