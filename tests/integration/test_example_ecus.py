@@ -30,6 +30,8 @@ def test_campaign_passes_against_the_example(node: str, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("node", list(EXAMPLES))
 def test_example_needs_nothing_of_the_bench(node: str) -> None:
-    """What a supplier writes from the documents: python-can, cantools, autosar-e2e (`e2e`) and the standard
-    library, nothing of bench or plant."""
-    assert third_party_imports(_example(node)) == {"can", "cantools", "e2e"}
+    """What a supplier writes from the documents: python-can, cantools, autosar-e2e (`e2e`), can-isotp (`isotp`)
+    for its diagnostics in the examples' one shared module (`uds_server`) and the standard library, nothing of
+    bench or plant."""
+    assert third_party_imports(_example(node)) == {"can", "cantools", "e2e", "uds_server"}
+    assert third_party_imports(_example(node).with_name("uds_server.py")) == {"can", "isotp"}
