@@ -12,24 +12,26 @@ import re
 from bisect import bisect_left
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from pytest import fail
-from udsoncan.client import Client
 
 from bench.checks.monitor import InvalidFrame
 from bench.checks.steps import StepLog, percentile, tolerance_text, within
 from bench.checks.timing import LATE_FLOOR, Late, SelfTiming
 from bench.database.codec import SignalCodec
 from bench.diag.declaration import NodeDiagnostics, Protocol
-from bench.diag.describe import describe
-from bench.diag.tester import BenchConnection, TesterPort, open_client, tester_port
 from bench.errors import BenchError, Inconclusive, did_you_mean
 from bench.faults.plan import KINDS, Fault
 from bench.results.model import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
 from bench.sim.station import LATE_CYCLES
+
+if TYPE_CHECKING:   # (udsoncan costs 0.3 s of import: loaded when a case first asks for a tester)
+    from udsoncan.client import Client
+
+    from bench.diag.tester import TesterPort
 
 MAX_INPUT_GAPS = 500         # gaps past their bound looked at per message and case (they are compared pairwise)
 BENCH_FIGURES = 8            # figures of the bench's own timing on a case's record at most (the worst)
@@ -217,6 +219,8 @@ class Case:
         udsoncan's NegativeResponseException (its `.response.code` is the NRC), no response its TimeoutException,
         each naming the node and the request. The exchange goes on the case's record in the report, decoded.
         Records no step."""
+        from bench.diag.tester import open_client, tester_port
+
         declaration = self.session.declaration
         if declaration is None:
             raise BenchError(f"bench.diag({node!r}): {self.session.project.path} has no [diagnostics] file")
@@ -263,6 +267,11 @@ class Case:
         return declaration.protocol
 
     def _close_testers(self) -> None:
+        if not self._testers:
+            return
+        from bench.diag.describe import describe
+        from bench.diag.tester import BenchConnection
+
         rows: list[list[object]] = []
         for (node, _), client in self._testers.items():
             connection = client.conn

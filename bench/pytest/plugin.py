@@ -14,6 +14,7 @@ error, so nothing runs); reference-only cases are skipped at collection when the
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from collections.abc import Generator, Iterator
 from datetime import datetime
@@ -26,7 +27,6 @@ from bench.case import Case
 from bench.checks.steps import step_values
 from bench.config import ProjectConfig, RunSettings, load_config
 from bench.database.codec import load_codebook
-from bench.diag.tester import DiagnosticError
 from bench.errors import BenchError, Inconclusive
 from bench.faults.plan import parse_fault
 from bench.options import add_pytest_options
@@ -365,6 +365,12 @@ def pytest_runtest_call(item: pytest.Item) -> Generator[None, Result[None], None
                      item.nodeid, step_summary(step))
 
 
+def _diagnostic_errors() -> tuple[type[BaseException], ...]:
+    """The tester's one-line failures, when a case has loaded the tester (udsoncan costs 0.3 s of import)."""
+    tester = sys.modules.get("bench.diag.tester")
+    return (tester.DiagnosticError,) if tester is not None else ()
+
+
 def _simulation_failures(case: Case) -> list[Step]:
     """The failed steps of other nodes than the case's DUT that the bench itself simulates (none of them external)."""
     external = case.session.external
@@ -376,7 +382,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]
                               ) -> Generator[None, Result[pytest.TestReport], None]:
     outcome = yield
     report: pytest.TestReport = outcome.get_result()
-    if call.excinfo is not None and call.excinfo.errisinstance((FailedSteps, Inconclusive, DiagnosticError)):
+    if call.excinfo is not None and call.excinfo.errisinstance((FailedSteps, Inconclusive, *_diagnostic_errors())):
         report.longrepr = str(call.excinfo.value)   # the steps say it all: no traceback through pytest's hooks
         if call.excinfo.errisinstance(Inconclusive):
             # pytest's own outcome stays "failed" (a plain pytest run must not pass it); the bench's records and
