@@ -41,6 +41,7 @@ from bench.pytest.marks import (
     split_names,
 )
 from bench.pytest.shard import apply_shard
+from bench.report import prepare_html
 from bench.report.junit import step_summary
 from bench.results import store as results_io
 from bench.results.model import SIMULATION_FAILED, CaseRef, RequirementInfo, RunResult, Step, Table
@@ -89,6 +90,8 @@ def pytest_configure(config: pytest.Config) -> None:
         config.addinivalue_line("markers", f"{name}: {text}")
     if _worker_id(config) and config.getoption("--bench-out"):
         STOP.install()   # a worker of `bench run -n`: the controller forwards SIGINT/SIGTERM (bench.stop)
+    elif not _worker_id(config):
+        prepare_html()   # this process writes the report: its template compiled before any case runs
     config.stash[_RUN_KEY] = None
     config.stash[_DESELECTED_KEY] = []
     config.stash[_PENDING_KEY] = []

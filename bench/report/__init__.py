@@ -4,7 +4,7 @@ Both read only :class:`bench.results.model.RunResult`, so they can be (re)writte
 result without the bus or pytest.
 """
 
-from bench.report.html import write_html
+from bench.report.html import prepare_html, write_html
 from bench.report.junit import write_junit
 
-__all__ = ["write_html", "write_junit"]
+__all__ = ["prepare_html", "write_html", "write_junit"]

@@ -104,6 +104,9 @@ def _finalize(value: object) -> object:
     return _CONTROL.sub("", str(value))
 
 
+TEMPLATE = "report.html.j2"
+
+
 @cache
 def _env() -> Environment:
     env = Environment(
@@ -220,6 +223,12 @@ def _search_key(case: CaseResult) -> str:
     return " ".join([case.name, case.nodeid, *case.reqs, *case.duts, *(f.spec for f in case.faults)]).lower()
 
 
+def prepare_html() -> None:
+    """Compile the report's template now, in a process that will write a report: a run stopped by a signal has a
+    second for its report (bench.stop), and compiling the template took a third of it on a busy host."""
+    _env().get_template(TEMPLATE)
+
+
 def render_html(run: RunResult, report_dir: Path = Path("."), keep_drawing: Callable[[], bool] | None = None) -> str:
     """The report as a string; ``report_dir`` is where it will live (for relative links). ``keep_drawing``: asked
     before each case's plots; once it says False the remaining cases' plots are left out, and the report says how
@@ -233,7 +242,7 @@ def render_html(run: RunResult, report_dir: Path = Path("."), keep_drawing: Call
             plots.append([])
             continue
         plots.append([_render_plot(plotter, plot, f"c{i}p{j}", case) for j, plot in enumerate(case.plots)])
-    return _env().get_template("report.html.j2").render(
+    return _env().get_template(TEMPLATE).render(
         run=run,
         counts=run.counts,
         plots=plots,
