@@ -646,14 +646,16 @@ class Case:
         that never arrived fails. Records one step per message (measured p50 / p99 / max in ms); fewer than
         `min_frames` intervals fail. A message none of whose senders is among the case's DUTs (`dut` markers;
         e.g. a sensor the bench simulates) is judged as its sender's (the step's `node`, as `expect`'s): shown
-        under that node and never fails the case. Returns True when every message passed."""
+        under that node and never fails the case. In real time a message this process sends (its restbus) times the
+        bench itself: where it fails, how far it is past the bound is a figure of the bench's lateness too
+        (Case.bench_verdict), and the case is inconclusive, not failed. Returns True when every message passed."""
         ok_all = True
         duts = self.result.duts
+        # A simulated node's periodic message the restbus sends now is due on the bus whether it came or not (a
+        # fault may have dropped every frame); an external node's are known only by their frames.
+        sent = {name for station in self.session.stations
+                for name, slot in station.restbus.periodic.items() if slot.enabled}
         if messages is None:
-            # A simulated node's periodic message the restbus sends now is due on the bus whether it came or
-            # not (a fault may have dropped every frame); an external node's are known only by their frames.
-            sent = {name for station in self.session.stations
-                    for name, slot in station.restbus.periodic.items() if slot.enabled}
             names = [n for n, s in self._monitor.by_name.items() if s.codec.cycle_time and (
                 n in sent or s.intervals_dropped + len(s.intervals) > self._interval_marks.get(n, 0))]
         else:
@@ -674,6 +676,12 @@ class Case:
             p50, p99, worst = percentile(intervals, 50), percentile(intervals, 99), max(intervals)
             ms = 1000.0
             ok = (abs(p50 - cycle) <= p50_band * cycle and p99 <= p99_max * cycle and worst < max_max * cycle)
+            timing = self.session.self_timing
+            if not ok and timing is not None and name in sent:
+                for figure, late, bound in (("p50", abs(p50 - cycle), p50_band * cycle),
+                                            ("p99", p99 - cycle, (p99_max - 1.0) * cycle),
+                                            ("max", worst - cycle, (max_max - 1.0) * cycle)):
+                    timing.add(f"{name} sent by the bench, cycle {figure}", late, self.now, bound)
             ok_all &= self._steps.record(
                 f"cycle time {name}", ok, f"p50 {p50 * ms:.2f} / p99 {p99 * ms:.2f} / max {worst * ms:.2f}",
                 f"{cycle * ms:g} ms", f"p50 ±{p50_band:.0%}, p99 ≤ {p99_max:g}×, max < {max_max:g}×", "ms",

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from bench.cli.run import EXIT_INCONCLUSIVE
 from bench.config import load_config
 from bench.database.codec import load_codebook
 from bench.errors import ConfigError
@@ -95,14 +96,16 @@ def test_bench_run_pcan_bitrate_reaches_python_can(tmp_path: Path, fake_pcan: tu
     env, log = fake_pcan
     result = bench(env, "run", str(MINI), "-k", "pivot", "--interface", "pcan", "--channel", "PCAN_USBBUS1",
                    "--bitrate", "500000", "--fd", "--data-bitrate", "2000000", "--out", str(tmp_path / "out"))
-    assert result.returncode == 0, result.stdout + result.stderr
+    # 3: inconclusive, the bench was late on a busy host (a real-time run's verdict depends on the load); what this
+    # test checks is the settings python-can got, and that the case ran
+    assert result.returncode in (0, EXIT_INCONCLUSIVE), result.stdout + result.stderr
     calls = opened(log)
     # the pre-run check opens it once, then the run's plant and runner stations each open their own
     assert len(calls) == 3, calls
     for call in calls:
         assert call["channel"] == "PCAN_USBBUS1"
         assert call["bitrate"] == 500000 and call["fd"] is True and call["data_bitrate"] == 2000000, call
-    assert "1 passed" in result.stdout
+    assert "1 passed" in result.stdout or "1 inconclusive" in result.stdout, result.stdout
 
 
 def test_default_bitrate_is_the_databases_baudrate(tmp_path: Path, fake_pcan: tuple[dict[str, str], Path]) -> None:
