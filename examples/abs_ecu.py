@@ -28,7 +28,10 @@ Choices the documents leave to the ECU (each marked where it is made):
   front wheel makes the car turn less than eq. 11 says, and delta-bar reads low);
 - a switching point counts (an interpolation point of the reference speed, an axle difference) only if the
   wheel re-accelerated (beyond 5 m/s^2) since its pressure reduction began: one that did not still slips; the
-  identification under ABS takes axle differences only at the switching points of the armed side's inner
+  identification under ABS arms a side when its two wheels were each in DECREASE in one of the last 10 updates
+  while the other side's are in INCREASE (ABS-TURN-01's window; read from one update alone, the pattern
+  appeared only when the two inner wheels' cycles overlapped, and an angle step was identified in about half
+  of the real-time runs), takes axle differences only at the switching points of the armed side's inner
   wheels and forgets them when the other side is armed and after 0.5 s; the extrapolation starts from the
   reference speed at the start of ABS control but does not take it as an interpolation point;
 - a new world (the bench restarts a scenario without telling an external ECU, PLANT-SCN-04) shows as a jump of
@@ -107,6 +110,7 @@ WHEELS = ("FL", "FR", "RL", "RR")  # wheels 1-4 of [P4]
 # --- Calibration (ABS-TURN-01; bench.toml [calibration.ABS]) --------------------------------------------------
 V_L0, V_L1, V_L2 = 0.6, 9.0, 1.35  # km/h
 T0_S = 0.01  # side pattern held this long arms the identification under ABS
+PATTERN_WINDOW = 10  # updates (0.1 s): a wheel in DECREASE in one of them counts as decreasing (ABS-TURN-01)
 T1_S = 0.05  # a new T holds this long before it is taken (before ABS) / confirmed (under ABS)
 FILTER_TAU_S = 0.3  # low-pass of the wheel speeds before ABS control (ABS-TURN-01, informative)
 T_SETTLE_S = 0.5  # after a restart of the estimate T stays 0 this long (the filters settle from the raw speeds)
@@ -748,6 +752,7 @@ class Abs:
         self.start_point = (0.0, 0.0)
         self.slope0 = -5.0
         self.pattern, self.pattern_since, self.armed = 0, 0.0, 0
+        self.recent_states: deque[list[int]] = deque(maxlen=PATTERN_WINDOW)
         self.axle_dv: list[float | None] = [None, None]
         self.axle_dv_t = [0.0, 0.0]
         self.pending: tuple[int, float] | None = None
@@ -988,12 +993,13 @@ class Abs:
     def identify_under_abs(self, t: float, speeds: list[float]) -> None:
         """ABS-TURN-01 steps 1-3 and ABS-EST-02 under ABS."""
         states = [w.state for w in self.wheels]
-        if states[0] == states[2] == 2 and states[1] == states[3] == 1:
-            pattern = 1  # left turn: FL and RL decrease, FR and RR increase
-        elif states[1] == states[3] == 2 and states[0] == states[2] == 1:
-            pattern = -1
-        else:
-            pattern = 0
+        self.recent_states.append(states)
+        # step 1: an inner wheel decreasing in one update of the window counts (the inner front and rear wheels
+        # cycle on their own: their DECREASE stretches often alternate without sharing an update)
+        decreasing = [any(past[i] == DECREASE for past in self.recent_states) for i in range(4)]
+        left = decreasing[0] and decreasing[2] and states[1] == states[3] == INCREASE
+        right = decreasing[1] and decreasing[3] and states[0] == states[2] == INCREASE
+        pattern = 1 if left and not right else -1 if right and not left else 0   # both: no pattern
         if pattern != self.pattern:
             self.pattern, self.pattern_since = pattern, t
         if pattern != 0 and t - self.pattern_since >= T0_S - 1e-9 and pattern != self.armed:

@@ -81,15 +81,14 @@ def _failures(out: Path) -> str:
     if not path.exists():
         return "no results.json\n"
     lines = []
-    for case in json.loads(path.read_text())["cases"]:
-        if case["outcome"] in ("passed", "skipped"):
-            continue
+    cases = [c for c in json.loads(path.read_text())["cases"] if c["outcome"] not in ("passed", "skipped")]
+    for case in sorted(cases, key=lambda c: c["outcome"] == "inconclusive"):   # the failed ones first: CI cuts
         lines.append(f"{case['outcome']}: {case['nodeid']} {case.get('inconclusive') or ''}")
         lines += [f"  step {s['name']!r}: measured {s['measured']!r}, expected {s['expected']!r} {s['tolerance']}"
                   f" at {s['time']:.3f} s {s['detail']}" for s in case["steps"] if s["verdict"] == "fail"]
         lines += [f"  invalid: {entry}" for entry in case.get("invalid", [])[:5]]
         lines += [f"  bench timing: {entry}" for entry in case.get("bench_timing", [])[:5]]
-        lines += [f"  message: {case['message'][-1500:]}"] if case.get("message") else []
+        lines += [f"  message: {case['message'][:300]}"] if case.get("message") else []
     return "\n".join(lines) + "\n"
 
 
