@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import pytest
 
 from bench.case import Case
-from testcases.fault_memory import FaultMemory
+from testcases.fault_memory import FaultMemory, OnBus
 from testcases.stimulus import STIMULUS
 
 TICK = 0.001
@@ -77,13 +77,20 @@ def _drive(bench: Case) -> None:
     bench.expect("no fault before the injection", bench.value("VCU_VehicleState", "VcuFault"), 0)
 
 
-def _reaction(bench: Case, case: FaultCase) -> None:
+def _reaction(bench: Case, case: FaultCase, fault_end: float) -> None:
     vcu = lambda: bench.value("VCU_VehicleState", "VcuFault")  # noqa: E731
     speeds_zero = lambda: all(bench.value(f"VCU_WheelCmd_{c}", "WheelSpeedCmd") == 0.0  # noqa: E731
                               for c in ("FL", "FR", "RL", "RR"))
     if case.reaction == "vcu_request":
         bench.eventually("VCU flags REQUEST_INVALID", lambda: vcu() == REQUEST_INVALID, REACTION_S)
         bench.eventually("VCU commands zero wheel speeds", speeds_zero, REACTION_S)
+    elif case.reaction == "vcu_timeout" and case.after_window:
+        # The VCU timed out while its own frames were starved: its first frame after the flood may show the timeout
+        # or already the valid request that came first (VCU-FLT-10); its fault memory shows that it detected it
+        after = bench.history("VCU_VehicleState", "VcuFault", since=fault_end)[1]
+        first = int(after[0]) if len(after) else "no frame"
+        bench.expect_true("VCU's first frame after the flood: REQUEST_TIMEOUT, or OK (recovered, VCU-FLT-10)",
+                          first in (REQUEST_TIMEOUT, 0), measured=first, expected=f"{REQUEST_TIMEOUT} or 0")
     elif case.reaction == "vcu_timeout":
         bench.eventually("VCU flags REQUEST_TIMEOUT", lambda: vcu() == REQUEST_TIMEOUT, REACTION_S)
         bench.eventually("VCU commands zero wheel speeds", speeds_zero, REACTION_S)
@@ -172,7 +179,7 @@ def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
     if case.after_window:
         bench.run(fault.end - bench.now)
         bench.wait_until(lambda: not bench.timed_out("VCU_VehicleState"), 0.05)
-    _reaction(bench, case)
+    _reaction(bench, case, fault.end)
     if not case.after_window:   # (after a flood the cause is over: the node's next frame clears the code)
         memory.during(dtc, fault.start)
     t_zero = bench.now
@@ -192,7 +199,13 @@ def test_fault_is_detected_and_handled(bench: Case, case: FaultCase) -> None:
                   case.bound * 1000]])
     bench.eventually("no fault once the window is over", lambda: bench.value("VCU_VehicleState", "VcuFault") == 0,
                      1.0)
-    memory.after(dtc, fault.start)
+    if case.after_window:
+        # PIVOT: DRV_MotionRequest times out 3 cycles after its last frame before the flood (VCU-FLT-01), and the
+        # timeout lasts to the flood's end; the node detected it by then at the latest (its snapshot's time)
+        timed_out = fault.start + 3 * CYCLE["DRV_MotionRequest"]
+        memory.after(dtc, fault.start, OnBus(timed_out, fault.end - timed_out, 1, fault.end, True))
+    else:
+        memory.after(dtc, fault.start)
     memory.clear_and_reset()
     bench.plot("VCU fault and FL wheel", [("VCU_VehicleState", "VcuFault"), ("WHL_Status_FL", "WheelFault"),
                                           ("VCU_WheelCmd_FL", "WheelSpeedCmd")])
