@@ -62,7 +62,8 @@ class BenchRun:
         self.findings = FindingCollector(lambda: self.session.now() if self.session is not None else None)
         self.findings.attach()
         label = f"{settings.interface}:{settings.channel or 'default'}"
-        self.recorder = log = LogProcess(self.mcap_path, project.databases, label, project.e2e)
+        self.recorder = log = LogProcess(self.mcap_path, project.databases, label, project.e2e,
+                                         project.diagnostics)
         self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
 
         def sink(frame: CheckedFrame) -> None:

@@ -5,6 +5,8 @@ What the report's diagnostic table and the log show beside the steps; the names 
 
 from __future__ import annotations
 
+from functools import cache
+
 from udsoncan.BaseService import BaseService
 from udsoncan.Response import Response
 
@@ -14,6 +16,7 @@ from bench.diag.declaration import NodeDiagnostics, dtc_code
 SUBFUNCTION_SERVICES = {0x10, 0x11, 0x19, 0x27, 0x31, 0x3E, 0x85, 0x28}
 
 
+@cache   # udsoncan finds a service by walking its classes (~40 us), and the run log names every UDS message
 def service_name(sid: int) -> str:
     service = BaseService.from_request_id(sid) or BaseService.from_response_id(sid)
     return service.get_name() if service is not None else f"service 0x{sid:02X}"
@@ -27,8 +30,8 @@ def describe(payload: bytes, node: NodeDiagnostics | None = None) -> str:
     data = payload.hex(" ").upper()
     sid = payload[0]
     if sid == 0x7F and len(payload) >= 3:
-        return f"negative {service_name(payload[1])}: {Response.Code.get_name(payload[2])} (0x{payload[2]:02X})"
-    if sid & 0x40 and BaseService.from_response_id(sid) is not None:
+        return f"negative {service_name(payload[1])}: {_nrc_name(payload[2])} (0x{payload[2]:02X})"
+    if sid & 0x40 and _is_response(sid):
         text = f"positive {service_name(sid)}"
         if sid == 0x59 and len(payload) >= 3 and payload[1] in (0x02, 0x04, 0x06):
             dtcs = payload[3:] if payload[1] == 0x02 else payload[2:6]
@@ -40,6 +43,16 @@ def describe(payload: bytes, node: NodeDiagnostics | None = None) -> str:
     if sid in SUBFUNCTION_SERVICES and len(payload) >= 2:
         text += f" 0x{payload[1] & 0x7F:02X}" + (" (no positive response)" if payload[1] & 0x80 else "")
     return f"{text} [{data}]"
+
+
+@cache
+def _is_response(sid: int) -> bool:
+    return BaseService.from_response_id(sid) is not None
+
+
+@cache   # udsoncan reads the NRC's name from the class's members (inspect), ~40 us
+def _nrc_name(code: int) -> str:
+    return Response.Code.get_name(code)
 
 
 def _dtc_name(node: NodeDiagnostics | None, number: int) -> str:

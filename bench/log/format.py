@@ -6,6 +6,8 @@ panels), and JSON keeps the log pure Python. Channels:
 - `/can/frames`: every raw frame (`bench.CanFrame`, ROS `can_msgs/Frame` fields plus bench fields);
 - `/can/decoded/<Message>`: the decoded signals of each DBC message (numbers; a non-finite value is null);
 - `/bench/steps`: test steps and verdicts as `foxglove.Log`;
+- `/diag/<Message>`: each whole diagnostic message (UDS on ISO-TP) whose frames are the DBC message's, reassembled
+  and described in a line (`bench.DiagMessage`, bench.log.diaglog); a channel appears with its first message;
 - metadata `bench.sim.clock` (`origin_ns`: the log time of bench time 0) and `bench` (who wrote the log).
 
 The writer (bench.log.recorder) builds the records from the templates below, the reader (bench.log.logread)
@@ -25,6 +27,8 @@ CLOCK_METADATA = "bench.clock"   # origin_ns: the log time of bench time 0
 BENCH_METADATA = "bench"         # profile, host, python, bench version, attachments, compression
 STEPS_TOPIC = "/bench/steps"
 DECODED_PREFIX = "/can/decoded/"
+DIAG_PREFIX = "/diag/"
+DIAG_SCHEMA_NAME = "bench.DiagMessage"
 FRAME_SCHEMA_NAME = "bench.CanFrame"
 LOG_SCHEMA_NAME = "foxglove.Log"
 ENCODING = "json"                # the message encoding of every channel
@@ -113,6 +117,24 @@ LOG_SCHEMA: dict[str, Any] = {
         "file": {"type": "string", "description": "Filename"},
         "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
     },
+}
+
+
+TEXT_SCHEMA = {"type": "string"}
+DIAG_SCHEMA: dict[str, Any] = {
+    "title": DIAG_SCHEMA_NAME,
+    "description": "A whole diagnostic message (UDS on ISO-TP) as a bus observer reassembles it from the frames of "
+                   "one DBC message; log time: the frame that completed it",
+    "type": "object",
+    "properties": {
+        "node": {**TEXT_SCHEMA, "description": "The node whose connection it is; empty for a functional request"},
+        "direction": {"type": "string", "enum": ["request", "response", "functional"]},
+        "service": {**TEXT_SCHEMA, "description": "UDS service (of a negative response: the refused one)"},
+        "text": {**TEXT_SCHEMA, "description": "The message in one line: sub-function, NRC and DTCs by name"},
+        "data": {**TEXT_SCHEMA, "description": "The payload in hex, e.g. 19 02 FF"},
+        "length": {"type": "integer", "minimum": 1, "description": "Payload bytes (the ISO-TP length)"},
+    },
+    "required": ["node", "direction", "service", "text", "data", "length"],
 }
 
 

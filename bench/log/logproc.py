@@ -3,7 +3,8 @@
 Why a child: logging every frame (JSON of the raw frame and of its decoded values, then mcap's chunking and
 compression) is a large part of a campaign's CPU (docs/performance.md, "the log package" and issue 18's
 sections); in a child process it runs on the machine's other core while the simulation goes on, and the child
-writes each run of frames with `Recorder.frames` (the texts of a repeated frame built once).
+writes each run of frames with `Recorder.frames` (the texts of a repeated frame built once), and follows the
+diagnostic connections (bench.log.diaglog: a whole UDS message per record, from the declaration the run names).
 The simulation hands over raw frames in batches (no decoded values: the child decodes them again
 with the same codec, which is cheaper than pickling them), each batch's frames as one list and its few other
 items (steps, metadata, the time origin) apart with their place among the frames. The child
@@ -29,12 +30,14 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
+from operator import itemgetter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bench.errors import BenchError, LogError
 
-if TYPE_CHECKING:   # the run's process needs neither (nor mcap's import); the child imports them
+if TYPE_CHECKING:   # the run's process needs none of them (nor mcap's or udsoncan's import); the child imports them
+    from bench.log.diaglog import DiagnosticLog
     from bench.log.recorder import Decoder, Recorder
 
 BATCH_FRAMES = 2000      # hand over at least this often ...
@@ -51,13 +54,14 @@ class LogProcess:
     """Same calls as the recorder's frame/step/close, served by a child process."""
 
     def __init__(self, path: Path, databases: Sequence[Path], channel: str,
-                 e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> None:
-        """`e2e_overrides`: bench.toml's [e2e] table, so that the child loads the databases as the run does."""
+                 e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None, diagnostics: Path | None = None) -> None:
+        """`e2e_overrides`: bench.toml's [e2e] table, so that the child loads the databases as the run does;
+        `diagnostics`: its [diagnostics] file, the nodes and addresses of the log's diagnostic topics."""
         # A program of its own (not multiprocessing, which would re-import the caller's main module), in a
         # session of its own so that a signal to the run's process group does not cut the log short.
         self._process = subprocess.Popen(
             [sys.executable, "-m", "bench.log.logproc", str(path), channel, json.dumps(dict(e2e_overrides or {})),
-             *map(str, databases)],
+             str(diagnostics or ""), *map(str, databases)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True)
         assert self._process.stdin is not None and self._process.stdout is not None
         self._to_child = Connection(os.dup(self._process.stdin.fileno()), readable=False)
@@ -127,7 +131,7 @@ class LogProcess:
 
 
 def _serve(conn: Connection, reply: Connection, path: str, databases: list[str], channel: str,
-           e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+           e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None, diagnostics: str = "") -> None:
     """The child: one Recorder, fed batch by batch until the pipe says stop or closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C and SIGTERM are for the run; it closes us
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -136,6 +140,8 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
     except OSError as exc:   # not fatal: the log is only written later than it could be
         logging.getLogger("bench.log.logproc").warning("log process: nice(%d) failed: %s", LOG_NICE, exc)
     from bench.database.codec import load_codebook
+    from bench.diag.declaration import load_declaration
+    from bench.log.diaglog import DiagnosticLog
     from bench.log.recorder import Recorder
 
     try:
@@ -146,6 +152,11 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
     except BenchError as exc:
         reply.send(str(exc))
         return
+    try:
+        declaration = load_declaration(Path(diagnostics)) if diagnostics else None
+    except BenchError:   # the run's session reports it; the log follows the databases' diagnostic messages
+        declaration = None
+    trace = DiagnosticLog(recorder, codebook, declaration)
     reply.send("ready")
     # The collector's automatic passes cost about a tenth of this process's CPU (each batch is tens of thousands of
     # new tuples, none in a cycle); the start's objects (modules, databases) are moved out of its scans, and it
@@ -166,7 +177,7 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
             frames, others = batch
             start = 0   # each run of frames between other items is written in one call
             for position, item in others:
-                rejected += _write_frames(recorder, frames[start:position], channel, by_id, path, rejected)
+                rejected += _write_frames(recorder, frames[start:position], channel, by_id, path, rejected, trace)
                 start = position
                 try:
                     if item[0] == _STEP:
@@ -178,7 +189,8 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
                 except (BenchError, ValueError, TypeError) as exc:   # one bad record must not end the log
                     rejected += 1
                     _report_first(path, rejected, str(exc))
-            rejected += _write_frames(recorder, frames[start:] if start else frames, channel, by_id, path, rejected)
+            rejected += _write_frames(recorder, frames[start:] if start else frames, channel, by_id, path, rejected,
+                                      trace)
             now = time.monotonic()   # one clock read per batch
             if now >= flush_at:
                 recorder.flush()     # on disk: a run killed now loses at most this batch's successors
@@ -195,8 +207,34 @@ def _serve(conn: Connection, reply: Connection, path: str, databases: list[str],
 
 
 def _write_frames(recorder: Recorder, frames: list[tuple[Any, ...]], channel: str,
-                  codecs: Mapping[int, Decoder], path: str, rejected: int) -> int:
-    """Write a run of frames with their decoded values; how many records were refused (reported as they come)."""
+                  codecs: Mapping[int, Decoder], path: str, rejected: int, trace: DiagnosticLog | None = None) -> int:
+    """Write a run of frames with their decoded values, and after each diagnostic frame the message it completes;
+    how many records were refused (reported as they come)."""
+    if not frames:
+        return 0
+    try:   # one pass in C over the run's ids: a run without diagnostic frames (nearly all) costs no more
+        diagnostic = trace is not None and not trace.ids.isdisjoint(map(itemgetter(1), frames))
+    except (TypeError, IndexError):   # a malformed item: the frames alone, as below
+        diagnostic = False
+    if not diagnostic:
+        return _write_run(recorder, frames, channel, codecs, path, rejected)
+    assert trace is not None
+    count = start = 0
+    for end, frame in enumerate(frames, 1):
+        if frame[1] in trace.ids:
+            count += _write_run(recorder, frames[start:end], channel, codecs, path, rejected + count)
+            start = end
+            try:
+                trace.on_frame(frame[0], frame[1], bytes(frame[2]))
+            except (BenchError, ValueError, TypeError) as exc:
+                count += 1
+                _report_first(path, rejected + count, str(exc))
+    return count + _write_run(recorder, frames[start:], channel, codecs, path, rejected + count)
+
+
+def _write_run(recorder: Recorder, frames: list[tuple[Any, ...]], channel: str,
+               codecs: Mapping[int, Decoder], path: str, rejected: int) -> int:
+    """`_write_frames` of frames without the diagnostic topics."""
     if not frames:
         return 0
     try:
@@ -221,4 +259,4 @@ def _report_first(path: str, count: int, problem: str) -> None:
 
 if __name__ == "__main__":
     _serve(Connection(os.dup(0), writable=False), Connection(os.dup(1), readable=False), sys.argv[1],
-           sys.argv[4:], sys.argv[2], json.loads(sys.argv[3]))
+           sys.argv[5:], sys.argv[2], json.loads(sys.argv[3]), sys.argv[4])

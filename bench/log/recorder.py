@@ -41,6 +41,9 @@ from bench.log.format import (
     CLOCK_METADATA,
     DECIMAL,
     DECODED_PREFIX,
+    DIAG_PREFIX,
+    DIAG_SCHEMA,
+    DIAG_SCHEMA_NAME,
     ENCODING,
     EXACT_T,
     FRAME_HEAD,
@@ -69,6 +72,7 @@ CHUNK_BYTES = 1 << 20
 _TEXT_CACHE = 1 << 14   # distinct frames whose record texts `Recorder.frames` keeps (then it starts again)
 _PLAIN_NUMBERS = frozenset((int, float))
 _ENCODER = json.JSONEncoder(allow_nan=False, separators=(",", ":"), default=lambda o: o.value)
+_PLAIN_ENCODER = json.JSONEncoder(allow_nan=False, separators=(",", ":"))   # one, not one per call of json.dumps
 
 
 class Decoder(Protocol):
@@ -177,6 +181,8 @@ class Recorder:
             raise
 
         self._quoted: dict[str, str] = {}  # channel name -> its JSON string
+        self._diag_channels: dict[str, int] = {}   # message -> its `/diag/` channel, made with its first record
+        self._diag_schema = 0
         self._texts: dict[tuple[int, bytes, str, bool, str, str], tuple[bytes, int, bytes | None, str]] = {}
         self._lock = threading.RLock()
         self._busy = False  # a write is under way on the thread holding the lock
@@ -348,6 +354,31 @@ class Recorder:
             self._texts.clear()
         self._texts[key] = known
         return known
+
+    def diagnostic(self, t: float, message: str, record: Mapping[str, object]) -> None:
+        """Log one whole diagnostic message (format.DIAG_SCHEMA's fields) on `/diag/<message>`, the DBC message of
+        its frames. Its channel is registered with its first record, so a log without diagnostics has none."""
+        if message not in self._decoded:
+            raise LogError(f"run log {self.path}: unknown message {message!r}: it is in none of the recorder's "
+                           "databases")
+        try:
+            ns = log_ns(t) + self._origin_ns
+            payload = _PLAIN_ENCODER.encode(dict(record)).encode()
+        except (TypeError, ValueError) as exc:
+            raise LogError(f"run log {self.path}: bad diagnostic {message}: {exc}") from None
+        with self._lock:
+            channel_id = self._diag_channels.get(message)
+            if channel_id is None:
+                if self._closed or self._broken:
+                    return
+                self._broken = True   # as in _write: a failed registration leaves the log at its last chunk
+                if not self._diag_schema:
+                    self._diag_schema = self._writer.register_schema(DIAG_SCHEMA_NAME, SCHEMA_ENCODING,
+                                                                     json.dumps(DIAG_SCHEMA).encode())
+                channel_id = self._writer.register_channel(DIAG_PREFIX + message, ENCODING, self._diag_schema)
+                self._diag_channels[message] = channel_id
+                self._broken = False
+            self._write(channel_id, ns, payload)
 
     def step(self, t: float, level: int, name: str, message: str, file: str = "", line: int = 0) -> None:
         """Log a test step or verdict on `/bench/steps` (level 1 DEBUG .. 5 FATAL, as foxglove.Log)."""

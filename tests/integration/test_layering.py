@@ -154,7 +154,7 @@ def test_the_import_scan_sees_relative_and_from_imports() -> None:
 # -- the log package ------------------------------------------------------------------------------------------
 #: What bench/log/ may import of the bench besides itself: the frame checks it logs with, the errors, the version.
 LOG_MAY_IMPORT = {"bench", "bench.version", "bench.errors", "bench.database.codec", "bench.checks.monitor",
-                  "bench.config"}
+                  "bench.config", "bench.diag"}
 #: The one module that may reach into mcap's private state (its bytes are compared with mcap's public writer's,
 #: tests/bench/log/test_recorder.py).
 MCAP_FAST_PATH = "bench/log/mcapfast.py"

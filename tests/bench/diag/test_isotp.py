@@ -132,9 +132,11 @@ def test_round_trip(size: int, bs: int, stmin: float, padding: int | None, ids: 
         assert len(frame) == 8 if padding is not None or frame[0] >> 4 == 1 else len(frame) <= 8
     if padding is None and size <= 7:
         assert wire.frames[0][2] == bytes([size]) + payload
-    framing = IsoTpFraming(*ids)            # and a monitor on the bus finds nothing wrong either
-    assert [p for t, i, d in wire.frames for p in framing.on_frame(t, i, d)] == []
+    messages: list[Frame] = []
+    framing = IsoTpFraming(*ids, on_message=lambda *m: messages.append(m))   # a monitor on the bus finds
+    assert [p for t, i, d in wire.frames for p in framing.on_frame(t, i, d)] == []   # nothing wrong either,
     assert framing.check_timeouts(wire.now + 10.0) == []
+    assert messages == [(last, ids[0], payload)]                            # and reads the same message
 
 
 @settings(max_examples=30, deadline=None)
@@ -706,3 +708,95 @@ def test_framing_reports_a_timeout_once() -> None:
     assert framing.check_timeouts(2.0) == []
     assert framing.on_frame(2.1, TESTER, fc(bs=4)) == []       # the late FC: the same fault
     assert [p for t, i, d in good() for p in framing.on_frame(t + 3.0, i, d)] == []   # the next exchange is fine
+
+
+# -- the monitor's reassembly (on_message: the run log's diagnostic topics) ------------------------------------
+def reassembled(frames: list[Frame]) -> tuple[list[Frame], list[IsoTpProblem]]:
+    """The whole messages a bus observer reads from the frames, and the problems it finds."""
+    messages: list[Frame] = []
+    framing = IsoTpFraming(TESTER, ECU, on_message=lambda *m: messages.append(m))
+    problems = [p for t, i, d in frames for p in framing.on_frame(t, i, d)]
+    return messages, problems
+
+
+def test_reassembly_of_a_single_frame_drops_the_padding() -> None:
+    assert reassembled([(0.5, TESTER, sf(b"\x19\x02\xff"))]) == ([(0.5, TESTER, b"\x19\x02\xff")], [])
+    assert reassembled([(0.5, ECU, sf(b"\x7f\x19\x31", padding=None))])[0] == [(0.5, ECU, b"\x7f\x19\x31")]
+
+
+def test_reassembly_of_multi_frame_messages_with_flow_control() -> None:
+    """Each message once its last byte came, at that frame's time, both ways, across blocks (BS 4) and a
+    sequence number that wraps; the flow control frames are no message."""
+    frames = good()
+    messages, problems = reassembled(frames)
+    assert problems == []
+    assert [(i, p) for _, i, p in messages] == [(TESTER, b"\x22\xf1\x90"), (ECU, RESPONSE), (TESTER, REQUEST),
+                                                (ECU, b"\x6e\xf1\x90")]
+    assert messages[1][0] == frames[_index(frames, ECU, 2, 27)][0]     # its 28th and last CF
+    assert messages[2][0] == frames[_index(frames, TESTER, 2, 4)][0]   # its 5th and last CF
+
+
+@pytest.mark.parametrize("mutate", [
+    pytest.param(_wrong_sn, id="wrong sequence number"),
+    pytest.param(lambda f: _drop(f, _index(f, ECU, 2, 6)), id="CF missing"),
+    pytest.param(lambda f: _shift_from(f, _index(f, ECU, 2, 2), 1.2), id="CF gap over N_Cr"),
+    pytest.param(lambda f: _insert(f, _index(f, ECU, 2, 3), ECU, sf(b"\x7f\x22\x78")), id="interrupted"),
+    pytest.param(lambda f: [(t, i, fc(status=2) if (i, d) == (TESTER, fc(bs=4)) else d) for t, i, d in f],
+                 id="OVFLW"),
+])
+def test_a_broken_sequence_gives_no_message(mutate: Callable[[list[Frame]], list[Frame]]) -> None:
+    """The message whose framing broke is dropped as its receiver drops it; the others still arrive, an SF that
+    interrupts it among them."""
+    messages, problems = reassembled(mutate(good()))
+    assert problems
+    payloads = [p for _, _, p in messages]
+    assert RESPONSE not in payloads
+    assert payloads[0] == b"\x22\xf1\x90" and payloads[-2:] == [REQUEST, b"\x6e\xf1\x90"]
+
+
+def test_reassembly_changes_no_judgement() -> None:
+    """With on_message the framing finds exactly the problems it finds without (the monitor's behaviour)."""
+    for _, mutate, _, _ in BROKEN:
+        frames = mutate(good())
+        framing = IsoTpFraming(TESTER, ECU)
+        assert reassembled(frames)[1] == [p for t, i, d in frames for p in framing.on_frame(t, i, d)]
+
+
+class _Stacks:
+    """Two can-isotp protocol stacks (TransportLayerLogic, no thread) wired back to back through queues."""
+
+    def __init__(self, sender: dict[str, object], receiver: dict[str, object]) -> None:
+        self.frames: list[Frame] = []
+        self.queues: dict[int, list[isotp.CanMessage]] = {TESTER: [], ECU: []}
+        self.a = self._stack(TESTER, ECU, sender)
+        self.b = self._stack(ECU, TESTER, receiver)
+
+    def _stack(self, tx: int, rx: int, params: dict[str, object]) -> isotp.TransportLayerLogic:
+        queue = self.queues[rx]
+
+        def send(msg: isotp.CanMessage) -> None:
+            self.frames.append((len(self.frames) * 0.001, msg.arbitration_id, bytes(msg.data)))
+            self.queues[msg.arbitration_id].append(msg)
+
+        return isotp.TransportLayerLogic(lambda timeout: queue.pop(0) if queue else None, send,
+                                         isotp.Address(isotp.AddressingMode.Normal_11bits, txid=tx, rxid=rx),
+                                         params=params)
+
+
+@settings(max_examples=60, deadline=None)
+@given(payload=st.binary(min_size=1, max_size=4095), bs=BLOCK, padding=st.sampled_from([0xCC, 0x00, None]))
+@example(payload=bytes(range(256)) * 15 + bytes(range(255)), bs=0, padding=0xCC).via("the longest message")
+def test_reassembly_of_what_can_isotp_sends(payload: bytes, bs: int, padding: int | None) -> None:
+    """Any payload of 1-4095 bytes framed by can-isotp, its receiver asking for BS blocks: the observer reads it
+    whole, once, at the time of its last frame, and finds nothing wrong."""
+    stacks = _Stacks({"tx_padding": padding}, {"blocksize": bs, "tx_padding": padding})
+    stacks.a.send(payload)
+    for _ in range(10_000):
+        stacks.a.process()
+        stacks.b.process()
+        if stacks.b.available():
+            break
+    assert stacks.b.recv() == payload
+    messages, problems = reassembled(stacks.frames)
+    assert problems == []
+    assert messages == [(stacks.frames[-1][0], TESTER, payload)]
