@@ -8,6 +8,11 @@ invalid frame and 0 from then on, VCU-FLT-08). Once the frames are valid again, 
 
 The existing fault cases corrupt frames that carry the request already executed, so they cannot tell a VCU that
 uses an invalid frame's values from one that does not; this case can.
+
+The DTC side (testcases/fault_memory.py): the VCU's fault memory is cleared before the fault; after it, the DTC of
+each fault code the VCU showed meanwhile (REQUEST_INVALID, REQUEST_TIMEOUT) is judged as every fault case judges
+it: testFailed clear, the failure remembered, confirmed only if it lasted its confirmation time, one occurrence
+per run of the code on the bus, a snapshot consistent with the bus.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from testcases.ev4wis.steps import (
     start,
     wait_for_targets,
 )
+from testcases.fault_memory import FaultMemory
 
 S0, V0 = (3.0, 2.0), 1.0           # the valid request before the fault
 S1, V1 = (-2.0, 0.0), 1.0          # the request the corrupted frames carry: every angle and speed differs from S0's
@@ -49,6 +55,7 @@ def test_invalid_frames_carry_no_request(bench) -> None:
     for w in WHEELS:   # the case can only tell S1 from S0 where their commands differ
         assert abs(new[w].angle - held[w]) > 10 * ANGLE_TOL and abs(new[w].rpm - old_rpm[w]) > 10 * SPEED_ABS_TOL
 
+    memory = FaultMemory(bench, "VCU")
     fault = bench.inject("checksum_offset", "DRV_MotionRequest", param=1, duration=FAULT_S)
     bench.note(f"injected fault {fault.describe()} (bench time); request changed to S1 = {S1} m, {V1} m/s "
                f"{CHANGE_AFTER_S} s into it")
@@ -73,5 +80,9 @@ def test_invalid_frames_carry_no_request(bench) -> None:
     bench.expect_true("invalid frames on the bus: only the injected DRV_MotionRequest ones", not others,
                       measured=f"{len(invalid) - len(others)} injected, {len(others)} other", expected="0 other",
                       detail="; ".join(f"{f.message}: {f.reason}" for f in others[:5]))
+    shown = {int(v) for v in bench.history("VCU_VehicleState", "VcuFault", since=fault.start)[1]}
+    for name in ("REQUEST_INVALID", "REQUEST_TIMEOUT"):
+        if FAULT_VALUE[name] in shown:
+            memory.after(name, fault.start)
     plot_wheels(bench)
     plot_vcu_state(bench)
