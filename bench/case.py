@@ -278,13 +278,15 @@ class Case:
             assert isinstance(connection, BenchConnection)
             self._resets += [(t, node) for t, direction, payload in connection.exchanges
                              if direction == "response" and payload[:1] == b"\x51"]
-            rows += [[f"{t - self.start:.3f}", connection.name, direction, describe(payload)]
+            declaration = self.session.declaration
+            named = declaration.node(node) if declaration is not None else None   # DTCs by name, as the log has them
+            rows += [[f"{t - self.start:.3f}", node, direction, describe(payload, named)]
                      for t, direction, payload in connection.exchanges]
             client.close()
         self._testers, self._ports = {}, {}
         if rows:
             rows.sort(key=lambda row: float(str(row[0])))
-            self.table("Diagnostic exchange", ["t (s)", "connection", "", "message"], rows)
+            self.table("Diagnostic exchange", ["t (s)", "node", "", "message"], rows)
 
     def close(self) -> None:
         """End of the case (the pytest plugin calls it; a case need not): its timers stop, its case+ fault
