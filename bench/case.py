@@ -341,10 +341,11 @@ class Case:
         nor simulated in this process (`bench plant` in another process, another ECU), on the receive stamps of
         their valid frames (the runner's history): a frame later than its cycle by more than LATE_CYCLES cycles
         leaves its receivers (the DUT among them) a timeout that the DUT did not cause. Such a gap counts against
-        its bound only when another message gapped past its own bound at the same time, of any node (a stalled
-        process: `bench plant` plays many nodes, and a stall gaps every message it sends, several of one node
-        among them: the plant's 5 ms bench I/O); one message silent alone is taken as meant (a fault the case
-        asked the plant for) and shown as a figure only. The worst per message."""
+        its bound only when another message gapped at the same time, of any node, past its own bound or late by at
+        least half as much (a stalled process: `bench plant` plays many nodes, and a stall gaps every message it
+        sends: its 5 ms bench I/O passes its bound while its 10 ms messages, as late, stay within theirs); one
+        message silent alone is taken as meant (a fault the case asked the plant for) and shown as a figure only.
+        The worst per message."""
         duts = set(self.result.duts)
         if not duts:
             return []
@@ -352,6 +353,7 @@ class Case:
         own = set(session.codebook.nodes) - session.external   # simulated here: timed as they are sent
         worst: dict[str, Late] = {}
         over: list[tuple[float, float, str, Late]] = []   # gaps past their bound: (from, to, message, figure)
+        gaps: list[tuple[float, float, str, float]] = []  # every gap past LATE_FLOOR: (from, to, message, late)
         for name, state in self._monitor.by_name.items():
             cycle, senders = state.codec.cycle_time, frozenset(state.codec.senders)
             if not cycle or not senders or senders & duts or senders & own:
@@ -368,8 +370,14 @@ class Case:
             for j in np.nonzero(lates > bound)[0][:MAX_INPUT_GAPS]:
                 over.append((float(times[j]), float(times[j + 1]), name,
                              Late(what, float(lates[j]), float(times[j]) + cycle, bound)))
+            gaps += [(float(times[j]), float(times[j + 1]), name, float(lates[j]))
+                     for j in np.nonzero(lates > LATE_FLOOR)[0][:MAX_INPUT_GAPS]]
         for t0, t1, name, late in over:
-            if any(u0 < t1 and t0 < u1 and other != name for u0, u1, other, _ in over):
+            # a stall: another message past its bound at the same time, or late then by at least half as much (a
+            # stalled process lags all it sends; the plant's 5 ms I/O passes its bound while its 10 ms messages,
+            # as late, are still within theirs)
+            if any(u0 < t1 and t0 < u1 and other != name for u0, u1, other, _ in over) or \
+                    any(u0 < t1 and t0 < u1 and other != name and lag >= late.late / 2 for u0, u1, other, lag in gaps):
                 current = worst[name]
                 if math.isinf(current.bound) or late.late > current.late:
                     worst[name] = late

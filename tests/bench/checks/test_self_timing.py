@@ -246,6 +246,29 @@ def test_a_stalled_plant_gapping_only_its_own_io_is_no_failure_of_the_dut(
     assert f"(bound {bound * 1000:g} ms)" in line and "and 2 more" in line, line
 
 
+def test_a_plant_stall_seen_past_its_bound_only_on_its_5_ms_io_is_no_failure_of_the_dut(
+        realtime_runner: tuple[BenchSession, TimingCollector]) -> None:
+    """CI rehearsal, 2026-11-29, the example ABS: `bench plant` stalled about 17 ms; IO_AbsSensors (5 ms) came 16.5 ms
+    late, past its 10 ms bound, and PLANT_Motion (10 ms) 16.2 ms late, within its 20 ms bound. The ABS timed its
+    sensors out and three steady cases failed: one message past its bound alone was taken as meant. The other
+    message, as late at the same time, shows the stall: the case is inconclusive."""
+    session, _ = realtime_runner
+    case = _case(session, duts=["ABS"])
+    restbus = Restbus(session.codebook, {"PLANT"})
+    for message, stall in (("IO_AbsSensors", 0.0215), ("PLANT_Motion", 0.0262)):
+        codec = session.codebook[message]
+        cycle = codec.cycle_time
+        assert cycle is not None and tuple(codec.senders) == ("PLANT",)
+        slot = restbus.periodic[message]
+        times = [case.start + cycle * i for i in range(1, round(0.05 / cycle) + 1)]   # both stall at +0.05 s
+        times += [times[-1] + stall + cycle * i for i in range(10)]
+        for t in times:
+            session.monitor.on_frame(t, codec.frame_id, restbus.build(slot), "rx")
+    line = case.bench_verdict()
+    assert line.startswith("a sender other than the DUT late by 16.5 ms on input IO_AbsSensors"), \
+        (line, case.result.bench_timing)
+
+
 def test_one_node_silent_alone_is_taken_as_meant(realtime_runner: tuple[BenchSession, TimingCollector]) -> None:
     """One node's message silent while every other sender goes on (a sensor fault the case asked the plant for)
     is a figure on the record, not a reason to call the case inconclusive."""
