@@ -3,8 +3,10 @@ docs/contract/README.md tells a supplier to judge a real one: three processes on
 limit 0: nothing leaves the host): `bench plant --external NODE` simulates every node but NODE, the example plays
 NODE, and `bench run --external all --dut NODE` runs every case that judges NODE.
 
-What a passing example must show: `bench run` exits 0 with no failure, error or inconclusive case; at least
-`min_ran` cases ran; every case names NODE as its DUT; only reference-only cases, and cases whose coding selects an
+What a passing example must show: `bench run` exits 0 (or 3: inconclusive) with no failure or error; at most
+MAX_INCONCLUSIVE cases inconclusive, each for the bench's or the plant's own lateness (a stall of the host: the
+bench cannot judge the DUT then, docs/reliability.md), the others passed; at least `min_ran` cases ran or were
+inconclusive; every case names NODE as its DUT; only reference-only cases, and cases whose coding selects an
 optional function the node refuses (NRC 0x31, testcases/coding.py), are skipped, each with its reason; the
 report's conformance table shows NODE as the real ECU; no invalid frame outside the cases that inject
 a fault (results.json, the monitor's count per case); the example and the plant end cleanly on Ctrl-C.
@@ -25,11 +27,17 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
+from bench.cli.run import EXIT_INCONCLUSIVE
 from tests.child import Child
 from tests.fakes import ipv4_group
 from tests.repo import ROOT
 
 BENCH = [sys.executable, "-m", "bench"]
+
+
+#: inconclusive cases an example's campaign may have (the bench or the plant stalled by the host, about one in a
+#: campaign on this project's 2-core VM in the real-time step, 2026-11-29): more is a bench to look at (issue 34)
+MAX_INCONCLUSIVE = 2
 
 
 def _realtime_priority() -> list[str]:
@@ -64,7 +72,7 @@ def judge_example(example: Path, node: str, out: Path, *, min_ran: int, seconds:
         ecu.wait_for("running", 60)
         run = subprocess.run([*priority, *BENCH, "run", *bus, "--external", "all", "--dut", node, "--out", str(out)],
                              cwd=ROOT, capture_output=True, text=True, timeout=seconds)
-        assert run.returncode == 0, _failures(out) + run.stdout[-3000:] + run.stderr[-3000:]
+        assert run.returncode in (0, EXIT_INCONCLUSIVE), _failures(out) + run.stdout[-3000:] + run.stderr[-3000:]
         campaign = _check_report(out, node, min_ran)
     finally:
         outputs = {"ecu": ecu.stop() if ecu is not None else "", "plant": plant.stop()}
@@ -97,7 +105,7 @@ def _check_report(out: Path, node: str, min_ran: int) -> Campaign:
     suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
     assert suite is not None
     assert int(suite.get("failures", "1")) == 0 and int(suite.get("errors", "1")) == 0
-    ran, skipped = [], []
+    ran, skipped, inconclusive = [], [], []
     for case in suite.findall("testcase"):
         name = case.get("name", "")
         duts = [p.get("value") for p in case.iter("property") if p.get("name") == "dut"]
@@ -106,18 +114,23 @@ def _check_report(out: Path, node: str, min_ran: int) -> Campaign:
         if skip is None:
             ran.append(name)
             continue
+        if skip.get("type") == "inconclusive":
+            why = skip.get("message") or ""
+            assert re.match(r"inconclusive: (bench|a sender other than the DUT) late by ", why), (name, why)
+            inconclusive.append(f"{name}: {why}")
+            continue
         reason = (skip.get("message") or "") + (skip.text or "")       # reference-only, or an optional function
         assert re.search(r"reference_only: .+ \(.+ (is|are) external\)|refuses the coding .+ \(NRC 0x31\)",
                          reason), (name, reason)
         skipped.append(name)
-    assert len(ran) >= min_ran, f"only {len(ran)} cases ran: {ran}"
+    assert len(inconclusive) <= MAX_INCONCLUSIVE, "the bench was late in too many cases:\n" + "\n".join(inconclusive)
+    assert len(ran) + len(inconclusive) >= min_ran, f"only {len(ran)} cases ran: {ran}"
     report = (out / "report.html").read_text()                  # NODE's conformance table, as the real ECU
     assert re.search(rf'<h2 id="node-{node}">{node} <span class="node-kind">external \(the real ECU\)', report)
     results = json.loads((out / "results.json").read_text())["cases"]
     invalid = {c["nodeid"]: (c["invalid_frames"], c["invalid"][:3]) for c in results
                if c.get("invalid_frames") and not c.get("faults")}
     assert not invalid, f"invalid frames outside the fault cases: {invalid}"
-    assert not [c["nodeid"] for c in results if c.get("inconclusive")], "inconclusive cases: the bench was late"
     return Campaign(ran, skipped, results)
 
 
