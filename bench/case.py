@@ -273,12 +273,12 @@ class Case:
         from bench.diag.tester import BenchConnection
 
         rows: list[list[object]] = []
+        declaration = self.session.declaration
         for (node, _), client in self._testers.items():
             connection = client.conn
             assert isinstance(connection, BenchConnection)
             self._resets += [(t, node) for t, direction, payload in connection.exchanges
                              if direction == "response" and payload[:1] == b"\x51"]
-            declaration = self.session.declaration
             named = declaration.node(node) if declaration is not None else None   # DTCs by name, as the log has them
             rows += [[f"{t - self.start:.3f}", node, direction, describe(payload, named)]
                      for t, direction, payload in connection.exchanges]
@@ -353,7 +353,7 @@ class Case:
         own = set(session.codebook.nodes) - session.external   # simulated here: timed as they are sent
         worst: dict[str, Late] = {}
         over: list[tuple[float, float, str, Late]] = []   # gaps past their bound: (from, to, message, figure)
-        gaps: list[tuple[float, float, str, float]] = []  # every gap past LATE_FLOOR: (from, to, message, late)
+        arrivals: dict[str, tuple[np.ndarray, np.ndarray]] = {}   # per message: its frames' times, each gap's lateness
         for name, state in self._monitor.by_name.items():
             cycle, senders = state.codec.cycle_time, frozenset(state.codec.senders)
             if not cycle or not senders or senders & duts or senders & own:
@@ -370,14 +370,14 @@ class Case:
             for j in np.nonzero(lates > bound)[0][:MAX_INPUT_GAPS]:
                 over.append((float(times[j]), float(times[j + 1]), name,
                              Late(what, float(lates[j]), float(times[j]) + cycle, bound)))
-            gaps += [(float(times[j]), float(times[j + 1]), name, float(lates[j]))
-                     for j in np.nonzero(lates > LATE_FLOOR)[0][:MAX_INPUT_GAPS]]
+            arrivals[name] = (times, lates)
         for t0, t1, name, late in over:
             # a stall: another message past its bound at the same time, or late then by at least half as much (a
             # stalled process lags all it sends; the plant's 5 ms I/O passes its bound while its 10 ms messages,
             # as late, are still within theirs)
-            if any(u0 < t1 and t0 < u1 and other != name for u0, u1, other, _ in over) or \
-                    any(u0 < t1 and t0 < u1 and other != name and lag >= late.late / 2 for u0, u1, other, lag in gaps):
+            if any(u0 < t1 and t0 < u1 and other != name for u0, u1, other, _ in over) or any(
+                    bool(np.any((times[:-1] < t1) & (times[1:] > t0) & (lates >= late.late / 2)))
+                    for other, (times, lates) in arrivals.items() if other != name):
                 current = worst[name]
                 if math.isinf(current.bound) or late.late > current.late:
                     worst[name] = late
