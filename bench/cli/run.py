@@ -7,7 +7,9 @@ import atexit
 import gc
 import itertools
 import os
+import shutil
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -276,14 +278,22 @@ def run(args: argparse.Namespace) -> int:
     args.config, args.out = str(project.path), str(out_dir)   # as resolved here, for the plugin
     pytest_args = [*paths, "-p", "no:terminal", "-p", "no:cacheprovider",
                    "--rootdir", str(_rootdir(project, paths)), *options.pytest_args(args, HANDED_TO_PYTEST)]
+    scratch = None
     if args.workers:
-        pytest_args += ["--dist", DIST]
+        # pytest-xdist's controller makes a numbered /tmp/pytest-of-<user>/pytest-N for its workers and, as it
+        # exits, deletes the old ones beyond the last three: other pytest sessions' folders, hundreds of MB after
+        # a test suite, which kept a stopped run busy for more than a second after its report. A folder of our own
+        # instead, removed after the run.
+        scratch = tempfile.mkdtemp(prefix="bench-run-")
+        pytest_args += ["--dist", DIST, "--basetemp", scratch]
     progress = _Progress(console)
     try:
         code = pytest.main(pytest_args, plugins=[progress])
     finally:
         gc.unfreeze()   # what _Progress froze at the session's end: collectable again for whoever called run()
         _settle_at_exit()
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
     result = finished_run()
     if result is None:
         _remove_empty(made)

@@ -7,6 +7,7 @@ terminal), as in CI.
 
 from __future__ import annotations
 
+import getpass
 import os
 import re
 import subprocess
@@ -92,6 +93,25 @@ def test_progress_counts_the_cases_with_workers(tmp_path: Path) -> None:
     assert sorted(int(done) for done, _ in counters) == [1, 2, 3], result.stdout
     assert {total for _, total in counters} == {"3"}
     assert "bench: 3 cases" in result.stdout
+
+
+def test_workers_leave_other_pytest_folders_alone(tmp_path: Path) -> None:
+    """`bench run -n` keeps its workers' scratch in a folder of its own and removes it: pytest-xdist's default
+    (/tmp/pytest-of-<user>/pytest-N) deleted the older numbered folders of other sessions as the run exited, which
+    made a stopped run late by a second (tests/integration/test_stop_signals.py)."""
+    pytest.importorskip("xdist")
+    (tmp_path / "test_user.py").write_text(CASES, encoding="utf-8")
+    scratch_root = tmp_path / "tmp"
+    others = [scratch_root / f"pytest-of-{getpass.getuser()}" / f"pytest-{n}" for n in range(1, 6)]
+    for folder in others:
+        (folder / "kept").mkdir(parents=True)
+    env = {**os.environ, "TMPDIR": str(scratch_root)}
+    result = subprocess.run([sys.executable, "-m", "bench", "run", str(tmp_path / "test_user.py"), "--out",
+                             str(tmp_path / "out"), "-n", "2", "-k", "left or dry"], cwd=ROOT, capture_output=True,
+                            text=True, timeout=300, env=env)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert all((folder / "kept").is_dir() for folder in others)
+    assert sorted(p.name for p in scratch_root.iterdir()) == [others[0].parent.name]   # no scratch left behind
 
 
 def test_workers_steal_work(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
