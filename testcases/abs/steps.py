@@ -26,6 +26,7 @@ from bench.case import Case
 from bench.results.model import Series
 from testcases.abs import oracle
 from testcases.limits import limit_value, limits_file, load_limits
+from testcases.pairing import nearest
 from testcases.stimulus import STIMULUS
 
 VEHICLE = "ACLASS_ABS"
@@ -117,12 +118,7 @@ def paired(bench: Case, since: float | None = None) -> dict[str, np.ndarray]:
         s = samples(bench, message, signals, since, required=required)
         if s["t"].size == 0:
             return {k: np.full(out["t"].shape, np.nan) for k in signals}
-        last = s["t"].size - 1
-        before = np.clip(np.searchsorted(s["t"], out["t"], side="right") - 1, 0, last)
-        after = np.clip(before + 1, 0, last)
-        gap_before, gap_after = np.abs(out["t"] - s["t"][before]), np.abs(s["t"][after] - out["t"])
-        idx = np.where(gap_after < gap_before, after, before)
-        ok = np.minimum(gap_before, gap_after) <= PAIR_WINDOW
+        idx, ok = nearest(out["t"], s["t"], PAIR_WINDOW)
         return {k: np.where(ok, s[k][idx], np.nan) for k in signals}
 
     wheel = take("ABS_WheelSpeeds", [f"WheelSpeed{w}" for w in WHEELS], required=True)

@@ -21,6 +21,7 @@ from bench.results.model import Series
 from testcases.coding import code
 from testcases.ev4wis.oracle import rpm_from_speed
 from testcases.limits import limit_value, limits_file, load_limits
+from testcases.pairing import nearest_values
 from testcases.rear_steer_4ws import oracle
 from testcases.rear_steer_4ws.path_driver import CarModel
 from testcases.stimulus import STIMULUS
@@ -89,6 +90,19 @@ def axle_angles(bench: Case, source: str = "VCU_WheelCmd") -> tuple[float, float
     signal = "SteerAngleCmd" if source == "VCU_WheelCmd" else "SteerAngle"
     a = [bench.value(f"{source}_{w}", signal) for w in WHEELS]
     return 0.5 * (a[0] + a[1]), 0.5 * (a[2] + a[3])
+
+
+def commanded_axles(bench: Case, since: float, until: float = math.inf
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, front, rear): at each VCU_WheelCmd_FL frame received in [since, until], the commanded axle angles, deg
+    (mean of the two wheels of an axle), each wheel's angle from its frame of the same cycle (the nearest in
+    receive time: testcases/pairing.py)."""
+    t, fl = bench.received("VCU_WheelCmd_FL", "SteerAngleCmd", since)
+    keep = t <= until
+    t, fl = t[keep], fl[keep]
+    fr, rl, rr = (nearest_values(t, *bench.received(f"VCU_WheelCmd_{w}", "SteerAngleCmd", since))
+                  for w in WHEELS[1:])
+    return t, 0.5 * (fl + fr), 0.5 * (rl + rr)
 
 
 def mean_since(bench: Case, message: str, signal: str, since: float) -> float:

@@ -23,7 +23,7 @@ import pytest
 
 from bench.results.model import Series
 from testcases.rear_steer_4ws import oracle
-from testcases.rear_steer_4ws.steps import SPEED_TOL, WHEELS, axle_angles, limit, start
+from testcases.rear_steer_4ws.steps import SPEED_TOL, WHEELS, axle_angles, commanded_axles, limit, start
 
 pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-01", "VCU-4WS-02", "VCU-4WS-05")]
 
@@ -71,12 +71,7 @@ def _ramp(bench, u_from: float, u_to: float, accel: float) -> tuple[float, float
 
 def _commanded_k(bench, since: float, until: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t, rear axle angle commanded, k commanded, vehicle speed at t) over [since, until]."""
-    t, fl = bench.received("VCU_WheelCmd_FL", "SteerAngleCmd", since)
-    keep = t <= until
-    t, fl = t[keep], fl[keep]
-    fr, rl, rr = (np.interp(t, *bench.received(f"VCU_WheelCmd_{w}", "SteerAngleCmd", since))
-                  for w in ("FR", "RL", "RR"))
-    front, rear = 0.5 * (fl + fr), 0.5 * (rl + rr)
+    t, front, rear = commanded_axles(bench, since, until)
     ts, speed = bench.history("PLANT_Motion", "Speed", since)
     return t, rear, rear / front, np.interp(t, ts, speed)
 

@@ -24,7 +24,7 @@ import pytest
 
 from bench.results.model import Series
 from testcases.rear_steer_4ws import oracle
-from testcases.rear_steer_4ws.steps import SPEED_TOL, WHEELS, limit, start
+from testcases.rear_steer_4ws.steps import SPEED_TOL, commanded_axles, limit, start
 
 pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-01", "VCU-4WS-02")]
 
@@ -45,9 +45,7 @@ def test_ratio_at_the_true_speed_after_a_restart(bench, speed_kmh):
     bench.set("DRV_Steering", HandWheelAngle=HAND_WHEEL)
     bench.run(JUDGE_S)
 
-    t, fl = bench.received("VCU_WheelCmd_FL", "SteerAngleCmd", t0)
-    fr, rl, rr = (np.interp(t, *bench.received(f"VCU_WheelCmd_{w}", "SteerAngleCmd", t0)) for w in WHEELS[1:])
-    front, rear = 0.5 * (fl + fr), 0.5 * (rl + rr)
+    t, front, rear = commanded_axles(bench, t0)
     ts, speed = bench.history("PLANT_Motion", "Speed", t0)
     u = np.interp(t, ts, speed)
     at_request = np.abs(u - u_request) <= SPEED_TOL * u_request

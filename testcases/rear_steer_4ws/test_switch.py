@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from testcases.rear_steer_4ws import oracle
-from testcases.rear_steer_4ws.steps import SPEED_TOL, limit, start
+from testcases.rear_steer_4ws.steps import SPEED_TOL, commanded_axles, limit, start
 
 pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-04", "VCU-MODE-06", "VCU-MODE-05", "VCU-4WS-01")]
 
@@ -66,13 +66,9 @@ def _run_to(bench, speed_kmh: float, ramp_from_kmh: float | None = None) -> floa
 
 def _ratio(bench, since: float, until: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, δ_r/X commanded, vehicle speed km/h) of the VCU_WheelCmd_FL frames in [since, until]."""
-    t, fl = bench.received("VCU_WheelCmd_FL", "SteerAngleCmd", since)
-    keep = t <= until
-    t, fl = t[keep], fl[keep]
-    fr, rl, rr = (np.interp(t, *bench.received(f"VCU_WheelCmd_{w}", "SteerAngleCmd", since))
-                  for w in ("FR", "RL", "RR"))
+    t, front, rear = commanded_axles(bench, since, until)
     ts, speed = bench.history("PLANT_Motion", "Speed", since)
-    return t, 0.5 * (rl + rr) / (0.5 * (fl + fr)), oracle.kmh(np.interp(t, ts, speed))
+    return t, rear / front, oracle.kmh(np.interp(t, ts, speed))
 
 
 def test_switch_at_20_kmh_follows_the_vehicle_speed(bench):
