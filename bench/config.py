@@ -10,12 +10,14 @@ from __future__ import annotations
 import glob
 import math
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bench.contract import Requirement, load_requirements
+from bench.database import overrides as overrides_table
 from bench.e2e.config import PARAMETERS as E2E_PARAMETERS
 from bench.errors import ConfigError, SignalError, did_you_mean
 from bench.transport import EMBEDDED, is_embedded
@@ -90,6 +92,8 @@ class ProjectConfig:
     scenario: ScenarioProtocol | None = None     # [scenario]; None: the project's plant takes no scenarios
     #: [e2e.MESSAGE]: AUTOSAR E2E parameters by name (no `E2E_` prefix) over the databases' own, per message
     e2e: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: [messages.MESSAGE]: a cycle time or send type over the databases' own, per message (bench.database.overrides)
+    messages: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: [calibration.NODE]: a real ECU's calibration the cases need to judge it (node -> name -> (value, unit))
     calibration: dict[str, dict[str, tuple[float, str]]] = field(default_factory=dict)
     #: [diagnostics] file: the diagnostic declaration (bench.diag.declaration); None: no node has diagnostics
@@ -181,6 +185,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         bus=_bus_table(path, data.get("bus", {})),
         scenario=_scenario(path, data.get("scenario")),
         e2e=_e2e_table(path, data.get("e2e", {})),
+        messages=_messages_table(path, data.get(overrides_table.TABLE, {})),
         calibration=_calibration(path, data.get("calibration", {})),
         **_contract(path, text, data.get("contract", {})),
         **_diagnostics(path, data.get("diagnostics", {})),
@@ -239,7 +244,7 @@ _BUS_CLI_ONLY = ("interface", "channel")
 
 
 #: bench.toml's tables; any other is a typo
-TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e", "calibration", "diagnostics")
+TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e", "messages", "calibration", "diagnostics")
 
 
 #: [e2e.MESSAGE] keys whose value is a name; DataIDList is hex text or a list of bytes; every other key a number.
@@ -251,16 +256,8 @@ def _e2e_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
     over what its database declares (docs/spec/e2e.md "Parameters"; keys are AUTOSAR's names, the DBC attributes'
     without `E2E_`). Only the form is checked here; the values are checked with the databases (`bench.e2e.config`),
     and a message name that no database has is refused there, with the name meant."""
-    if not isinstance(table, dict):
-        raise ConfigError(f"{path}: [e2e] must be a table of [e2e.MESSAGE] tables")
-    known = tuple(E2E_PARAMETERS)
     out: dict[str, dict[str, Any]] = {}
-    for message, values in table.items():
-        where = f"{path}: [e2e.{message}]"
-        if not isinstance(values, dict):
-            raise ConfigError(f"{path}: [e2e] {message} = {values!r}: give a message's parameters as a table "
-                              f"[e2e.{message}] (keys: {', '.join(known)})")
-        _known_keys(where, values, known)
+    for message, where, values in _message_tables(path, "e2e", table, tuple(E2E_PARAMETERS)):
         parameters: dict[str, Any] = {}
         for key, value in values.items():
             if key in _E2E_NAMES:
@@ -277,6 +274,40 @@ def _e2e_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
                 raise ConfigError(f"{where} {key} must be a whole number, got {value!r}")
             parameters[key] = value
         out[message] = parameters
+    return out
+
+
+def _message_tables(path: Path, name: str, table: Any,
+                    known: tuple[str, ...]) -> Iterator[tuple[str, str, dict[str, Any]]]:
+    """(message, where, its table) of a [NAME.MESSAGE] section, its form checked: a table of tables whose keys are
+    `known`. Whether each message exists is checked with the databases."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [{name}] must be a table of [{name}.MESSAGE] tables")
+    for message, values in table.items():
+        if not isinstance(values, dict):
+            raise ConfigError(f"{path}: [{name}] {message} = {values!r}: give a message's settings as a table "
+                              f"[{name}.{message}] (keys: {', '.join(known)})")
+        where = f"{path}: [{name}.{message}]"
+        _known_keys(where, values, known)
+        yield str(message), where, values
+
+
+def _messages_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
+    """[messages.MESSAGE] cycle_time_ms = 10, send_type = "cyclic": what a database lacks for one message
+    (bench.database.overrides)."""
+    out: dict[str, dict[str, Any]] = {}
+    for message, where, values in _message_tables(path, overrides_table.TABLE, table, overrides_table.KEYS):
+        cycle = values.get(overrides_table.CYCLE_TIME)
+        if cycle is not None and (isinstance(cycle, bool) or not isinstance(cycle, (int, float))
+                                  or not math.isfinite(cycle) or cycle <= 0):
+            raise ConfigError(f"{where} {overrides_table.CYCLE_TIME} must be a positive number of milliseconds, "
+                              f"got {cycle!r}")
+        send_type = values.get(overrides_table.SEND_TYPE)
+        if send_type is not None and send_type not in overrides_table.SEND_TYPES:
+            raise ConfigError(f"{where} {overrides_table.SEND_TYPE} {send_type!r}: the bench's restbus knows "
+                              f"{', '.join(repr(t) for t in overrides_table.SEND_TYPES)} only (it sends every "
+                              "message periodically at its cycle time)")
+        out[message] = dict(values)
     return out
 
 

@@ -107,7 +107,7 @@ class BenchSession:
                  sink: FrameSink | None = None, keep_history: bool = True) -> None:
         self.project = project
         self.settings = settings
-        self.codebook = load_codebook(project.databases, project.e2e)
+        self.codebook = load_codebook(project.databases, project.e2e, project.messages)
         problems = project.problems(self.codebook)
         self.declaration: Declaration | None = None
         if project.diagnostics is not None:

@@ -72,5 +72,5 @@ def reject_in_process(interface: str) -> None:
 
 def bus_options_for(project: ProjectConfig, args: argparse.Namespace) -> tuple[BusOptions, Codebook]:
     """The bus settings of a command (command line over [bus] over the databases) and the databases."""
-    codebook = load_codebook(project.databases, project.e2e)
+    codebook = load_codebook(project.databases, project.e2e, project.messages)
     return resolve_bus_options(project, given_bus_options(args), codebook), codebook

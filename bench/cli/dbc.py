@@ -26,6 +26,7 @@ from rich.text import Text
 
 from bench.config import load_config
 from bench.database import check as dbccheck
+from bench.database import overrides as overrides_table
 from bench.database.codec import load_dbc
 from bench.e2e import config as e2e_config
 from bench.errors import ConfigError, DatabaseError, did_you_mean
@@ -46,8 +47,9 @@ CHECK_DESCRIPTION = (
     "E2E_DataIDList, E2E_Offset, E2E_DataLength, E2E_MaxDeltaCounter, E2E_WindowSize, E2E_MinOkState*/"
     "E2E_MaxErrorState* (Init, Valid, Invalid); ARXML E2E properties; bench.toml [e2e.MESSAGE] over both when the "
     "files are the project's. A declaration no profile can use is an error; a signal over the CRC or counter "
-    "field that is not exactly that field is a warning. Exit 0: no errors; 1: a file has errors; 2: a file "
-    "cannot be read.")
+    "field that is not exactly that field is a warning. A cycle time or send type the database lacks comes from "
+    "bench.toml [messages.MESSAGE] (cycle_time_ms, send_type) when the files are the project's; each error such a "
+    "table fixes names its key. Exit 0: no errors; 1: a file has errors; 2: a file cannot be read.")
 CONFIG_HELP = "the project's bench.toml, whose [bench] databases are the default FILEs (default: found from here up)"
 VALUES_HELP = ("list only: each signal with its DBC range and its value table (the names a case may give, e.g. "
                "bench.set(MESSAGE, SIGNAL=\"NAME\"))")
@@ -101,32 +103,34 @@ def run(args: argparse.Namespace) -> int:
         if args.values or "--values" in words:
             raise ConfigError("--values: only for the listing, 'bench dbc [FILE ...] --values'")
         checked = _words("bench dbc check", words[1:], with_e2e=True)
-        files, overrides = _files(checked.files, checked.config or args.config)
-        return check(files, checked.e2e or args.e2e or dbccheck.OPTIONAL, overrides)
+        files, overrides, message_overrides = _files(checked.files, checked.config or args.config)
+        return check(files, checked.e2e or args.e2e or dbccheck.OPTIONAL, overrides, message_overrides)
     if args.e2e is not None:
         raise ConfigError("--e2e: only for 'bench dbc check FILE...'")
     listed = _words("bench dbc", words, with_e2e=False)
-    files, overrides = _files(listed.files, listed.config or args.config)
+    files, overrides, message_overrides = _files(listed.files, listed.config or args.config)
     databases = [(path, load_dbc(path)) for path in files]  # raises DatabaseError naming the file
     console = Console()
     for path, database in databases:
-        console.print(message_table(path, database, overrides, values=listed.values or args.values))
+        console.print(message_table(path, database, overrides, values=listed.values or args.values,
+                                    message_overrides=message_overrides))
     return 0
 
 
-def _files(given: list[str], config: str | None) -> tuple[list[Path], dict[str, dict[str, Any]]]:
-    """The files named, or the project's databases with its [e2e] table: what `bench run` would load (ConfigError
-    without a bench.toml)."""
+def _files(given: list[str], config: str | None) -> tuple[list[Path], dict[str, dict[str, Any]],
+                                                         dict[str, dict[str, Any]]]:
+    """The files named, or the project's databases with its [e2e] and [messages] tables: what `bench run` would
+    load (ConfigError without a bench.toml)."""
     if given:
-        return [Path(f) for f in given], {}
+        return [Path(f) for f in given], {}, {}
     project = load_config(Path(config) if config else None)
-    return list(project.databases), project.e2e
+    return list(project.databases), project.e2e, project.messages
 
 
 def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None,
-                  values: bool = False) -> Table:
+                  values: bool = False, message_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> Table:
     """One row per message, sorted by id (= bus priority); `values`: each signal with its range and value
-    table."""
+    table; a cycle time from bench.toml's [messages] is marked so."""
     table = Table(title=_title(path, database), title_justify="left", show_lines=True)
     table.add_column("id", no_wrap=True, justify="right")
     table.add_column("message", no_wrap=True)
@@ -141,11 +145,18 @@ def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Ma
             Text(f"0x{message.frame_id:03X}"),
             Text(message.name),
             Text(", ".join(message.senders) or "-"),
-            Text("-" if message.cycle_time is None else str(message.cycle_time)),
+            Text(_cycle(message, message_overrides)),
             _protection(message, definitions, overrides.get(message.name)),
             _signals(message, values),
         )
     return table
+
+
+def _cycle(message: Message, supplied_by: Mapping[str, Mapping[str, Any]] | None) -> str:
+    supplied = overrides_table.cycle_time_ms(supplied_by, message.name)
+    if supplied is not None:
+        return f"{supplied:g} (bench.toml)"
+    return "-" if message.cycle_time is None else str(message.cycle_time)
 
 
 def _protection(message: Message, definitions: Mapping[str, Any], override: Mapping[str, Any] | None) -> Text:
@@ -182,13 +193,14 @@ def _values(signal: Signal) -> str:
     return text
 
 
-def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> int:
+def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None,
+          message_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> int:
     """Print per message the protection the bench applies, every finding as FILE:LINE, then one summary line per
     file (compiler style, so editors jump to it)."""
     out = Console(soft_wrap=True, highlight=False)
     err = Console(stderr=True, soft_wrap=True, highlight=False)
     unreadable = rejected = 0
-    outcomes = dbccheck.check_files(files, e2e_mode, e2e_overrides)
+    outcomes = dbccheck.check_files(files, e2e_mode, e2e_overrides, message_overrides)
     for outcome in outcomes:
         if isinstance(outcome, DatabaseError):
             unreadable += 1
@@ -209,4 +221,7 @@ def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[
     for name in stray:   # what `bench run` refuses too (bench.database.codec.Codebook)
         out.print(Text(f"bench.toml: error [e2e] {name}: no such message in the databases{did_you_mean(name, names)}",
                        style="red"))
-    return 2 if unreadable else (1 if rejected or stray else 0)
+    unknown = overrides_table.unknown_messages(message_overrides, names)
+    for line in unknown:
+        out.print(Text(line, style="red"))
+    return 2 if unreadable else (1 if rejected or stray or unknown else 0)

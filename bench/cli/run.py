@@ -169,7 +169,7 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
             return None
 
     # a database that does not load makes every other check moot
-    codebook = load_codebook(project.databases, project.e2e)
+    codebook = load_codebook(project.databases, project.e2e, project.messages)
     problems.extend(project.problems(codebook))
     for path in args.paths:
         if not Path(path.partition("::")[0]).exists():

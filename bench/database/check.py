@@ -45,6 +45,7 @@ from typing import Any
 import cantools
 from cantools.database.can import Database, Message, Signal
 
+from bench.database import overrides
 from bench.database.codec import RANGE_SLACK, diagnostic_kind
 from bench.e2e import config as e2e_config
 from bench.e2e.profiles import P01_MODES, PROFILES, Field, Protection
@@ -255,20 +256,23 @@ def _dbc_id(message: Message) -> int:
 Overrides = Mapping[str, Mapping[str, Any]]
 
 
-def check_file(path: Path | str, e2e_mode: str = OPTIONAL, e2e_overrides: Overrides | None = None) -> CheckResult:
+def check_file(path: Path | str, e2e_mode: str = OPTIONAL, e2e_overrides: Overrides | None = None,
+               message_overrides: Overrides | None = None) -> CheckResult:
     """Check one DBC or ARXML file (by its suffix); DatabaseError only when the file cannot be read at all.
     `e2e_overrides`: a project's bench.toml [e2e] table (message name -> parameters), applied to this file's
-    messages of those names."""
+    messages of those names; `message_overrides`: its [messages] table (cycle times and send types,
+    bench.database.overrides)."""
     path = Path(path)
     text, encoding = read_text(path)
     kind = "arxml" if path.suffix.lower() == ARXML_SUFFIX else "dbc"
-    result = check_text(text, path, e2e_mode, e2e_overrides, database_format=kind)
+    result = check_text(text, path, e2e_mode, e2e_overrides, database_format=kind, message_overrides=message_overrides)
     result.encoding = encoding
     return result
 
 
 def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = OPTIONAL,
-               e2e_overrides: Overrides | None = None, database_format: str = "dbc") -> CheckResult:
+               e2e_overrides: Overrides | None = None, database_format: str = "dbc",
+               message_overrides: Overrides | None = None) -> CheckResult:
     """Check DBC (or ARXML) text; never raises on any text (every problem is a finding)."""
     if e2e_mode not in E2E_MODES:
         raise ValueError(f"e2e mode must be one of {', '.join(E2E_MODES)}, got {e2e_mode!r}")
@@ -281,6 +285,7 @@ def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = OPTIONAL,
     database, strict_error = _load(text, findings, database_format)
     if database is None:
         return _sorted(result)
+    supplied = message_overrides or {}
     messages = list(database.messages)
     result.messages = len(messages)
     result.signals = sum(len(m.signals) for m in messages)
@@ -291,10 +296,10 @@ def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = OPTIONAL,
     definitions = _attribute_definitions(database)
     _check_e2e_definitions(definitions, lines, findings)
     attribute_defaults = {name: d.default_value for name, d in definitions.items()}
-    overrides = e2e_overrides or {}
+    protections = e2e_overrides or {}
     for message in messages:
-        _check_message(message, lines, attribute_defaults, findings)
-        result.protections.append(_check_e2e(message, definitions, overrides.get(message.name), lines,
+        _check_message(message, lines, attribute_defaults, findings, supplied.get(message.name, {}))
+        result.protections.append(_check_e2e(message, definitions, protections.get(message.name), lines,
                                              e2e_mode == REQUIRED, findings))
     if strict_error is not None:
         _add_strict_error(strict_error, lines, findings)
@@ -388,7 +393,9 @@ def _check_duplicates(messages: list[Message], lines: _Lines, findings: list[Fin
 
 
 # -- one message -------------------------------------------------------------------------------------
-def _check_message(message: Message, lines: _Lines, defaults: dict[str, object], findings: list[Finding]) -> None:
+def _check_message(message: Message, lines: _Lines, defaults: dict[str, object], findings: list[Finding],
+                   supplied: Mapping[str, Any]) -> None:
+    """`supplied`: bench.toml's [messages.NAME] for this message (what the project gives over its database)."""
     line = lines.of_message(message)
     name = message.name
 
@@ -411,7 +418,7 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
         add(WARNING, "sender", "no sender node: no node of the bench will simulate it")
     if not message.comment:
         add(WARNING, "comment", "no comment")
-    _check_timing(message, lines, defaults, add)
+    _check_timing(message, lines, defaults, add, supplied)
     _check_layout(message, lines, findings)
     for signal in message.signals:
         _check_signal(message, signal, lines, findings)
@@ -425,26 +432,34 @@ def _attribute(message: Message, name: str, defaults: dict[str, object]) -> tupl
     return defaults.get(name), False
 
 
-def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], add: _Add) -> None:
+def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], add: _Add,
+                  supplied: Mapping[str, Any]) -> None:
+    """Each error that bench.toml can fix names the key that fixes it (bench.database.overrides)."""
     if diagnostic_kind(message):   # ISO-TP traffic on request: no cycle time, no send type (bench.diag)
         return
-    if message.dbc is None:   # ARXML: the cycle time of the frame's timing, no send type attribute
+    cycle_hint = overrides.hint(message.name, overrides.CYCLE_TIME, "<ms>")
+    if overrides.CYCLE_TIME in supplied:
+        pass
+    elif message.dbc is None:   # ARXML: the cycle time of the frame's timing, no send type attribute
         if message.cycle_time is None or message.cycle_time <= 0:
-            add(ERROR, "cycle-time", "no cyclic timing: the restbus cannot send it periodically")
+            add(ERROR, "cycle-time", f"no cyclic timing: the restbus cannot send it periodically; {cycle_hint}")
         return
-    dbc_id = _dbc_id(message)
-    cycle, explicit = _attribute(message, "GenMsgCycleTime", defaults)
-    at = lines.message_attr.get((dbc_id, "GenMsgCycleTime"))
-    if cycle is None:
-        add(ERROR, "cycle-time", "no GenMsgCycleTime: the restbus cannot send it periodically")
-    elif not isinstance(cycle, (int, float)) or not math.isfinite(cycle) or cycle <= 0:
-        origin = "" if explicit else " (the attribute's default; the message sets none)"
-        add(ERROR, "cycle-time", f"GenMsgCycleTime {cycle!r}{origin} is not a positive number of ms: "
-            "the restbus would never send it", at)
+    else:
+        cycle, explicit = _attribute(message, "GenMsgCycleTime", defaults)
+        at = lines.message_attr.get((_dbc_id(message), "GenMsgCycleTime"))
+        if cycle is None:
+            add(ERROR, "cycle-time", f"no GenMsgCycleTime: the restbus cannot send it periodically; {cycle_hint}")
+        elif not isinstance(cycle, (int, float)) or not math.isfinite(cycle) or cycle <= 0:
+            origin = "" if explicit else " (the attribute's default; the message sets none)"
+            add(ERROR, "cycle-time", f"GenMsgCycleTime {cycle!r}{origin} is not a positive number of ms: "
+                f"the restbus would never send it; {cycle_hint}", at)
+    if message.dbc is None or overrides.SEND_TYPE in supplied:
+        return
     send_type = message.send_type
-    at = lines.message_attr.get((dbc_id, "GenMsgSendType"))
+    at = lines.message_attr.get((_dbc_id(message), "GenMsgSendType"))
     if send_type is None:
-        add(ERROR, "send-type", "no GenMsgSendType")
+        add(ERROR, "send-type", "no GenMsgSendType: the restbus does not know how to send it; "
+            + overrides.hint(message.name, overrides.SEND_TYPE, '"cyclic"'))
     elif "cyclic" not in str(send_type).lower():
         add(WARNING, "send-type", f"GenMsgSendType {send_type!r} is not cyclic: the restbus sends every "
             "message at its cycle time", at)
@@ -717,12 +732,13 @@ def format_finding(result: CheckResult, finding: Finding) -> str:
 
 
 def check_files(paths: Iterable[Path | str], e2e_mode: str = OPTIONAL,
-                e2e_overrides: Overrides | None = None) -> list[CheckResult | DatabaseError]:
+                e2e_overrides: Overrides | None = None,
+                message_overrides: Overrides | None = None) -> list[CheckResult | DatabaseError]:
     """Each file's result, or the DatabaseError of a file that cannot be read."""
     out: list[CheckResult | DatabaseError] = []
     for path in paths:
         try:
-            out.append(check_file(path, e2e_mode, e2e_overrides))
+            out.append(check_file(path, e2e_mode, e2e_overrides, message_overrides))
         except DatabaseError as exc:
             out.append(exc)
     return out

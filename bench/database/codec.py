@@ -31,6 +31,7 @@ from cantools.database import errors as cantools_errors
 from cantools.database.can import Database, Message, Signal
 
 from bench import e2e
+from bench.database import overrides
 from bench.errors import DatabaseError, SignalError, did_you_mean
 
 
@@ -115,14 +116,16 @@ def diagnostic_kind(message: Message) -> str:
 class MessageCodec:
     """Encode and decode one message; E2E bytes are left to `bench.e2e`."""
 
-    def __init__(self, message: Message, database_name: str, protection: e2e.Protection | None = None) -> None:
+    def __init__(self, message: Message, database_name: str, protection: e2e.Protection | None = None,
+                 cycle_time_ms: float | None = None) -> None:
+        """`cycle_time_ms`: bench.toml's [messages.NAME] cycle time over the database's (bench.database.overrides)."""
         self.message = message
         self.database = database_name
         self.name: str = message.name
         self.frame_id: int = message.frame_id
         self.length: int = message.length
         self.senders: tuple[str, ...] = tuple(message.senders)
-        cycle_ms = message.cycle_time
+        cycle_ms = message.cycle_time if cycle_time_ms is None else cycle_time_ms
         self.cycle_time: float | None = cycle_ms / 1000.0 if cycle_ms else None
         #: "request" / "response": ISO-TP traffic (bench.diag), judged by its framing, never by cycle, E2E or range
         self.diagnostic: str = diagnostic_kind(message)
@@ -434,25 +437,31 @@ class Codebook:
     """Every message of the loaded databases, by identifier and by name."""
 
     def __init__(self, databases: Iterable[tuple[str, Database]],
-                 e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> None:
-        """`e2e_overrides`: bench.toml's `[e2e]` table, message name -> AUTOSAR parameters over the database's."""
+                 e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None,
+                 message_overrides: overrides.MessageOverrides | None = None) -> None:
+        """`e2e_overrides`: bench.toml's `[e2e]` table, message name -> AUTOSAR parameters over the database's;
+        `message_overrides`: its `[messages]` table (bench.database.overrides)."""
         self.databases: list[tuple[str, Database]] = list(databases)
         self.by_id: dict[int, MessageCodec] = {}
         self.by_name: dict[str, MessageCodec] = {}
-        overrides = dict(e2e_overrides or {})
+        protections = dict(e2e_overrides or {})
         names = [m.name for _, db in self.databases for m in db.messages]
-        for name in overrides:
+        for name in protections:
             if name not in names:
                 raise DatabaseError(f"bench.toml: [e2e] {name}: no such message{did_you_mean(name, names)}")
+        unknown = overrides.unknown_messages(message_overrides, names)
+        if unknown:
+            raise DatabaseError(unknown[0])
         for db_name, db in self.databases:
             definitions: Mapping[str, Any] = (db.dbc.attribute_definitions if db.dbc is not None else None) or {}
             for message in db.messages:
                 try:
-                    protection = e2e.protection(message, definitions, overrides.get(message.name))
+                    protection = e2e.protection(message, definitions, protections.get(message.name))
                 except e2e.ProtectionError as exc:
-                    over = f" (with bench.toml [e2e.{message.name}])" if message.name in overrides else ""
+                    over = f" (with bench.toml [e2e.{message.name}])" if message.name in protections else ""
                     raise DatabaseError(f"{db_name}{over}: {exc}") from None
-                codec = MessageCodec(message, db_name, protection)
+                cycle_ms = overrides.cycle_time_ms(message_overrides, message.name)
+                codec = MessageCodec(message, db_name, protection, cycle_ms)
                 other = self.by_id.get(codec.frame_id) or self.by_name.get(codec.name)
                 if other is not None:
                     raise DatabaseError(
@@ -509,19 +518,22 @@ def _file_key(path: Path) -> tuple[object, ...]:
 
 
 def load_codebook(paths: Iterable[Path | str],
-                  e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> Codebook:
+                  e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None,
+                  message_overrides: overrides.MessageOverrides | None = None) -> Codebook:
     """The databases' messages; `e2e_overrides` is bench.toml's [e2e] table (message -> AUTOSAR parameters), given
-    by every caller that loads a project's databases so that each process applies the same protection.
+    by every caller that loads a project's databases so that each process applies the same protection;
+    `message_overrides` its [messages] table (cycle times and send types over the databases').
 
     Parsed once per process: the same files (path, size, modification time) with the same overrides give the same
     Codebook again (it does not change once built). Why: `bench run`'s checks, the pytest plugin (twice) and the
     session each asked for the project's databases, and cantools parsed them every time (3 to 5 times a run);
     the log process, a program of its own, parses them once in its own process."""
     files = [Path(p) for p in paths]
-    key = (tuple(_file_key(p) for p in files), json.dumps(e2e_overrides or {}, sort_keys=True, default=repr))
+    given = [e2e_overrides or {}, message_overrides or {}]
+    key = (tuple(_file_key(p) for p in files), json.dumps(given, sort_keys=True, default=repr))
     codebook = _LOADED.pop(key, None)
     if codebook is None:
-        codebook = Codebook(((p.name, load_dbc(p)) for p in files), e2e_overrides)
+        codebook = Codebook(((p.name, load_dbc(p)) for p in files), e2e_overrides, message_overrides)
     _LOADED[key] = codebook
     while len(_LOADED) > LOADED_KEPT:
         del _LOADED[next(iter(_LOADED))]

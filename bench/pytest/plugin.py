@@ -135,7 +135,7 @@ def _facts(config: pytest.Config) -> tuple[ProjectConfig, list[str]]:
     if facts is None:
         try:
             project = load_config(_config_path(config))
-            nodes = load_codebook(project.databases, project.e2e).nodes
+            nodes = load_codebook(project.databases, project.e2e, project.messages).nodes
         except BenchError as exc:
             raise pytest.UsageError(str(exc)) from None
         facts = config.stash[_FACTS_KEY] = (project, nodes)
@@ -234,7 +234,7 @@ def _check_calibration(config: pytest.Config, marked: list[tuple[pytest.Item, Ca
 
 def _external(config: pytest.Config, project: ProjectConfig) -> set[str]:
     try:
-        return resolve_external(load_codebook(project.databases, project.e2e), project.stimulus,
+        return resolve_external(load_codebook(project.databases, project.e2e, project.messages), project.stimulus,
                                 config.getoption("--bench-external"))
     except BenchError as exc:
         raise pytest.UsageError(str(exc)) from None

@@ -254,13 +254,23 @@ def test_e2e_table_is_read_by_autosar_names(tmp_path: Path) -> None:
     ("[e2e.DRV_Steering]\nMaxDeltaCountr = 3\n",
      "[e2e.DRV_Steering] unknown key(s) MaxDeltaCountr (did you mean MaxDeltaCounter?)"),
     ("[e2e.DRV_Steering]\nE2E_DataID = 3\n", "[e2e.DRV_Steering] unknown key(s) E2E_DataID (did you mean DataID?)"),
-    ("[e2e]\nDRV_Steering = 3\n", "give a message's parameters as a table [e2e.DRV_Steering]"),
+    ("[e2e]\nDRV_Steering = 3\n", "give a message's settings as a table [e2e.DRV_Steering]"),
     ("[e2e.DRV_Steering]\nProfile = 11\n", "[e2e.DRV_Steering] Profile must be a name"),
     ('[e2e.DRV_Steering]\nDataID = "0x100"\n', "[e2e.DRV_Steering] DataID must be a whole number"),
     ("[e2e.DRV_Steering]\nDataIDList = [1, 256]\n", "[e2e.DRV_Steering] DataIDList must be 16 bytes"),
     ("[e2e.DRV_Steering]\nWindowSize = true\n", "[e2e.DRV_Steering] WindowSize must be a whole number"),
-], ids=["typo", "prefix", "not-a-table", "profile-number", "id-text", "list-byte", "bool"])
-def test_e2e_table_errors_are_one_line(tmp_path: Path, body: str, words: str) -> None:
+    # [messages.MESSAGE] (bench.database.overrides)
+    ("[messages.DRV_Steering]\ncycle_time = 20\n",
+     "[messages.DRV_Steering] unknown key(s) cycle_time (did you mean cycle_time_ms?)"),
+    ("[messages]\nDRV_Steering = 20\n", "give a message's settings as a table [messages.DRV_Steering]"),
+    ("[messages.DRV_Steering]\ncycle_time_ms = 0\n", "cycle_time_ms must be a positive number of milliseconds"),
+    ("[messages.DRV_Steering]\ncycle_time_ms = true\n", "cycle_time_ms must be a positive number of milliseconds"),
+    ('[messages.DRV_Steering]\ncycle_time_ms = "10"\n', "cycle_time_ms must be a positive number of milliseconds"),
+    ('[messages.DRV_Steering]\nsend_type = "OnChange"\n', "send_type 'OnChange': the bench's restbus knows 'cyclic'"),
+], ids=["typo", "prefix", "not-a-table", "profile-number", "id-text", "list-byte", "bool",
+       "messages-typo", "messages-not-a-table", "messages-zero", "messages-bool", "messages-text",
+       "messages-send-type"])
+def test_message_table_errors_are_one_line(tmp_path: Path, body: str, words: str) -> None:
     path = write(tmp_path, toml({"bench": GOOD}) + body)
     with pytest.raises(ConfigError) as error:
         load_config(path)
@@ -290,6 +300,42 @@ def test_e2e_table_reaches_the_session_and_bench_run(tmp_path: Path, capsys: pyt
     unknown = write(tmp_path, toml({"bench": GOOD}) + "[e2e.DRV_Steerin]\nMaxDeltaCounter = 3\n", "unknown.toml")
     assert main(["run", str(MINI_CASES), "--config", str(unknown), "--out", str(tmp_path / "out")]) == 2
     assert "[e2e] DRV_Steerin: no such message (did you mean DRV_Steering?)" in capsys.readouterr().err
+
+
+# -- [messages]: what a database lacks for one message (bench.database.overrides) -------------------------------
+def test_messages_table_is_read(tmp_path: Path) -> None:
+    project = load_config(write(tmp_path, toml({"bench": GOOD}) + "[messages.DRV_Steering]\ncycle_time_ms = 20\n"
+                                '[messages.DRV_Pedals]\nsend_type = "cyclic"\ncycle_time_ms = 12.5\n'))
+    assert project.messages == {"DRV_Steering": {"cycle_time_ms": 20},
+                                "DRV_Pedals": {"send_type": "cyclic", "cycle_time_ms": 12.5}}
+    assert load_config(write(tmp_path, toml({"bench": GOOD}))).messages == {}
+
+
+def test_messages_table_reaches_the_restbus_and_bench_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The restbus sends at bench.toml's cycle time, and the monitor judges by it; a message no database has
+    stops `bench run` at the door."""
+    from dataclasses import replace
+
+    from bench.config import RunSettings
+    from bench.session import BenchSession
+
+    path = write(tmp_path, toml({"bench": GOOD}) + "[messages.DRV_Steering]\ncycle_time_ms = 25\n")
+    project = replace(load_config(path), plant="tests.fixtures.echo_plant:build")
+    session = BenchSession(project, RunSettings())
+    try:
+        session.start()
+        session.run_until(1.0)
+        steering = session.runner.monitor.state("DRV_Steering")
+        pedals = session.runner.monitor.state("DRV_Pedals")     # the database's 10 ms, untouched
+        assert steering.intervals and all(abs(i - 0.025) < 1e-9 for i in steering.intervals), steering.intervals[:5]
+        assert pedals.intervals and all(abs(i - 0.010) < 1e-9 for i in pedals.intervals)
+        assert session.codebook["DRV_Steering"].cycle_time == 0.025
+    finally:
+        session.close()
+    unknown = write(tmp_path, toml({"bench": GOOD}) + "[messages.DRV_Steerin]\ncycle_time_ms = 25\n", "unknown.toml")
+    assert main(["run", str(MINI_CASES), "--config", str(unknown), "--out", str(tmp_path / "out")]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert "[messages.DRV_Steerin]: no such message in the databases (did you mean DRV_Steering?)" in err, err
 
 
 def test_config_is_a_folder_or_missing(tmp_path: Path) -> None:

@@ -205,6 +205,39 @@ def test_send_type_missing_and_not_cyclic() -> None:
     assert result.accepted
 
 
+def test_timing_errors_name_the_bench_toml_key_that_fixes_them() -> None:
+    """An OEM's database is not the engineer's to edit: each timing error says which bench.toml key supplies
+    what is missing, and with that key given the error is gone (bench.database.overrides)."""
+    no_cycle = GOOD.replace('BA_ "GenMsgCycleTime" BO_ 256 10;\n', "")
+    assert "bench.toml [messages.ECU_Status] cycle_time_ms = <ms>" in only(errors(check_text(no_cycle),
+                                                                                  "cycle-time")).text
+    assert check_text(no_cycle, message_overrides={"ECU_Status": {"cycle_time_ms": 10}}).accepted
+    no_send_type = GOOD.replace('BA_ "GenMsgSendType" BO_ 256 0;\n', "").replace(
+        'BA_DEF_ BO_  "GenMsgSendType" ENUM  "Cyclic","NoMsgSendType";\n', "").replace(
+        'BA_DEF_DEF_  "GenMsgSendType" "NoMsgSendType";\n', "")
+    assert 'bench.toml [messages.ECU_Status] send_type = "cyclic"' in only(errors(check_text(no_send_type),
+                                                                                  "send-type")).text
+    assert check_text(no_send_type, message_overrides={"ECU_Status": {"send_type": "cyclic"}}).accepted
+
+
+def test_a_projects_messages_table_reaches_dbc_check(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`bench dbc check` of a project checks its databases with its [messages] table; a name no database has is
+    an error with the name meant."""
+    dbc = tmp_path / "oem.dbc"
+    dbc.write_text(GOOD.replace('BA_ "GenMsgCycleTime" BO_ 256 10;\n', ""))
+    project = ('[bench]\ndatabases = ["oem.dbc"]\nstimulus = ["TESTER"]\nplant = "chassis"\ntestcases = "t"\n'
+               'reports = "r"\n')
+    (tmp_path / "bench.toml").write_text(project)
+    assert main(["dbc", "check", "--config", str(tmp_path / "bench.toml")]) == 1
+    assert "error [cycle-time]" in capsys.readouterr().out
+    (tmp_path / "bench.toml").write_text(project + "[messages.ECU_Status]\ncycle_time_ms = 10\n")
+    assert main(["dbc", "check", "--config", str(tmp_path / "bench.toml")]) == 0
+    (tmp_path / "bench.toml").write_text(project + "[messages.ECU_Statu]\ncycle_time_ms = 10\n")
+    assert main(["dbc", "check", "--config", str(tmp_path / "bench.toml")]) == 1
+    out = " ".join(capsys.readouterr().out.split())
+    assert "[messages.ECU_Statu]: no such message in the databases (did you mean ECU_Status?)" in out, out
+
+
 # -- ranges, scale, start values -----------------------------------------------------------------------------
 def test_range_wider_than_the_raw_field() -> None:
     # 16-bit signed at 0.01: -327.68..327.67, so +-400 cannot be carried
