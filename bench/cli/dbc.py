@@ -32,6 +32,9 @@ from bench.e2e import config as e2e_config
 from bench.errors import ConfigError, DatabaseError, did_you_mean
 
 CHECK = "check"
+STRICT_HELP = ("check only: what the bench survives in a database but a contract must not have (a range wider than "
+               "its raw field, a start value outside its range) is an error, not a warning (how the contract's own "
+               "databases are checked)")
 #: Where `Protection.describe()` is broken into lines in the table: before each group of parameters.
 _PARTS = re.compile(r", (?=CRC bits|counter bits|MaxDeltaCounter|window)")
 E2E_HELP = ("check only: may a message go without E2E protection? optional (the default): yes, it is listed as "
@@ -60,7 +63,7 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         "dbc",
         help="list the messages and signals of DBC files, or check them (bench dbc check FILE...)",
-        usage="bench dbc [FILE ...]\n       bench dbc check [--e2e {optional,required}] [FILE ...]",
+        usage="bench dbc [FILE ...]\n       bench dbc check [--e2e {optional,required}] [--strict] [FILE ...]",
         description="List id, name, senders, cycle time, E2E protection and signals of every message of DBC or "
         "ARXML files; 'bench dbc check FILE...' checks them against the bench's needs instead (cycle and send "
         "types, layout, ranges, start values, value tables, the E2E protection each message declares), prints "
@@ -72,6 +75,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument("files", nargs=argparse.REMAINDER, metavar="[check] FILE",
                         help="DBC or ARXML file(s); a first word 'check' checks them instead of listing them")
     parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
     parser.add_argument("--config", default=None, help=CONFIG_HELP)
     parser.add_argument("--values", action="store_true", help=VALUES_HELP)
     parser.set_defaults(handler=run)
@@ -91,6 +95,7 @@ def _words(prog: str, words: list[str], with_e2e: bool) -> argparse.Namespace:
     parser.add_argument("--config", default=None, help=CONFIG_HELP)
     if with_e2e:
         parser.add_argument("--e2e", choices=dbccheck.E2E_MODES, default=None, help=E2E_HELP)
+        parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
     else:
         parser.add_argument("--values", action="store_true", help=VALUES_HELP)
     return parser.parse_intermixed_args(words)
@@ -104,9 +109,10 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--values: only for the listing, 'bench dbc [FILE ...] --values'")
         checked = _words("bench dbc check", words[1:], with_e2e=True)
         files, overrides, message_overrides = _files(checked.files, checked.config or args.config)
-        return check(files, checked.e2e or args.e2e or dbccheck.OPTIONAL, overrides, message_overrides)
-    if args.e2e is not None:
-        raise ConfigError("--e2e: only for 'bench dbc check FILE...'")
+        return check(files, checked.e2e or args.e2e or dbccheck.OPTIONAL, overrides, message_overrides,
+                     strict=checked.strict or args.strict)
+    if args.e2e is not None or args.strict:
+        raise ConfigError(f"{'--e2e' if args.e2e is not None else '--strict'}: only for 'bench dbc check FILE...'")
     listed = _words("bench dbc", words, with_e2e=False)
     files, overrides, message_overrides = _files(listed.files, listed.config or args.config)
     databases = [(path, load_dbc(path)) for path in files]  # raises DatabaseError naming the file
@@ -194,13 +200,13 @@ def _values(signal: Signal) -> str:
 
 
 def check(files: list[Path], e2e_mode: str, e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None,
-          message_overrides: Mapping[str, Mapping[str, Any]] | None = None) -> int:
+          message_overrides: Mapping[str, Mapping[str, Any]] | None = None, strict: bool = False) -> int:
     """Print per message the protection the bench applies, every finding as FILE:LINE, then one summary line per
     file (compiler style, so editors jump to it)."""
     out = Console(soft_wrap=True, highlight=False)
     err = Console(stderr=True, soft_wrap=True, highlight=False)
     unreadable = rejected = 0
-    outcomes = dbccheck.check_files(files, e2e_mode, e2e_overrides, message_overrides)
+    outcomes = dbccheck.check_files(files, e2e_mode, e2e_overrides, message_overrides, strict)
     for outcome in outcomes:
         if isinstance(outcome, DatabaseError):
             unreadable += 1

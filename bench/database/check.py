@@ -2,10 +2,10 @@
 DBC file; an ARXML file has no line numbers, so its findings name the message (and the signal).
 
 Why a checker of its own rather than cantools' strict load: strict loading stops at the first problem
-and knows nothing of what the bench relies on — the restbus sends only messages with a cycle time,
-encodes with a mask (a range wider than the raw field wraps silently), starts every signal at its
-`GenSigStartValue` (a start value outside the range stops the run at the first send), and protects and checks
-every message that declares an AUTOSAR E2E profile (docs/spec/e2e.md).
+and knows nothing of what the bench relies on — the restbus sends only messages with a cycle time (the database's
+or bench.toml's [messages], bench.database.overrides), judges a signal only within what its raw field carries,
+starts every signal at its `GenSigStartValue` (at the nearest end of the range when that lies outside it), and
+protects and checks every message that declares an AUTOSAR E2E profile (docs/spec/e2e.md).
 
 cantools gives no line numbers for parsed objects, so the text is scanned for `BO_ <id> <name>`,
 the ` SG_ <name> ` lines of that message's block, and the `BA_DEF_`/`BA_`/`VAL_` lines naming them.
@@ -13,7 +13,9 @@ the ` SG_ <name> ` lines of that message's block, and the `BA_DEF_`/`BA_`/`VAL_`
 Severities: an *error* is something the bench would get wrong or refuse (a database with errors is
 rejected); a *warning* is something the contract asks for (docs/spec/k-matrix.md: cycle time, send type, unit,
 range, start value and comment on everything; value tables for enumerations) whose absence the bench
-survives.
+survives. Two inconsistencies of real databases are warnings saying what the bench does instead (a range wider
+than the raw field, a start value outside the range); `strict` (`--strict`, the contract's own databases) makes
+them errors.
 
 End-to-end protection is declared per message (`bench.e2e.config`): DBC attributes `E2E_Profile`, `E2E_DataID`,
 ... (AUTOSAR's parameter names with the prefix `E2E_`), ARXML E2E properties (cantools' `Message.autosar.e2e`),
@@ -46,7 +48,7 @@ import cantools
 from cantools.database.can import Database, Message, Signal
 
 from bench.database import overrides
-from bench.database.codec import RANGE_SLACK, diagnostic_kind
+from bench.database.codec import RANGE_SLACK, carried_range, diagnostic_kind
 from bench.e2e import config as e2e_config
 from bench.e2e.profiles import P01_MODES, PROFILES, Field, Protection
 from bench.errors import DatabaseError, did_you_mean
@@ -257,22 +259,24 @@ Overrides = Mapping[str, Mapping[str, Any]]
 
 
 def check_file(path: Path | str, e2e_mode: str = OPTIONAL, e2e_overrides: Overrides | None = None,
-               message_overrides: Overrides | None = None) -> CheckResult:
+               message_overrides: Overrides | None = None, strict: bool = False) -> CheckResult:
     """Check one DBC or ARXML file (by its suffix); DatabaseError only when the file cannot be read at all.
     `e2e_overrides`: a project's bench.toml [e2e] table (message name -> parameters), applied to this file's
     messages of those names; `message_overrides`: its [messages] table (cycle times and send types,
-    bench.database.overrides)."""
+    bench.database.overrides); `strict`: what the bench survives in a database but a contract must not have (a range
+    wider than its raw field, a start value outside the range) is an error, not a warning."""
     path = Path(path)
     text, encoding = read_text(path)
     kind = "arxml" if path.suffix.lower() == ARXML_SUFFIX else "dbc"
-    result = check_text(text, path, e2e_mode, e2e_overrides, database_format=kind, message_overrides=message_overrides)
+    result = check_text(text, path, e2e_mode, e2e_overrides, database_format=kind, message_overrides=message_overrides,
+                        strict=strict)
     result.encoding = encoding
     return result
 
 
 def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = OPTIONAL,
                e2e_overrides: Overrides | None = None, database_format: str = "dbc",
-               message_overrides: Overrides | None = None) -> CheckResult:
+               message_overrides: Overrides | None = None, strict: bool = False) -> CheckResult:
     """Check DBC (or ARXML) text; never raises on any text (every problem is a finding)."""
     if e2e_mode not in E2E_MODES:
         raise ValueError(f"e2e mode must be one of {', '.join(E2E_MODES)}, got {e2e_mode!r}")
@@ -298,7 +302,7 @@ def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = OPTIONAL,
     attribute_defaults = {name: d.default_value for name, d in definitions.items()}
     protections = e2e_overrides or {}
     for message in messages:
-        _check_message(message, lines, attribute_defaults, findings, supplied.get(message.name, {}))
+        _check_message(message, lines, attribute_defaults, findings, supplied.get(message.name, {}), strict)
         result.protections.append(_check_e2e(message, definitions, protections.get(message.name), lines,
                                              e2e_mode == REQUIRED, findings))
     if strict_error is not None:
@@ -394,7 +398,7 @@ def _check_duplicates(messages: list[Message], lines: _Lines, findings: list[Fin
 
 # -- one message -------------------------------------------------------------------------------------
 def _check_message(message: Message, lines: _Lines, defaults: dict[str, object], findings: list[Finding],
-                   supplied: Mapping[str, Any]) -> None:
+                   supplied: Mapping[str, Any], strict: bool = False) -> None:
     """`supplied`: bench.toml's [messages.NAME] for this message (what the project gives over its database)."""
     line = lines.of_message(message)
     name = message.name
@@ -421,7 +425,7 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
     _check_timing(message, lines, defaults, add, supplied)
     _check_layout(message, lines, findings)
     for signal in message.signals:
-        _check_signal(message, signal, lines, findings)
+        _check_signal(message, signal, lines, findings, strict)
 
 
 def _attribute(message: Message, name: str, defaults: dict[str, object]) -> tuple[object, bool]:
@@ -534,8 +538,12 @@ def _g(value: float) -> str:
     return f"{value:.10g}"
 
 
-def _check_signal(message: Message, signal: Signal, lines: _Lines, findings: list[Finding]) -> None:
+def _check_signal(message: Message, signal: Signal, lines: _Lines, findings: list[Finding],
+                  strict: bool = False) -> None:
+    """`strict`: a range wider than the raw field and a start value outside the range are errors (a contract's
+    own databases); else warnings, with what the bench does instead (bench.database.codec)."""
     line = lines.of_signal(message, signal)
+    survivable = ERROR if strict else WARNING
     dbc_id = _dbc_id(message)
 
     def add(severity: str, kind: str, text: str, at: int | None = None) -> None:
@@ -566,19 +574,23 @@ def _check_signal(message: Message, signal: Signal, lines: _Lines, findings: lis
         tol = slack + 1e-9 * max(1.0, abs(lo), abs(hi))
         if minimum < lo - tol or maximum > hi + tol:
             kind = "signed" if signal.is_signed else "unsigned"
-            add(ERROR, "range-raw", f"range [{_g(minimum)}|{_g(maximum)}] is wider than the {signal.length}-bit "
-                f"{kind} raw field can carry at scale {_g(scale)}, offset {_g(offset)}: [{_g(lo)}|{_g(hi)}]")
+            add(survivable, "range-raw", f"range [{_g(minimum)}|{_g(maximum)}] is wider than the {signal.length}-bit "
+                f"{kind} raw field can carry at scale {_g(scale)}, offset {_g(offset)}: [{_g(lo)}|{_g(hi)}]"
+                + ("" if strict else f"; the bench judges and accepts [{_g(max(minimum, lo))}|{_g(min(maximum, hi))}]"))
         if maximum > minimum and maximum - minimum < abs(scale) * (1 - 1e-9):
             add(WARNING, "resolution", f"range [{_g(minimum)}|{_g(maximum)}] is narrower than one step "
                 f"({_g(scale)})")
     _check_start_value(message, signal, scale, offset, slack, lines.signal_attr.get(
-        (dbc_id, signal.name, "GenSigStartValue")), add)
+        (dbc_id, signal.name, "GenSigStartValue")), add, survivable)
     _check_value_table(message, signal, lines, add)
 
 
 def _check_start_value(message: Message, signal: Signal, scale: float, offset: float, slack: float,
-                       at: int | None, add: _Add) -> None:
-    """The restbus starts at raw GenSigStartValue (raw 0 when absent), checked against the range at send."""
+                       at: int | None, add: _Add, survivable: str = ERROR) -> None:
+    """The restbus starts at raw GenSigStartValue (raw 0 when absent); one outside the signal's range starts at the
+    nearest end of the range instead (bench.database.codec.MessageCodec.start_values): `survivable` is the
+    severity of that (a warning, or an error with --strict). Without a range to fall back to, a raw start value
+    outside its field cannot be sent: an error."""
     raw = signal.raw_initial
     if raw is None:
         add(WARNING, "start-value", "no GenSigStartValue: the bench starts it at raw 0")
@@ -588,19 +600,27 @@ def _check_start_value(message: Message, signal: Signal, scale: float, offset: f
     if not isinstance(raw, (int, float)) or not math.isfinite(raw):
         add(ERROR, "start-value", f"{origin} is not a finite number", at)
         return
+    carried = carried_range(signal)
+    lo, hi = carried["minimum"], carried["maximum"]
+    value = raw * scale + offset
+    instead = ""
+    if lo is not None and value < lo - slack:
+        instead = f"; the restbus starts it at {_g(lo)}"
+    elif hi is not None and value > hi + slack:
+        instead = f"; the restbus starts it at {_g(hi)}"
     if not signal.is_float:
         raw_lo, raw_hi = _raw_limits(signal)
         if not raw_lo <= raw <= raw_hi:
-            add(ERROR, "start-value", f"{origin} does not fit the {signal.length}-bit raw field "
-                f"[{raw_lo}|{raw_hi}]", at)
+            add(survivable if instead else ERROR, "start-value", f"{origin} does not fit the {signal.length}-bit "
+                f"raw field [{raw_lo}|{raw_hi}]" + (instead if survivable == WARNING else ""), at)
             return
-    value = raw * scale + offset
     minimum, maximum = signal.minimum, signal.maximum
     if (minimum is not None and value < minimum - slack) or (maximum is not None and value > maximum + slack):
         unit = f" {signal.unit}" if signal.unit else ""
-        add(ERROR, "start-value", f"{origin} is {_g(value)}{unit}, outside the range "
+        add(survivable, "start-value", f"{origin} is {_g(value)}{unit}, outside the range "
             f"[{_g(minimum if minimum is not None else -math.inf)}|"
-            f"{_g(maximum if maximum is not None else math.inf)}]: the first frame would stop the run", at)
+            f"{_g(maximum if maximum is not None else math.inf)}]"
+            + (instead if survivable == WARNING else ": the bench refuses it in a contract's own database"), at)
 
 
 def _check_value_table(message: Message, signal: Signal, lines: _Lines, add: _Add) -> None:
@@ -733,12 +753,12 @@ def format_finding(result: CheckResult, finding: Finding) -> str:
 
 def check_files(paths: Iterable[Path | str], e2e_mode: str = OPTIONAL,
                 e2e_overrides: Overrides | None = None,
-                message_overrides: Overrides | None = None) -> list[CheckResult | DatabaseError]:
+                message_overrides: Overrides | None = None, strict: bool = False) -> list[CheckResult | DatabaseError]:
     """Each file's result, or the DatabaseError of a file that cannot be read."""
     out: list[CheckResult | DatabaseError] = []
     for path in paths:
         try:
-            out.append(check_file(path, e2e_mode, e2e_overrides, message_overrides))
+            out.append(check_file(path, e2e_mode, e2e_overrides, message_overrides, strict))
         except DatabaseError as exc:
             out.append(exc)
     return out

@@ -82,6 +82,8 @@ class SignalCodec:
     maximum: float | None
     unit: str
     choices: Mapping[str, int]   # value-table name -> raw number
+    #: why the range is narrower than the DBC's ("" when it is the DBC's): its raw field carries no more
+    narrowed: str = ""
 
     @property
     def mask(self) -> int:
@@ -133,8 +135,7 @@ class MessageCodec:
             SignalCodec(
                 name=s.name, start=s.start, length=s.length, signed=s.is_signed,
                 scale=float(s.scale), offset=float(s.offset),
-                minimum=None if s.minimum is None else float(s.minimum),
-                maximum=None if s.maximum is None else float(s.maximum),
+                **carried_range(s),
                 unit=s.unit or "",
                 choices={str(name): int(raw) for raw, name in (s.choices or {}).items()},
             )
@@ -222,11 +223,19 @@ class MessageCodec:
 
     # -- values ---------------------------------------------------------------------------------
     def start_values(self) -> dict[str, float]:
-        """Physical start values from `GenSigStartValue` (a raw value, per DBC convention)."""
+        """Physical start values from `GenSigStartValue` (a raw value, per DBC convention; raw 0 without one).
+        A start value outside the signal's range starts at the nearest end of it (`bench dbc check` warns of it):
+        an OEM's database may carry one, and the first frame must not stop the run."""
         values: dict[str, float] = {}
         for sig, s in zip(self.message.signals, self.signals):
             raw = sig.raw_initial if sig.raw_initial is not None else 0
-            values[s.name] = raw * s.scale + s.offset
+            value = raw * s.scale + s.offset
+            slack = RANGE_SLACK * abs(s.scale)
+            if s.minimum is not None and value < s.minimum - slack:
+                value = s.minimum
+            elif s.maximum is not None and value > s.maximum + slack:
+                value = s.maximum
+            values[s.name] = value
         return values
 
     def signal(self, name: str) -> SignalCodec:
@@ -257,7 +266,7 @@ class MessageCodec:
             raise SignalError(f"{self.name}.{signal}: {value!r} is not a finite number")
         if not sig.in_range(number):
             raise SignalError(f"{self.name}.{signal}: {number:g} {sig.unit} is outside the DBC range "
-                              f"[{sig.minimum:g}, {sig.maximum:g}]")
+                              f"[{sig.minimum:g}, {sig.maximum:g}]{sig.narrowed}")
         return number
 
     # -- frames ---------------------------------------------------------------------------------
@@ -408,6 +417,25 @@ class MessageCodec:
             else:
                 out[name] = self.physical(name, value)
         return out
+
+
+def carried_range(signal: Signal) -> dict[str, Any]:
+    """The signal's range as the bench judges it: the DBC's, narrowed to what its raw field carries when the DBC
+    declares more (an OEM's database may; `bench dbc check` warns, `--strict` refuses). A value outside the field
+    would not fit the frame: refused when a case or the restbus sets it, never wrapped."""
+    minimum = None if signal.minimum is None else float(signal.minimum)
+    maximum = None if signal.maximum is None else float(signal.maximum)
+    if signal.is_float or minimum is None or maximum is None or not 0 < signal.length <= 64 or signal.scale == 0:
+        return {"minimum": minimum, "maximum": maximum}
+    raw_lo, raw_hi = _raw_limits(signal.length, signal.is_signed)
+    lo, hi = sorted((raw_lo * float(signal.scale) + float(signal.offset),
+                     raw_hi * float(signal.scale) + float(signal.offset)))
+    if lo <= minimum and maximum <= hi:
+        return {"minimum": minimum, "maximum": maximum}
+    kind = "signed" if signal.is_signed else "unsigned"
+    return {"minimum": max(minimum, lo), "maximum": min(maximum, hi),
+            "narrowed": f" (the DBC declares [{minimum:g}, {maximum:g}], more than its {signal.length}-bit {kind} "
+                        "field carries)"}
 
 
 def _raw_limits(length: int, signed: bool) -> tuple[int, int]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import cantools
 import pytest
 from cantools.database import errors as cantools_errors
 from hypothesis import given, settings
@@ -116,3 +117,48 @@ def test_text_for_a_signal_without_value_table_is_not_a_number(codebook: Codeboo
                                  "has no value table)")
     with pytest.raises(SignalError, match=r"'PIVT' \(did you mean PIVOT\?\) is not in its value table \(.*PIVOT"):
         drive.physical("DriveMode", "PIVT")
+
+
+# -- an OEM's inconsistent declarations (issue 33): judged as far as the frame carries them ----------------------
+OEM_DBC = '''VERSION ""
+
+NS_ :
+
+BS_:
+
+BU_: ECU
+
+BO_ 256 Status: 8 ECU
+ SG_ Speed : 0|16@1- (0.01,0) [-400|400] "m/s" ECU
+ SG_ Level : 16|8@1+ (1,0) [0|250] "-" ECU
+
+BA_DEF_ SG_  "GenSigStartValue" INT -2147483648 2147483647;
+BA_DEF_DEF_  "GenSigStartValue" 0;
+BA_ "GenSigStartValue" SG_ 256 Level 254;
+'''
+
+
+def _oem_status() -> MessageCodec:
+    database = cantools.database.load_string(OEM_DBC, database_format="dbc")
+    assert isinstance(database, cantools.database.can.Database)
+    return Codebook([("oem.dbc", database)])["Status"]
+
+
+def test_a_range_wider_than_its_field_is_judged_as_far_as_the_field_carries() -> None:
+    """[-400|400] on a 16-bit signed field at 0.01 (which carries -327.68..327.67): 330 is refused when set, with
+    the DBC's range and the reason, rather than accepted and failing at the next frame's encoding."""
+    codec = _oem_status()
+    assert codec.physical("Speed", 327.67) == 327.67 and codec.physical("Speed", -327.68) == -327.68
+    with pytest.raises(SignalError) as error:
+        codec.physical("Speed", 330.0)
+    text = str(error.value)
+    assert "[-327.68, 327.67]" in text and "the DBC declares [-400, 400]" in text and "16-bit signed" in text
+    assert codec.out_of_range(codec.decode(codec.encode({"Speed": -327.68, "Level": 3}))) == []
+
+
+def test_a_start_value_outside_the_range_starts_at_its_end() -> None:
+    """GenSigStartValue 254 for a range [0|250]: the restbus starts at 250 and the first frame is sent."""
+    codec = _oem_status()
+    start = codec.start_values()
+    assert start == {"Speed": 0.0, "Level": 250.0}
+    assert codec.decode(codec.encode(codec.checked(start)))["Level"] == 250.0
