@@ -6,6 +6,7 @@ stimulus lists the bench hands to test cases read this registry, so no second li
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import pkgutil
 from functools import cache
@@ -41,7 +42,9 @@ def vehicle(name: str) -> Vehicle:
     known = vehicles()
     found = known.get(str(name).upper())
     if found is None:
-        raise ValueError(f"no plant for vehicle {name!r} (available: {', '.join(sorted(known))})")
+        close = difflib.get_close_matches(str(name).upper(), known, n=1, cutoff=0.6)
+        meant = f" (did you mean {close[0]}?)" if close else ""
+        raise ValueError(f"no plant for vehicle {name!r}{meant} (available: {', '.join(sorted(known))})")
     return found
 
 

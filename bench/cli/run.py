@@ -184,7 +184,8 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
             problems.append(f"{project.path}: [bench] plant: {exc}")
     unknown = [n for n in split_names(args.dut) if n not in codebook.nodes]
     if unknown:
-        problems.append(f"--dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(codebook.nodes)})")
+        named = ", ".join(f"{n}{did_you_mean(n, codebook.nodes)}" for n in unknown)
+        problems.append(f"--dut: unknown node(s) {named} (nodes: {', '.join(codebook.nodes)})")
     before = len(problems)
     check(check_interface, args.interface)
     interface_known = len(problems) == before

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from bench.database.codec import Codebook, MessageCodec
 from bench.e2e import Protection
+from bench.errors import did_you_mean
 
 if TYPE_CHECKING:
     from bench.faults.plan import Fault
@@ -67,9 +68,9 @@ class FaultKind:
     def check_target(self, target: str, codebook: Codebook) -> str | None:
         """Why TARGET does not fit this kind and the databases (None: it fits)."""
         if self.target == MESSAGE and target not in codebook.by_name:
-            return f"unknown message {target!r} (in none of the databases)"
+            return f"unknown message {target!r}{did_you_mean(target, codebook.by_name)} (in none of the databases)"
         if self.target == NODE and target not in codebook.nodes:
-            return f"unknown node {target!r} (nodes: {', '.join(codebook.nodes)})"
+            return f"unknown node {target!r}{did_you_mean(target, codebook.nodes)} (nodes: {', '.join(codebook.nodes)})"
         if self.target == IDENTIFIER:
             try:
                 int(target, 0)

@@ -14,6 +14,7 @@ checks can be tested without running pytest.
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
@@ -134,9 +135,13 @@ def check_marks(marks: CaseMarks, nodes: Collection[str], requirements: Collecti
             problems.append(f"@pytest.mark.{name}: {node!r} is not a node of the databases (nodes: {known})")
     for rid in marks.reqs:
         if rid not in requirements:
-            where = f"the contract documents ({documents})" if documents else \
-                "the contract: bench.toml has no [contract] documents"
-            problems.append(f"@pytest.mark.req: {rid!r} is not a requirement of {where}")
+            if not documents:
+                problems.append(f"@pytest.mark.req: {rid!r} is not a requirement of the contract: bench.toml has "
+                                "no [contract] documents")
+                continue
+            nearby = sorted(difflib.get_close_matches(rid, list(requirements), n=3, cutoff=0.6))
+            problems.append(f"@pytest.mark.req: {rid!r} is not a requirement of the contract"
+                            + (f" (nearby ids: {', '.join(nearby)})" if nearby else f" ({documents})"))
     return problems
 
 

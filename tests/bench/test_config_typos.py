@@ -75,3 +75,17 @@ def test_every_typo_is_its_own_line(tmp_path: Path, capsys: pytest.CaptureFixtur
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 2, lines
     assert "'TESTR'" in lines[0] and "'Qwerty'" in lines[1] and "did you mean" not in lines[1], lines
+
+
+# -- typos on the command line (issue 34, the front door): each names the name most likely meant -----------------
+@pytest.mark.parametrize("argv, words", [
+    (["--fault", "drop:VCU_WheelCmd_FLL@2-3"], "unknown message 'VCU_WheelCmd_FLL' (did you mean VCU_WheelCmd_FL?)"),
+    (["--fault", "silence:VCUU@2-3"], "unknown node 'VCUU' (did you mean VCU?)"),
+    (["--external", "VCUU"], "--external: unknown node(s) VCUU (did you mean VCU?)"),
+    (["--dut", "ABX"], "--dut: unknown node(s) ABX (did you mean ABS?)"),
+], ids=["fault-message", "fault-node", "external", "dut"])
+def test_command_line_typos_name_what_was_meant(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
+                                                words: str) -> None:
+    assert main(["run", str(MINI_CASES), "--out", str(tmp_path / "out"), *argv]) == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert words in err, err

@@ -135,3 +135,8 @@ def test_an_unknown_stimulus_message_is_a_clear_error() -> None:
     with pytest.raises(BenchError, match="VCU_WheelCmd_FL is no periodic stimulus message"):
         _case(session).start_scenario(Vehicle="EV4WIS", stimulus=["VCU_WheelCmd_FL"])
     session.close()
+
+
+def test_an_unknown_vehicle_names_the_one_meant() -> None:
+    with pytest.raises(ValueError, match=r"no plant for vehicle 'EV4WI' \(did you mean EV4WIS\?\)"):
+        declared("EV4WI")

@@ -313,8 +313,8 @@ def test_bad_markers_are_a_collection_error_naming_case_and_value(fixture_projec
     assert result.returncode == pytest.ExitCode.INTERRUPTED, result.stdout + result.stderr
     out = result.stdout
     assert "Interrupted: 1 error during collection" in out and "passed" not in out
-    for words in (["test_unknown_req", "'VCU-FLT-99' is not a requirement of the contract documents",
-                   "contract/common.md, contract/vcu.md"],
+    for words in (["test_unknown_req", "'VCU-FLT-99' is not a requirement of the contract",
+                   "(nearby ids: VCU-FLT-01, VCU-FLT-02, VCU-FLT-03)"],
                   ["test_bad_node", "3 is not a node name"],
                   ["test_bad_node", "'BOGUS' is not a node of the databases"],
                   ["test_empty", "@pytest.mark.req without a requirement id"],
