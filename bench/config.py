@@ -340,7 +340,9 @@ def _calibration(path: Path, table: Any) -> dict[str, dict[str, tuple[float, str
 
 def _bus_table(path: Path, table: Any) -> BusOptions:
     """[bus] bitrate = 500000, fd = true, data_bitrate = 2000000, and any other python-can bus argument
-    (e.g. PCAN's f_clock_mhz, Vector's app_name), passed to `can.Bus` as given."""
+    (e.g. PCAN's f_clock_mhz, Vector's app_name), passed to `can.Bus` as given. Unknown keys are not refused here,
+    unlike every other table: python-can's drivers read their options from **kwargs, so no signature tells an
+    option from a typo (README, "Real hardware")."""
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: [bus] must be a table")
     cli_only = [k for k in _BUS_CLI_ONLY if k in table]
