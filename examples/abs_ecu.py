@@ -401,7 +401,7 @@ class E2EReceiver:
         return accepted
 
     def timed_out(self, now: float) -> bool:
-        """COM-RX-02: no accepted frame for more than 3 cycles, or never one since power-up."""
+        """COM-RX-02: no applied frame for more than 3 cycles, or never one since power-up."""
         return self.last_accepted_t is None or now - self.last_accepted_t > 3 * self.cycle_s
 
     def check(self, data: bytes) -> str:

@@ -81,12 +81,16 @@ FRAME_SCHEMA: dict[str, Any] = {
             "items": {"type": "integer", "minimum": 0, "maximum": 255},
             "minItems": 8,
             "maxItems": MAX_DATA,
-            "description": "Payload, padded with zeros to 8 bytes",
+            "description": "Payload, padded with zeros to 8 bytes; dlc is the frame's length",
         },
         "channel": {"type": "string", "description": "Bus channel"},
         "direction": {"type": "string", "enum": ["rx", "tx"]},
-        "valid": {"type": "boolean", "description": "False when the bench rejected the frame"},
-        "error": {"type": "string", "description": "Why the frame is invalid; empty when valid"},
+        "valid": {"type": "boolean",
+                  "description": "False when the bench did not apply the frame for a fault of its sender (its "
+                                 "length, its E2E status or state, a value out of range: see error). True also for "
+                                 "a frame not applied for no fault of its sender: the first frame a receiver judges "
+                                 "and one in sequence while the E2E state machine is still INIT (docs/spec/e2e.md)"},
+        "error": {"type": "string", "description": "Why the frame is invalid (status and state); empty when valid"},
         # Written only when true (or set): a classic frame's record stays as it was.
         "is_fd": {"type": "boolean", "description": "CAN FD frame (absent: FD when more than 8 data bytes)"},
         "bitrate_switch": {"type": "boolean", "description": "CAN FD: data phase at the higher bit rate (BRS)"},
