@@ -77,6 +77,11 @@ class StopRequests:
         finally:
             self._finishing -= 1
 
+    def exit_code(self) -> int:
+        """A stopped run's exit code, by the shell's convention for a process a signal ended: 128 + the signal's
+        number (SIGINT 130, SIGTERM 143); 130 when no signal came (a KeyboardInterrupt raised otherwise)."""
+        return 128 + int(self.signum if self.signum is not None else signal.SIGINT)
+
     def keep_drawing(self) -> bool:
         """Whether the report may still draw plots: no stop signal, or one less than DRAW_BUDGET s ago."""
         return self.at is None or time.monotonic() - self.at < DRAW_BUDGET

@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from bench.errors import BenchError, did_you_mean
+from bench.stop import STOP
 
 SUBCOMMANDS = ("run", "plant", "diag", "dbc", "log", "monitor", "replay", "report")
 
@@ -65,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             console.print(f"[bold red]bench {args.command}: error:[/] {escape(problem)}", highlight=False)
         return 2
     except KeyboardInterrupt:
-        return 130
+        return STOP.exit_code()
 
 
 if __name__ == "__main__":

@@ -46,7 +46,8 @@ from bench.transport.busopts import BusOptions
 OUTCOME_STYLE = {"passed": "green", "failed": "bold red", "error": "bold red", "skipped": "yellow",
                  "aborted": "bold magenta", "inconclusive": "bold yellow"}
 #: `bench run`'s exit code when no case failed but one or more were inconclusive (the bench's own timing or a
-#: limit of the bench: bench.errors.Inconclusive); 0: every case passed, 1: a case failed, 2: bad input, 130: aborted.
+#: limit of the bench: bench.errors.Inconclusive); 0: every case passed, 1: a case failed, 2: bad input; stopped by a
+#: signal: 128 + its number (130 SIGINT, 143 SIGTERM: bench.stop.StopRequests.exit_code).
 EXIT_INCONCLUSIVE = 3
 
 
@@ -339,7 +340,7 @@ def run(args: argparse.Namespace) -> int:
                               f"verdict: {escape(step_summary(steps[0]))}{more}", highlight=False)
     console.print(f"report: {out_dir}")
     if result.aborted:
-        return 130
+        return STOP.exit_code()
     if int(code) not in (pytest.ExitCode.OK, pytest.ExitCode.TESTS_FAILED):
         return 1
     return {"PASS": 0, "INCONCLUSIVE": EXIT_INCONCLUSIVE}.get(result.verdict, 1)
