@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 from pathlib import Path
+
+from rich.console import Console
 
 from bench.config import ProjectConfig
 from bench.database.codec import Codebook, load_codebook
@@ -22,6 +25,18 @@ from bench.transport.busopts import BusOptions
 
 BUS_OPTIONS = ("interface", "channel", "bitrate", "fd", "data-bitrate", "config")
 NODE_OPTIONS = ("external", "fault")
+
+
+#: Columns a table printed into a pipe or a file may take: more than any row needs, so the table is whole.
+PIPED_WIDTH = 1000
+
+
+def table_console(stderr: bool = False) -> Console:
+    """A console to print tables on: at a terminal its width (rich narrows the wrappable columns first; the
+    identifier and name columns are no_wrap with a min_width, so they are never cut); into a pipe or a file
+    (`bench dbc > file`, a CI log) wide enough that no table is cut at 80 columns (issue 34: `0…`, `DR…`)."""
+    stream = sys.stderr if stderr else sys.stdout
+    return Console(stderr=stderr, width=None if stream.isatty() else PIPED_WIDTH, highlight=False)
 
 
 def add_bus_options(parser: argparse.ArgumentParser, default_interface: str, channel_help: str = "") -> None:

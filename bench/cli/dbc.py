@@ -24,6 +24,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from bench.cli.common import table_console
 from bench.config import load_config
 from bench.database import check as dbccheck
 from bench.database import overrides as overrides_table
@@ -116,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     listed = _words("bench dbc", words, with_e2e=False)
     files, overrides, message_overrides = _files(listed.files, listed.config or args.config)
     databases = [(path, load_dbc(path)) for path in files]  # raises DatabaseError naming the file
-    console = Console()
+    console = table_console()
     for path, database in databases:
         console.print(message_table(path, database, overrides, values=listed.values or args.values,
                                     message_overrides=message_overrides))
@@ -138,8 +139,10 @@ def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Ma
     """One row per message, sorted by id (= bus priority); `values`: each signal with its range and value
     table; a cycle time from bench.toml's [messages] is marked so."""
     table = Table(title=_title(path, database), title_justify="left", show_lines=True)
-    table.add_column("id", no_wrap=True, justify="right")
-    table.add_column("message", no_wrap=True)
+    messages = list(database.messages)
+    widest_id = max((m.frame_id for m in messages), default=0)
+    table.add_column("id", no_wrap=True, justify="right", min_width=len(f"0x{widest_id:03X}"))
+    table.add_column("message", no_wrap=True, min_width=max((len(m.name) for m in messages), default=7))
     table.add_column("sender", no_wrap=True)
     table.add_column("cycle ms", justify="right", no_wrap=True)
     table.add_column("E2E", no_wrap=True)

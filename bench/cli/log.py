@@ -13,6 +13,7 @@ import can
 from rich.console import Console
 from rich.table import Table
 
+from bench.cli.common import table_console
 from bench.errors import LogError
 from bench.log.canio import frame_to_message
 from bench.log.logread import LoggedFrame, LogSummary, read_frames, run_start, summarise
@@ -53,7 +54,7 @@ def info_handler(args: argparse.Namespace) -> int:
     """Print a run log's summary; a LogError for a missing or non-MCAP file reaches the framework."""
     from bench.report.merge import log_files  # a merged report's index of its shards' logs
 
-    console = Console()
+    console = table_console()
     for path in log_files(args.file):
         show(summarise(path), console)
     return 0

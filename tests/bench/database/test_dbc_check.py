@@ -8,8 +8,12 @@ text for the statement that is wrong (never read back from the checker).
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
+import cantools
 import pytest
 
 from bench.cli import main
@@ -634,3 +638,19 @@ def test_arxml_findings_name_the_message() -> None:
     assert not errors(result, "e2e")
     overlap = [f for f in warnings(result, "e2e") if f.message == "Message1"]
     assert overlap and all(f.signal == "message1_SeqCounter" for f in overlap)
+
+
+def test_listing_into_a_pipe_is_whole() -> None:
+    """Issue 34, the front door: `bench dbc | less` cut the table at 80 columns (`0…`, `DR…`). Into a pipe every
+    identifier, name, sender and cycle time is whole, and nothing is cut."""
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    out = subprocess.run([sys.executable, "-m", "bench", "dbc"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120, env=env).stdout
+    assert "…" not in out
+    rows = {line.split("│")[2].strip(): line for line in out.splitlines() if line.count("│") > 3
+            and line.split("│")[2].strip()}
+    database = cantools.database.load_file(str(CHASSIS_DBC))
+    for message in database.messages:
+        row = rows.get(message.name)
+        assert row is not None, message.name
+        assert f"0x{message.frame_id:03X}" in row and ", ".join(message.senders) in row
