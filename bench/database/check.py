@@ -48,7 +48,7 @@ import cantools
 from cantools.database.can import Database, Message, Signal
 
 from bench.database import overrides
-from bench.database.codec import RANGE_SLACK, carried_range, diagnostic_kind
+from bench.database.codec import RANGE_SLACK, carried_range, diagnostic_kind, field_range
 from bench.e2e import config as e2e_config
 from bench.e2e.profiles import P01_MODES, PROFILES, Field, Protection
 from bench.errors import DatabaseError, did_you_mean
@@ -443,11 +443,10 @@ def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], 
         return
     cycle_hint = overrides.hint(message.name, overrides.CYCLE_TIME, "<ms>")
     if overrides.CYCLE_TIME in supplied:
-        pass
+        pass   # bench.toml gives it: whatever the database says
     elif message.dbc is None:   # ARXML: the cycle time of the frame's timing, no send type attribute
         if message.cycle_time is None or message.cycle_time <= 0:
             add(ERROR, "cycle-time", f"no cyclic timing: the restbus cannot send it periodically; {cycle_hint}")
-        return
     else:
         cycle, explicit = _attribute(message, "GenMsgCycleTime", defaults)
         at = lines.message_attr.get((_dbc_id(message), "GenMsgCycleTime"))
@@ -563,30 +562,30 @@ def _check_signal(message: Message, signal: Signal, lines: _Lines, findings: lis
             if scale == 0 else f"scale {_g(scale)} / offset {_g(offset)} is not a finite number")
         return
     slack = RANGE_SLACK * abs(scale)
+    carried = carried_range(signal)   # the codec's range: the rule of range-raw and of the start value's fallback
     minimum, maximum = signal.minimum, signal.maximum
     if minimum is None or maximum is None:
         add(WARNING, "range", "no range ([0|0]): the monitor cannot judge its values")
     elif minimum > maximum:
         add(ERROR, "range-order", f"range [{_g(minimum)}|{_g(maximum)}]: minimum above maximum")
     elif not signal.is_float:
-        raw_lo, raw_hi = _raw_limits(signal)
-        lo, hi = sorted((raw_lo * scale + offset, raw_hi * scale + offset))
-        tol = slack + 1e-9 * max(1.0, abs(lo), abs(hi))
-        if minimum < lo - tol or maximum > hi + tol:
+        if "narrowed" in carried:
+            lo, hi = field_range(signal)
             kind = "signed" if signal.is_signed else "unsigned"
             add(survivable, "range-raw", f"range [{_g(minimum)}|{_g(maximum)}] is wider than the {signal.length}-bit "
                 f"{kind} raw field can carry at scale {_g(scale)}, offset {_g(offset)}: [{_g(lo)}|{_g(hi)}]"
-                + ("" if strict else f"; the bench judges and accepts [{_g(max(minimum, lo))}|{_g(min(maximum, hi))}]"))
+                + ("" if strict else f"; the bench judges and accepts [{_g(carried['minimum'])}|"
+                                     f"{_g(carried['maximum'])}]"))
         if maximum > minimum and maximum - minimum < abs(scale) * (1 - 1e-9):
             add(WARNING, "resolution", f"range [{_g(minimum)}|{_g(maximum)}] is narrower than one step "
                 f"({_g(scale)})")
-    _check_start_value(message, signal, scale, offset, slack, lines.signal_attr.get(
+    _check_start_value(message, signal, scale, offset, slack, carried, lines.signal_attr.get(
         (dbc_id, signal.name, "GenSigStartValue")), add, survivable)
     _check_value_table(message, signal, lines, add)
 
 
 def _check_start_value(message: Message, signal: Signal, scale: float, offset: float, slack: float,
-                       at: int | None, add: _Add, survivable: str = ERROR) -> None:
+                       carried: Mapping[str, Any], at: int | None, add: _Add, survivable: str = ERROR) -> None:
     """The restbus starts at raw GenSigStartValue (raw 0 when absent); one outside the signal's range starts at the
     nearest end of the range instead (bench.database.codec.MessageCodec.start_values): `survivable` is the
     severity of that (a warning, or an error with --strict). Without a range to fall back to, a raw start value
@@ -600,7 +599,6 @@ def _check_start_value(message: Message, signal: Signal, scale: float, offset: f
     if not isinstance(raw, (int, float)) or not math.isfinite(raw):
         add(ERROR, "start-value", f"{origin} is not a finite number", at)
         return
-    carried = carried_range(signal)
     lo, hi = carried["minimum"], carried["maximum"]
     value = raw * scale + offset
     instead = ""

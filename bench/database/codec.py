@@ -419,18 +419,26 @@ class MessageCodec:
         return out
 
 
+def field_range(signal: Signal) -> tuple[float, float]:
+    """(lowest, highest) physical value an integer signal's raw field carries at its scale and offset."""
+    raw_lo, raw_hi = _raw_limits(signal.length, signal.is_signed)
+    scale, offset = float(signal.scale), float(signal.offset)
+    lo, hi = sorted((raw_lo * scale + offset, raw_hi * scale + offset))
+    return lo, hi
+
+
 def carried_range(signal: Signal) -> dict[str, Any]:
     """The signal's range as the bench judges it: the DBC's, narrowed to what its raw field carries when the DBC
-    declares more (an OEM's database may; `bench dbc check` warns, `--strict` refuses). A value outside the field
-    would not fit the frame: refused when a case or the restbus sets it, never wrapped."""
+    declares more than half a step beyond it (an OEM's database may; `bench dbc check` warns, `--strict` refuses:
+    one rule for both). A value outside the field would not fit the frame: refused when a case or the restbus sets
+    it, never wrapped."""
     minimum = None if signal.minimum is None else float(signal.minimum)
     maximum = None if signal.maximum is None else float(signal.maximum)
     if signal.is_float or minimum is None or maximum is None or not 0 < signal.length <= 64 or signal.scale == 0:
         return {"minimum": minimum, "maximum": maximum}
-    raw_lo, raw_hi = _raw_limits(signal.length, signal.is_signed)
-    lo, hi = sorted((raw_lo * float(signal.scale) + float(signal.offset),
-                     raw_hi * float(signal.scale) + float(signal.offset)))
-    if lo <= minimum and maximum <= hi:
+    lo, hi = field_range(signal)
+    tol = RANGE_SLACK * abs(float(signal.scale)) + 1e-9 * max(1.0, abs(lo), abs(hi))
+    if lo - tol <= minimum and maximum <= hi + tol:
         return {"minimum": minimum, "maximum": maximum}
     kind = "signed" if signal.is_signed else "unsigned"
     return {"minimum": max(minimum, lo), "maximum": min(maximum, hi),
