@@ -52,3 +52,11 @@ def did_you_mean(name: str, known: Iterable[str]) -> str:
     by_key = {k.lstrip("-").lower(): k for k in known}
     close = difflib.get_close_matches(name.lstrip("-").lower(), by_key, n=1, cutoff=0.6)
     return f" (did you mean {by_key[close[0]]}?)" if close else ""
+
+
+def unknown_names(what: str, names: Iterable[str], known: Iterable[str], also: str = "") -> str:
+    """'WHAT: unknown node(s) A (did you mean B?), C (nodes: ...)': one line for names not in `known`, each with the
+    name most likely meant; `also` ends the list of the known ones (e.g. ", or 'all'")."""
+    choices = list(known)
+    named = ", ".join(f"{n}{did_you_mean(n, choices)}" for n in names)
+    return f"{what}: unknown node(s) {named} (nodes: {', '.join(choices)}{also})"

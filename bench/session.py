@@ -20,7 +20,7 @@ from bench.diag.declaration import Declaration, Did, NodeDiagnostics, load_decla
 from bench.diag.declaration import Protocol as DiagnosticProtocol
 from bench.diag.isotp import IsoTpParams
 from bench.diag.server import UdsServer
-from bench.errors import BenchError, ConfigError, InputProblems, did_you_mean
+from bench.errors import BenchError, ConfigError, InputProblems, unknown_names
 from bench.faults.plan import FaultPlan
 from bench.plugins import load_plant
 from bench.sim.clock import Clock, Scheduler, VirtualClock, WallClock
@@ -44,8 +44,7 @@ def resolve_external(codebook: Codebook, stimulus: Sequence[str], external: Sequ
         return set(nodes) - set(stimulus)
     unknown = names - set(nodes)
     if unknown:
-        named = ", ".join(f"{n}{did_you_mean(n, nodes)}" for n in sorted(unknown))
-        raise ConfigError(f"--external: unknown node(s) {named} (nodes: {', '.join(nodes)}, or 'all')")
+        raise ConfigError(unknown_names("--external", sorted(unknown), nodes, also=", or 'all'"))
     return names
 
 

@@ -29,7 +29,7 @@ from bench.cli.common import (
 )
 from bench.config import ProjectConfig, load_config
 from bench.database.codec import load_codebook
-from bench.errors import BenchError, ConfigError, InputProblems, did_you_mean
+from bench.errors import BenchError, ConfigError, InputProblems, did_you_mean, unknown_names
 from bench.faults.plan import validate as validate_faults
 from bench.options import add_cli_options
 from bench.plugins import load_plant
@@ -185,8 +185,7 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
             problems.append(f"{project.path}: [bench] plant: {exc}")
     unknown = [n for n in split_names(args.dut) if n not in codebook.nodes]
     if unknown:
-        named = ", ".join(f"{n}{did_you_mean(n, codebook.nodes)}" for n in unknown)
-        problems.append(f"--dut: unknown node(s) {named} (nodes: {', '.join(codebook.nodes)})")
+        problems.append(unknown_names("--dut", unknown, codebook.nodes))
     before = len(problems)
     check(check_interface, args.interface)
     interface_known = len(problems) == before

@@ -27,7 +27,7 @@ from bench.case import Case
 from bench.checks.steps import step_values
 from bench.config import ProjectConfig, RunSettings, load_config
 from bench.database.codec import load_codebook
-from bench.errors import BenchError, Inconclusive
+from bench.errors import BenchError, Inconclusive, unknown_names
 from bench.faults.plan import parse_fault
 from bench.options import add_pytest_options
 from bench.pytest import shard as shards
@@ -207,7 +207,7 @@ def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config
         _, nodes = _facts(config)
         unknown = [n for n in wanted if n not in nodes]
         if unknown:
-            raise pytest.UsageError(f"--bench-dut: unknown node(s) {', '.join(unknown)} (nodes: {', '.join(nodes)})")
+            raise pytest.UsageError(unknown_names("--bench-dut", unknown, nodes))
         keep = [(item, marks) for item, marks in marked if set(marks.duts) & set(wanted)]
         if len(keep) != len(items):
             kept = {id(i) for i, _ in keep}
