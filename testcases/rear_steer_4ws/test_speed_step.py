@@ -21,7 +21,7 @@ import pytest
 
 from bench.results.model import Series
 from testcases.rear_steer_4ws import oracle
-from testcases.rear_steer_4ws.steps import limit, start
+from testcases.rear_steer_4ws.steps import commanded_axles, limit, start
 
 pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-01", "VCU-4WS-02", "VCU-4WS-03", "PLANT-DYN-03")]
 
@@ -38,7 +38,11 @@ DECEL_MARGIN = 0.02         # PLANT-DYN-03
 
 
 def _axle(bench, source: str, signal: str, since: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, front, rear) of an axle-mean angle history, on the FL frames' times."""
+    """(t, front, rear) of an axle-mean angle history, on the FL frames' times. The VCU's commands: each wheel's
+    frame of the same cycle (`commanded_axles`: one sender, four frames per cycle). The reached angles come from
+    four wheel ECUs, each on a cycle of its own: interpolated to the FL frame's time."""
+    if source == "VCU_WheelCmd":
+        return commanded_axles(bench, since)
     t, fl = bench.history(f"{source}_FL", signal, since)
     series = [np.interp(t, *bench.history(f"{source}_{w}", signal, since)) for w in ("FR", "RL", "RR")]
     return t, 0.5 * (fl + series[0]), 0.5 * (series[1] + series[2])
