@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import e2e
+from bench import canid, e2e
 from bench.case import Case
 from bench.checks.findings import FindingCollector
 from bench.checks.monitor import CheckedFrame, DuplicateSender, Monitor
@@ -67,7 +67,7 @@ class BenchRun:
         self.timing = timing = TimingCollector(project.latency)   # the report's timing section, whole run
 
         def sink(frame: CheckedFrame) -> None:
-            log.frame(frame.t, frame.arbitration_id, frame.data, frame.direction, frame.valid, frame.reason)
+            log.frame(frame.t, frame.frame_id, frame.data, frame.direction, frame.valid, frame.reason)
             timing(frame)
 
         self._project, self._sink = project, sink
@@ -231,7 +231,7 @@ def duplicates_table(monitors: list[Monitor]) -> Table | None:
             found.setdefault(frame_id, finding)
     if not found:
         return None
-    rows = [[f"0x{f.frame_id:03X}", f.message, f.describe(), f"{f.t:.3f}", str(f.frames)]
+    rows = [[canid.text(f.frame_id), f.message, f.describe(), f"{f.t:.3f}", str(f.frames)]
             for _, f in sorted(found.items())]
     return Table("Findings: two senders of one identifier", ["id", "message", "finding", "from [s]", "frames"], rows)
 
@@ -239,7 +239,7 @@ def duplicates_table(monitors: list[Monitor]) -> Table | None:
 def database_table(codebook: Codebook) -> Table:
     """What the run was checked against: every message of the databases with its E2E protection and its comment
     (DBC text: the report escapes it like every other string)."""
-    rows = [[db_name, f"0x{m.frame_id:X}", m.name, ", ".join(m.senders),
+    rows = [[db_name, canid.text(m.frame_id), m.name, ", ".join(m.senders),
              f"{m.cycle_time * 1000:g}" if m.cycle_time else "–",
              m.protection.describe() if m.protection is not None else "unprotected", m.message.comment or ""]
             for db_name, m in sorted(((c.database, c) for c in codebook.by_id.values()), key=lambda x: x[1].frame_id)]

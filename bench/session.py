@@ -12,6 +12,7 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 
+from bench import canid
 from bench.checks.monitor import FrameSink, Monitor
 from bench.checks.timing import SelfTiming
 from bench.config import ProjectConfig, RunSettings
@@ -96,6 +97,14 @@ def resolve_bus_options(project: ProjectConfig, given: BusOptions, codebook: Cod
     """The bus settings of a run: the command line's over bench.toml's [bus] over the databases' (the contract)."""
     options = given.over(project.bus).over(contract_options(codebook.databases))
     options.check()
+    fd = [codec for codec in codebook.by_id.values() if codec.frame_id & canid.FD]
+    if fd and not options.fd:
+        names = ", ".join(f"{c.name} ({c.database})" for c in fd[:3])
+        if len(fd) > 3:
+            names += f" and {len(fd) - 3} more"
+        raise ConfigError(f"CAN FD messages on a bus opened as classical CAN: {names}; open it with CAN FD "
+                          "(fd = true in bench.toml's [bus], or --fd; a DBC says it with BA_ \"BusType\" \"CAN FD\")"
+                          + (" (--no-fd was given)" if given.fd is False else ""))
     return options
 
 

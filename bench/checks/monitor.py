@@ -24,7 +24,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from bench import e2e
+from bench import canid, e2e
+from bench.canid import IDENTITY
 from bench.database.codec import Codebook, DecodeError, MessageCodec
 from bench.diag.isotp import IsoTpFraming, IsoTpParams, IsoTpProblem
 from bench.errors import BenchError, BenchLimit
@@ -52,12 +53,12 @@ class CheckedFrame:
     """A frame as the monitor judged it, handed to its sink (the run's log and timing): one object, its fields
     by name, rather than eight positional arguments every sink had to list in order."""
 
-    __slots__ = ("t", "arbitration_id", "data", "direction", "valid", "reason", "codec", "values")
+    __slots__ = ("t", "frame_id", "data", "direction", "valid", "reason", "codec", "values")
 
-    def __init__(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, reason: str,
+    def __init__(self, t: float, frame_id: int, data: bytes, direction: str, valid: bool, reason: str,
                  codec: MessageCodec | None, values: Mapping[str, float] | None) -> None:
         self.t = t                            # bench time, s
-        self.arbitration_id = arbitration_id
+        self.frame_id = frame_id              # identifier, format and kind (bench.canid)
         self.data = data
         self.direction = direction            # "rx" or "tx"
         self.valid = valid                    # False: rejected (reason says why), never applied
@@ -66,7 +67,7 @@ class CheckedFrame:
         self.values = values                  # decoded values of a valid frame, else None
 
     def __repr__(self) -> str:
-        return (f"CheckedFrame(t={self.t!r}, arbitration_id=0x{self.arbitration_id:X}, data={self.data!r}, "
+        return (f"CheckedFrame(t={self.t!r}, frame_id={canid.text(self.frame_id)}, data={self.data!r}, "
                 f"direction={self.direction!r}, valid={self.valid!r}, reason={self.reason!r})")
 
 
@@ -133,13 +134,13 @@ class DuplicateSender:
     last: float = 0.0         # bench time of the last of them, s
 
     def describe(self) -> str:
-        return f"two senders of 0x{self.frame_id:03X} ({self.message}): {self.evidence}"
+        return f"two senders of {canid.text(self.frame_id)} ({self.message}): {self.evidence}"
 
 
 @dataclass(slots=True)
 class InvalidFrame:
     t: float
-    arbitration_id: int
+    frame_id: int             # identifier, format and kind (bench.canid)
     message: str
     reason: str
 
@@ -172,24 +173,23 @@ class Monitor:
         self.history_from = math.inf
 
     # -- frames ------------------------------------------------------------------------------
-    def on_frame(self, t: float, arbitration_id: int, data: bytes, direction: str,
-                 is_extended: bool = False, is_error: bool = False) -> bool:
-        """Check one frame; apply it only when valid and its E2E state machine is VALID. Returns whether it was
-        applied: a frame that is valid but came while the state machine was only INIT (the first frame after
-        start-up, docs/spec/e2e.md) is logged as valid, counted in `starting`, and not applied. Never raises on bus
-        data."""
+    def on_frame(self, t: float, frame_id: int, data: bytes, direction: str) -> bool:
+        """Check one frame (`frame_id`: its identifier, format and kind, bench.canid); apply it only when valid and
+        its E2E state machine is VALID. Returns whether it was applied: a frame that is valid but came while the
+        state machine was only INIT (the first frame after start-up, docs/spec/e2e.md) is logged as valid, counted
+        in `starting`, and not applied. Never raises on bus data."""
         self.frames += 1
         sink = self.sink
-        state = None if (is_extended or is_error) else self.states.get(arbitration_id)
+        identity = frame_id & IDENTITY
+        state = self.states.get(identity)
         if state is None:
-            if not is_error and arbitration_id in self.diagnostic:
-                return self._diagnostic_frame(t, arbitration_id, data, direction)
+            if identity in self.diagnostic:
+                return self._diagnostic_frame(t, identity, data, direction)
             self.unknown_frames += 1
-            reason = "error frame" if is_error else "unknown identifier"
-            self._invalid(InvalidFrame(t, arbitration_id, "error frame" if is_error else
-                                       f"0x{arbitration_id:X}", reason))
+            name, reason = _unknown(frame_id, self.codebook)
+            self._invalid(InvalidFrame(t, frame_id, name, reason))
             if sink:
-                sink(CheckedFrame(t, arbitration_id, data, direction, False, reason, None, None))
+                sink(CheckedFrame(t, frame_id, data, direction, False, reason, None, None))
             return False
         codec = state.codec
         last_valid = state.last_valid
@@ -212,11 +212,12 @@ class Monitor:
         elif state.last_tx is not None and data not in state.recent_tx and t - state.last_tx <= state.foreign_s:
             # (a copy of one of the station's own recent frames is its echo, e.g. the kernel's broadcast manager
             # handing a message back to the tick scheduler on socketcan: seen in the vcan lane at scenario changes)
-            self._duplicate(state, t, arbitration_id, "frames received while this station sends it")
+            self._duplicate(state, t, frame_id, "frames received while this station sends it")
         kind = reason = ""
         values = None
         starting = False
-        length_ok = len(data) == codec.length
+        size = len(data)
+        length_ok = size == codec.length or size == codec.frame_length
         rx = state.rx
         if rx is not None:
             found = codec.counter_if_intact(data) if length_ok else None
@@ -228,7 +229,7 @@ class Monitor:
                 else:
                     kind, reason = _e2e_rejection(rx, status, found, expected, length_ok)
             if (kind or state.senders is not None) and length_ok and kind not in ("checksum", "length"):
-                self._follow_counters(state, t, arbitration_id, data, kind, prev_seen)
+                self._follow_counters(state, t, frame_id, data, kind, prev_seen)
             state.last_data = data
         if not length_ok:
             kind, reason = "length", f"length {len(data)}, DBC says {codec.length}"
@@ -243,15 +244,15 @@ class Monitor:
         if reason:
             state.invalid[kind] = state.invalid.get(kind, 0) + 1
             state.last_invalid = True
-            self._invalid(InvalidFrame(t, arbitration_id, codec.name, reason))
+            self._invalid(InvalidFrame(t, frame_id, codec.name, reason))
             if sink:
-                sink(CheckedFrame(t, arbitration_id, data, direction, False, reason, codec, None))
+                sink(CheckedFrame(t, frame_id, data, direction, False, reason, codec, None))
             return False
         assert values is not None
         if starting:   # a valid frame (so logged), not applied: the E2E state machine is not VALID yet
             state.starting += 1
             if sink:
-                sink(CheckedFrame(t, arbitration_id, data, direction, True, "", codec, values))
+                sink(CheckedFrame(t, frame_id, data, direction, True, "", codec, values))
             return False
         state.latest = values
         state.last_valid = t
@@ -264,7 +265,7 @@ class Monitor:
             if length > 2 * HISTORY_CAP and length > state.history_limit:
                 self._trim_history(state)
         if sink:
-            sink(CheckedFrame(t, arbitration_id, data, direction, True, "", codec, values))
+            sink(CheckedFrame(t, frame_id, data, direction, True, "", codec, values))
         return True
 
     def _trim_history(self, state: MessageState) -> None:
@@ -306,6 +307,7 @@ class Monitor:
             self._duplicate(state, t, frame_id, f"counters {first} and {second} interleaved")
 
     def _duplicate(self, state: MessageState, t: float, frame_id: int, evidence: str) -> None:
+        frame_id &= IDENTITY
         found = self.duplicates.get(frame_id)
         if found is None:
             self.duplicates[frame_id] = DuplicateSender(frame_id, state.codec.name, t, evidence, 1, t)
@@ -313,11 +315,11 @@ class Monitor:
             found.frames += 1
             found.last = t
 
-    def note_send_failure(self, t: float, arbitration_id: int, reason: str) -> None:
+    def note_send_failure(self, t: float, frame_id: int, reason: str) -> None:
         """A frame this station could not send (queue full, bus-off): logged as invalid, never applied."""
-        state = self.states.get(arbitration_id)
-        name = state.codec.name if state else f"0x{arbitration_id:X}"
-        self._invalid(InvalidFrame(t, arbitration_id, name, f"send failed: {reason}"))
+        state = self.states.get(frame_id & IDENTITY)
+        name = state.codec.name if state else canid.text(frame_id)
+        self._invalid(InvalidFrame(t, frame_id, name, f"send failed: {reason}"))
 
     def watch_framing(self, a_id: int, b_id: int, params: IsoTpParams) -> None:
         """Check the ISO-TP framing of one diagnostic connection (request and response identifiers)."""
@@ -326,24 +328,24 @@ class Monitor:
         self._pair[a_id] = self._pair[b_id] = (a_id, b_id)
         self._connections.append(((a_id, b_id), checker))
 
-    def _diagnostic_frame(self, t: float, arbitration_id: int, data: bytes, direction: str) -> bool:
-        codec = self.diagnostic[arbitration_id]
-        checker = self.framing.get(arbitration_id)
-        problems = checker.on_frame(t, arbitration_id, data) if checker is not None else []
+    def _diagnostic_frame(self, t: float, frame_id: int, data: bytes, direction: str) -> bool:
+        codec = self.diagnostic[frame_id]
+        checker = self.framing.get(frame_id)
+        problems = checker.on_frame(t, frame_id, data) if checker is not None else []
         own = []
         for problem in problems:   # (a timeout this frame revealed may be the other side's: its own record)
-            at_fault = _at_fault(problem, self._pair[arbitration_id], arbitration_id)
-            if at_fault == arbitration_id:
+            at_fault = _at_fault(problem, self._pair[frame_id], frame_id)
+            if at_fault == frame_id:
                 own.append(problem)
             else:
                 self._invalid(InvalidFrame(problem.t, at_fault, self.diagnostic[at_fault].name,
                                            f"ISO-TP {problem.rule}: {problem.text}"))
         reason = "; ".join(f"ISO-TP {p.rule}: {p.text}" for p in own)
         if reason:
-            self._invalid(InvalidFrame(t, arbitration_id, codec.name, reason))
+            self._invalid(InvalidFrame(t, frame_id, codec.name, reason))
         if self.sink:
             # (no codec: a diagnostic frame is in no cycle-time statistics)
-            self.sink(CheckedFrame(t, arbitration_id, data, direction, not reason, reason, None, None))
+            self.sink(CheckedFrame(t, frame_id, data, direction, not reason, reason, None, None))
         return not reason
 
     def _invalid(self, record: InvalidFrame) -> None:
@@ -427,6 +429,21 @@ class Monitor:
         return self.invalid_dropped + len(self.invalid_log)
 
 
+def _unknown(frame_id: int, codebook: Codebook) -> tuple[str, str]:
+    """(name, reason) of a frame no message of the databases is: an error or remote frame, a message's identifier in
+    the other frame format (classical CAN for a CAN FD message or the reverse: the message's own fault), or an
+    identifier the databases do not have."""
+    if frame_id & canid.ERR:
+        return "error frame", "error frame"
+    if frame_id & canid.RTR:
+        return canid.text(frame_id), "remote frame"
+    other = codebook.by_id.get((frame_id ^ canid.FD) & IDENTITY)
+    if other is not None:
+        sent, declared = ("CAN FD", "classical CAN") if frame_id & canid.FD else ("classical CAN", "CAN FD")
+        return other.name, f"frame format: a {sent} frame, the database declares {declared}"
+    return canid.text(frame_id), "unknown identifier"
+
+
 def _e2e_rejection(rx: e2e.Receiver, status: e2e.Status, found: int | None, expected: int,
                    length_ok: bool) -> tuple[str, str]:
     """(kind, reason) of a frame the receiver did not let through: the AUTOSAR check status and the state
@@ -451,8 +468,7 @@ def _at_fault(problem: IsoTpProblem, ids: tuple[int, ...], default: int) -> int:
     frame before a response's N_Cr timeout: recorded as the request's, the ECU's fault was judged the tester's."""
     if problem.rule in ("N_Bs timeout", "N_Cr timeout"):
         for frame_id in ids:
-            shown = f"0x{frame_id:08X}" if frame_id > 0x7FF else f"0x{frame_id:03X}"
-            if f" on {shown} within N_" in problem.text:
+            if f" on {canid.text(frame_id)} within N_" in problem.text:
                 return frame_id
     return default
 

@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from bench import canid
 from bench.config import LatencyPair
 from bench.database.codec import Codebook, MessageCodec
 from bench.errors import BenchError
@@ -248,9 +249,9 @@ class TimingCollector:
         if codec is None:
             return                                           # unknown identifiers and error frames
         t = frame.t
-        acc = self.cycles.get(frame.arbitration_id)
+        acc = self.cycles.get(codec.frame_id)
         if acc is None:
-            acc = self.cycles[frame.arbitration_id] = CycleAccumulator(codec)
+            acc = self.cycles[codec.frame_id] = CycleAccumulator(codec)
         acc.add(t)
         values = frame.values
         if values is None:
@@ -332,7 +333,7 @@ def cycle_table(stats: Sequence[CycleStats]) -> Table:
         deviation = "–" if s.cycle is None or not s.intervals else f"{(s.p50 - s.cycle) / s.cycle * 100:+.1f}"
         verdict = {None: "–" if s.intervals else "no frames", True: "yes", False: "NO"}[s.within_limits]
         gaps = "–" if s.cycle is None else str(s.gaps)
-        rows.append([s.message, f"0x{s.frame_id:X}", cycle, str(s.intervals), _ms(s.p50), _ms(s.p99), _ms(s.max),
+        rows.append([s.message, canid.text(s.frame_id), cycle, str(s.intervals), _ms(s.p50), _ms(s.p99), _ms(s.max),
                      deviation, gaps, verdict])
     return Table(
         f"Timing: cycle time per message over the whole run (gaps: intervals ≥ {MAX_MAX:g}× the DBC cycle, the "

@@ -24,6 +24,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from bench import canid
 from bench.cli.common import table_console
 from bench.config import load_config
 from bench.database import check as dbccheck
@@ -141,7 +142,7 @@ def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Ma
     table = Table(title=_title(path, database), title_justify="left", show_lines=True)
     messages = list(database.messages)
     widest_id = max((m.frame_id for m in messages), default=0)
-    table.add_column("id", no_wrap=True, justify="right", min_width=len(f"0x{widest_id:03X}"))
+    table.add_column("id", no_wrap=True, justify="right", min_width=len(canid.text(widest_id)))
     table.add_column("message", no_wrap=True, min_width=max((len(m.name) for m in messages), default=7))
     table.add_column("sender", no_wrap=True)
     table.add_column("cycle ms", justify="right", no_wrap=True)
@@ -151,7 +152,7 @@ def message_table(path: Path, database: Database, e2e_overrides: Mapping[str, Ma
     overrides = e2e_overrides or {}
     for message in sorted(database.messages, key=lambda m: m.frame_id):
         table.add_row(
-            Text(f"0x{message.frame_id:03X}"),
+            Text(canid.text(message.frame_id)),
             Text(message.name),
             Text(", ".join(message.senders) or "-"),
             Text(_cycle(message, message_overrides)),

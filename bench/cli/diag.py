@@ -24,6 +24,7 @@ from udsoncan.exceptions import (
 )
 from udsoncan.services.ReadDTCInformation import ReadDTCInformation
 
+from bench import canid
 from bench.cli.common import add_bus_options, add_node_options, given_bus_options
 from bench.config import RunSettings, load_config
 from bench.diag.declaration import Did, NodeDiagnostics, dtc_code, dtc_number
@@ -122,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             _act(console, client, node, args, mask)
         except TimeoutException as exc:
-            raise BenchError(f"{node.node} (request 0x{node.request:03X}, response 0x{node.response:03X}) did not "
+            raise BenchError(f"{node.node} (request {canid.text(node.request)}, response "
+                             f"{canid.text(node.response)}) did not "
                              f"answer: {exc}") from None
         except NegativeResponseException as exc:
             code = exc.response.code

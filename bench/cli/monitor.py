@@ -28,6 +28,8 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from bench import canid
+from bench.canid import IDENTITY
 from bench.checks.monitor import TIMEOUT_CYCLES, MessageState, Monitor
 from bench.cli.common import add_bus_options, bus_options_for, reject_in_process
 from bench.config import load_config
@@ -144,10 +146,10 @@ class LiveMonitor:
 
     def feed(self, host: float, msg: can.Message) -> None:
         t = self.time.stamp(msg.timestamp, host)
-        ok = self.monitor.on_frame(t, msg.arbitration_id, bytes(msg.data), "rx" if msg.is_rx else "tx",
-                                   msg.is_extended_id, msg.is_error_frame)
-        if not ok and (msg.is_extended_id or msg.is_error_frame or msg.arbitration_id not in self.monitor.states):
-            self.unknown["error frame" if msg.is_error_frame else _id_text(msg.arbitration_id, msg.is_extended_id)] += 1
+        frame_id = canid.of_message(msg)
+        ok = self.monitor.on_frame(t, frame_id, bytes(msg.data), "rx" if msg.is_rx else "tx")
+        if not ok and frame_id & IDENTITY not in self.monitor.states:
+            self.unknown["error frame" if msg.is_error_frame else canid.text(frame_id)] += 1
 
     def tick(self, host: float) -> float:
         """Timeouts up to now (the monitor keeps its own lists bounded). Returns now on the frames' time base."""
@@ -181,10 +183,6 @@ def window_stats(state: MessageState, now: float, window: float) -> tuple[float,
 
 
 # -- drawing ---------------------------------------------------------------------------------------------
-def _id_text(frame_id: int, extended: bool = False) -> str:
-    return f"0x{frame_id:08X}" if extended else f"0x{frame_id:03X}"
-
-
 def values_text(codec: MessageCodec, values: dict[str, float] | None) -> str:
     if values is None:
         return "–"
@@ -250,7 +248,7 @@ def render(live: LiveMonitor, now: float, source: str, elapsed: float) -> Group:
         if cycle and math.isfinite(rate) and abs(rate * cycle - 1.0) > RATE_WARN:
             rate_style = "bold yellow"
         table.add_row(
-            _id_text(frame_id), codec.name, ",".join(codec.senders), str(state.frames),
+            canid.text(frame_id), codec.name, ",".join(codec.senders), str(state.frames),
             Text(_number(rate), style=rate_style), _number(1.0 / cycle) if cycle else "–",
             _number(p50 * 1000, 2), _number(worst * 1000, 2), f"{cycle * 1000:g}" if cycle else "–",
             e2e_text(state), timeout_text(state, monitor, now), values_text(codec, state.latest))

@@ -13,6 +13,8 @@ from pathlib import Path
 
 from rich.console import Console
 
+from bench import canid
+from bench.canid import IDENTITY
 from bench.checks.monitor import Monitor
 from bench.cli.common import add_bus_options, add_node_options, given_bus_options, reject_in_process
 from bench.config import RunSettings, load_config
@@ -46,9 +48,9 @@ def _report_invalid(console: Console, monitor: Monitor, shown: int) -> int:
     if new > 0:
         records = monitor.invalid_log[-new:]
         # a message with two senders is said once (_report_duplicates), not with its counter errors
-        own = [r for r in records if r.arbitration_id not in monitor.duplicates]
+        own = [r for r in records if r.frame_id & IDENTITY not in monitor.duplicates]
         for record in own[:INVALID_SHOWN]:
-            console.print(f"  invalid at t={record.t:.3f} s: {record.message} (0x{record.arbitration_id:X}): "
+            console.print(f"  invalid at t={record.t:.3f} s: {record.message} ({canid.text(record.frame_id)}): "
                           f"{record.reason}", highlight=False, markup=False)
         if len(own) > INVALID_SHOWN:
             console.print(f"  ... and {len(own) - INVALID_SHOWN} more", highlight=False)

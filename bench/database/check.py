@@ -47,6 +47,7 @@ from typing import Any
 import cantools
 from cantools.database.can import Database, Message, Signal
 
+from bench import canid
 from bench.database import overrides
 from bench.database.codec import RANGE_SLACK, carried_range, diagnostic_kind, field_range
 from bench.e2e import config as e2e_config
@@ -57,6 +58,7 @@ ERROR, WARNING = "error", "warning"
 OPTIONAL, REQUIRED = "optional", "required"
 E2E_MODES = (OPTIONAL, REQUIRED)     # --e2e: may a message go without a declared profile?
 FRAME_LENGTH = 8                     # docs/spec/k-matrix.md: classical CAN, 8-byte frames
+FD_FRAME_LENGTH = canid.FD_LENGTHS[-1]   # ISO 11898-1: a CAN FD frame's longest data field
 ARXML_SUFFIX = ".arxml"
 #: The E2E attribute names the bench reads (`E2E_` + AUTOSAR's parameter name).
 E2E_ATTRIBUTES = tuple(e2e_config.PREFIX + name for name in e2e_config.PARAMETERS)
@@ -251,7 +253,8 @@ class _Lines:
 
 
 def _dbc_id(message: Message) -> int:
-    return message.frame_id | (0x80000000 if message.is_extended_frame else 0)
+    """The number of its BO_ line: a 29-bit identifier with bit 31 set, as SocketCAN writes it (bench.canid)."""
+    return canid.of(message.frame_id, message.is_extended_frame)
 
 
 # -- the check ---------------------------------------------------------------------------------------
@@ -387,7 +390,7 @@ def _check_duplicates(messages: list[Message], lines: _Lines, findings: list[Fin
     for message in messages:
         key = (message.frame_id, message.is_extended_frame)
         if key in seen_id:
-            findings.append(Finding(ERROR, "duplicate-id", f"identifier 0x{message.frame_id:X} is also "
+            findings.append(Finding(ERROR, "duplicate-id", f"identifier {canid.text(_dbc_id(message))} is also "
                                     f"message {seen_id[key]}", lines.of_message(message), message.name))
         seen_id.setdefault(key, message.name)
         if message.name in seen_name:
@@ -406,12 +409,17 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
     def add(severity: str, kind: str, text: str, at: int | None = None) -> None:
         findings.append(Finding(severity, kind, text, at or line, name))
 
-    if message.is_extended_frame:
-        add(ERROR, "frame-id", f"extended (29-bit) identifier 0x{message.frame_id:X}: the bench sends and "
-            "monitors 11-bit identifiers only")
-    if message.length > FRAME_LENGTH:
-        add(ERROR, "frame-length", f"length {message.length} bytes: the bench sends classical CAN frames of at "
-            f"most {FRAME_LENGTH} bytes")
+    if message.is_fd:
+        if message.length > FD_FRAME_LENGTH:
+            add(ERROR, "frame-length", f"length {message.length} bytes: a CAN FD frame carries at most "
+                f"{FD_FRAME_LENGTH}")
+        elif message.length not in canid.FD_LENGTHS:
+            add(WARNING, "frame-length", f"length {message.length} bytes is no CAN FD frame length: its frames go "
+                f"out as {canid.fd_length(message.length)} bytes on SocketCAN (the kernel pads)")
+    elif message.length > FRAME_LENGTH:
+        add(ERROR, "frame-length", f"length {message.length} bytes in a classical CAN frame (at most "
+            f"{FRAME_LENGTH}): declare it CAN FD in the database (a DBC: VFrameFormat StandardCAN_FD or "
+            "ExtendedCAN_FD)")
     elif message.length != FRAME_LENGTH:
         add(WARNING, "frame-length", f"length {message.length} byte{'s' * (message.length != 1)}: the contract's "
             f"frames are {FRAME_LENGTH} bytes (docs/spec/k-matrix.md); the bench sends and judges it at its length")
@@ -731,7 +739,7 @@ def _not_exactly(signal: Signal, place: Field) -> list[str]:
 
 def protection_line(result: CheckResult, entry: MessageProtection) -> str:
     """What the bench will apply to one message, e.g. `x.dbc: Brake_Status 0x100: P11 DataID 0x0100 BOTH, ...`."""
-    return f"{result.path}: {entry.name} 0x{entry.frame_id:03X}: {entry.describe()}"
+    return f"{result.path}: {entry.name} {canid.text(entry.frame_id)}: {entry.describe()}"
 
 
 def summary_line(result: CheckResult) -> str:

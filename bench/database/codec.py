@@ -30,7 +30,7 @@ import cantools
 from cantools.database import errors as cantools_errors
 from cantools.database.can import Database, Message, Signal
 
-from bench import e2e
+from bench import canid, e2e
 from bench.database import overrides
 from bench.errors import DatabaseError, SignalError, did_you_mean
 
@@ -104,6 +104,23 @@ class SignalCodec:
 DIAGNOSTIC_ATTRIBUTES = {"DiagRequest": "request", "DiagResponse": "response", "DiagState": "response"}
 
 
+def bitrate_switch(message: Message, definitions: Mapping[str, Any] | None = None) -> bool:
+    """Whether a CAN FD message's data phase switches to the data bit rate: Vector's `CANFD_BRS` message attribute,
+    else the database's default for it (`definitions`), else 1 (CANdb++'s default); False for a classical frame."""
+    if not message.is_fd:
+        return False
+    attributes = message.dbc.attributes if message.dbc is not None else {}
+    attribute = attributes.get("CANFD_BRS")
+    value: Any = attribute.value if attribute is not None else getattr((definitions or {}).get("CANFD_BRS"),
+                                                                        "default_value", None)
+    if value is None:
+        return True
+    choices = getattr(getattr(attribute, "definition", None), "choices", None)
+    if isinstance(value, int) and choices and 0 <= value < len(choices):
+        value = choices[value]
+    return str(value).strip().strip('"') in ("1", "Yes", "yes", "True", "true")
+
+
 def diagnostic_kind(message: Message) -> str:
     """"request" or "response" for a diagnostic message (ISO-TP traffic, no cycle time, no E2E), else "".
     A DBC marks it with Vector's `DiagRequest` / `DiagResponse` / `DiagState` attribute set to Yes."""
@@ -119,13 +136,20 @@ class MessageCodec:
     """Encode and decode one message; E2E bytes are left to `bench.e2e`."""
 
     def __init__(self, message: Message, database_name: str, protection: e2e.Protection | None = None,
-                 cycle_time_ms: float | None = None) -> None:
-        """`cycle_time_ms`: bench.toml's [messages.NAME] cycle time over the database's (bench.database.overrides)."""
+                 cycle_time_ms: float | None = None, definitions: Mapping[str, Any] | None = None) -> None:
+        """`cycle_time_ms`: bench.toml's [messages.NAME] cycle time over the database's (bench.database.overrides);
+        `definitions`: the database's attribute definitions (defaults of the attributes a message does not set)."""
         self.message = message
         self.database = database_name
         self.name: str = message.name
-        self.frame_id: int = message.frame_id
+        #: its identifier, format and CAN FD or not in one int (bench.canid): what the bench looks it up by
+        self.frame_id: int = canid.of(message.frame_id, message.is_extended_frame, is_fd=message.is_fd)
+        #: the frame_id of its frames on the bus: with the bit rate switch where the database asks for it
+        self.send_id: int = self.frame_id | (canid.BRS if bitrate_switch(message, definitions) else 0)
         self.length: int = message.length
+        #: the bytes its frames carry on the bus: a CAN FD frame between two DLC lengths is padded to the next
+        self.frame_length: int = (canid.fd_length(message.length) if message.is_fd and message.length <= 64
+                                  else message.length)
         self.senders: tuple[str, ...] = tuple(message.senders)
         cycle_ms = message.cycle_time if cycle_time_ms is None else cycle_time_ms
         self.cycle_time: float | None = cycle_ms / 1000.0 if cycle_ms else None
@@ -470,7 +494,8 @@ def _float_exact(signal: Signal) -> bool:
 
 
 class Codebook:
-    """Every message of the loaded databases, by identifier and by name."""
+    """Every message of the loaded databases, by frame_id (a received frame's `frame_id & bench.canid.IDENTITY`) and
+    by name."""
 
     def __init__(self, databases: Iterable[tuple[str, Database]],
                  e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None,
@@ -497,12 +522,12 @@ class Codebook:
                     over = f" (with bench.toml [e2e.{message.name}])" if message.name in protections else ""
                     raise DatabaseError(f"{db_name}{over}: {exc}") from None
                 cycle_ms = overrides.cycle_time_ms(message_overrides, message.name)
-                codec = MessageCodec(message, db_name, protection, cycle_ms)
+                codec = MessageCodec(message, db_name, protection, cycle_ms, definitions)
                 other = self.by_id.get(codec.frame_id) or self.by_name.get(codec.name)
                 if other is not None:
                     raise DatabaseError(
-                        f"{db_name}: message {codec.name} (0x{codec.frame_id:X}) clashes with "
-                        f"{other.name} (0x{other.frame_id:X}) of {other.database}")
+                        f"{db_name}: message {codec.name} ({canid.text(codec.frame_id)}) clashes with "
+                        f"{other.name} ({canid.text(other.frame_id)}) of {other.database}")
                 self.by_id[codec.frame_id] = codec
                 self.by_name[codec.name] = codec
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from bench import canid
 from bench.errors import ConfigError, did_you_mean
 
 if TYPE_CHECKING:
@@ -209,10 +210,10 @@ class Declaration:
             for key, frame_id, kind in (("request", node.request, "request"), ("response", node.response, "response")):
                 codec = codebook.by_id.get(frame_id)
                 if codec is None:
-                    found.append(f"{where} {key}: 0x{frame_id:03X} is no message of the databases (declare it "
+                    found.append(f"{where} {key}: {canid.text(frame_id)} is no message of the databases (declare it "
                                  f"with the attribute Diag{kind.title()} = Yes)")
                 elif codec.diagnostic != kind:
-                    found.append(f"{where} {key}: 0x{frame_id:03X} is {codec.name}, not a diagnostic {kind} "
+                    found.append(f"{where} {key}: {canid.text(frame_id)} is {codec.name}, not a diagnostic {kind} "
                                  f"(its database's attribute Diag{kind.title()} is not Yes)")
             for did in node.dids:
                 for key, name in (("signal", did.signal), ("input", did.input)):
@@ -224,8 +225,8 @@ class Declaration:
         functional = self.protocol.functional_request
         codec = codebook.by_id.get(functional)
         if codec is None or codec.diagnostic != "request":
-            found.append(f"{self.path}: [protocol] functional_request: 0x{functional:03X} is no diagnostic request "
-                         f"message of the databases")
+            found.append(f"{self.path}: [protocol] functional_request: {canid.text(functional)} is no diagnostic "
+                         f"request message of the databases")
         return found
 
     def diagnostic_ids(self) -> frozenset[int]:
@@ -340,9 +341,15 @@ def _node(path: Path, name: str, table: Mapping[str, Any], common: list[Did]) ->
     for t in r.tables("routine"):
         d = _Reader(path, f"[[nodes.{name}.routine]]", t)
         routines.append(Routine(d.integer("id", high=0xFFFF), d.text("name"), d.number("duration_ms", low=0) / 1e3))
-    return NodeDiagnostics(name, r.integer("request", high=0x1FFFFFFF), r.integer("response", high=0x1FFFFFFF),
+    return NodeDiagnostics(name, _frame_id(r.integer("request", high=0x1FFFFFFF)),
+                           _frame_id(r.integer("response", high=0x1FFFFFFF)),
                            r.integer("security_constant", high=0xFFFFFFFF), tuple(dids), dict(identification),
                            tuple(snapshot), tuple(dtcs), tuple(routines))
+
+
+def _frame_id(identifier: int) -> int:
+    """A declared identifier as the bench's frame_id (bench.canid): one above 0x7FF is a 29-bit one."""
+    return canid.of(identifier, identifier > canid.SFF_MASK)
 
 
 def load_declaration(path: Path) -> Declaration:
@@ -356,7 +363,7 @@ def load_declaration(path: Path) -> Declaration:
     r = _Reader(path, "[protocol]", data.get("protocol", {}))
     ms = 1000.0
     protocol = Protocol(
-        r.integer("functional_request", 0x7DF, high=0x1FFFFFFF), r.integer("padding", 0xCC, high=0xFF),
+        _frame_id(r.integer("functional_request", 0x7DF, high=0x1FFFFFFF)), r.integer("padding", 0xCC, high=0xFF),
         r.number("p2_ms", 50, low=1) / ms, r.number("p2_star_ms", 2000, low=1) / ms,
         r.number("s3_ms", 5000, low=1) / ms,
         r.integer("block_size", 0, high=255), r.number("stmin_ms", 0, low=0, high=127) / ms,
@@ -374,6 +381,6 @@ def load_declaration(path: Path) -> Declaration:
     for node in nodes.values():
         for key, frame_id in (("request", node.request), ("response", node.response)):
             if frame_id in used:
-                raise ConfigError(f"{path}: [nodes.{node.node}] {key}: 0x{frame_id:03X} is also {used[frame_id]}")
+                raise ConfigError(f"{path}: [nodes.{node.node}] {key}: {canid.text(frame_id)} is also {used[frame_id]}")
             used[frame_id] = f"[nodes.{node.node}] {key}"
     return Declaration(path, protocol, nodes)

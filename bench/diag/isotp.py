@@ -17,6 +17,8 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from bench import canid
+
 #: every `IsoTpProblem.rule` this module gives
 RULES = (
     "length",                        # a frame shorter (or longer) than its PCI says, or a length ISO forbids
@@ -100,13 +102,9 @@ def _decode_stmin(raw: int) -> float:
     return _RESERVED_STMIN
 
 
-def _hex_id(frame_id: int) -> str:
-    return f"0x{frame_id:08X}" if frame_id > 0x7FF else f"0x{frame_id:03X}"
-
-
 def _show(frame_id: int, data: bytes) -> str:
     """A frame as the problems name it: '0x7E8 [21 AA BB]'."""
-    return f"{_hex_id(frame_id)} [{data.hex(' ').upper()}]"
+    return f"{canid.text(frame_id)} [{data.hex(' ').upper()}]"
 
 
 def _ff_length(data: bytes) -> tuple[int, int]:
@@ -224,11 +222,11 @@ class IsoTpEndpoint:
         self._expire(t)
         payload = bytes(payload)
         if self._tx is not None:
-            raise ValueError(f"ISO-TP {_hex_id(self.tx_id)}: cannot transmit {len(payload)} bytes while a "
+            raise ValueError(f"ISO-TP {canid.text(self.tx_id)}: cannot transmit {len(payload)} bytes while a "
                              f"{len(self._tx.payload)}-byte message is still being sent ({self._tx.pos} bytes "
                              f"out); wait until busy is False or reset()")
         if not 1 <= len(payload) <= self.params.max_length:
-            raise ValueError(f"ISO-TP {_hex_id(self.tx_id)}: a payload of {len(payload)} bytes is not "
+            raise ValueError(f"ISO-TP {canid.text(self.tx_id)}: a payload of {len(payload)} bytes is not "
                              f"1-{self.params.max_length}")
         self._tx_dropped = False
         if len(payload) <= 7:
@@ -366,7 +364,7 @@ class IsoTpEndpoint:
         tx, rx = self._tx, self._rx
         if tx is not None and tx.waiting and t > tx.deadline:
             self._drop_tx(tx.deadline, "N_Bs timeout", f"{_show(self.tx_id, tx.last)} got no flow control on "
-                          f"{_hex_id(self.rx_id)} within N_Bs {self.params.n_bs:g} s; the message is dropped")
+                          f"{canid.text(self.rx_id)} within N_Bs {self.params.n_bs:g} s; the message is dropped")
         if rx is not None and t > rx.deadline:
             self._drop_rx(rx.deadline, "N_Cr timeout", f"{_show(self.rx_id, rx.last)} was followed by no CF "
                           f"within N_Cr {self.params.n_cr:g} s; the message ({len(rx.buffer)} of {rx.length} "
@@ -454,10 +452,10 @@ class IsoTpFraming:
             frame = _show(*tr.last)
             if tr.phase == _AWAIT_FC:
                 self._drop(tr, problems, tr.deadline, "N_Bs timeout", f"{frame} got no flow control on "
-                           f"{_hex_id(tr.fc_id)} within N_Bs {self.params.n_bs:g} s")
+                           f"{canid.text(tr.fc_id)} within N_Bs {self.params.n_bs:g} s")
             else:
                 self._drop(tr, problems, tr.deadline, "N_Cr timeout", f"{frame} was followed by no CF on "
-                           f"{_hex_id(tr.data_id)} within N_Cr {self.params.n_cr:g} s")
+                           f"{canid.text(tr.data_id)} within N_Cr {self.params.n_cr:g} s")
         return problems
 
     def _data(self, t: float, tr: _Transfer, kind: int, data: bytes, problems: list[IsoTpProblem]) -> None:
@@ -512,7 +510,7 @@ class IsoTpFraming:
         frame = _show(tr.fc_id, data)
         if tr.phase != _AWAIT_FC:
             if not tr.dropped:
-                why = f"with no FF on {_hex_id(tr.data_id)} before it" if tr.phase == _IDLE else \
+                why = f"with no FF on {canid.text(tr.data_id)} before it" if tr.phase == _IDLE else \
                     "while consecutive frames were due"
                 problems.append(IsoTpProblem(t, "unexpected flow control", f"{frame} is an FC {why}"))
             return
@@ -531,7 +529,7 @@ class IsoTpFraming:
                 tr.deadline = t + self.params.n_bs
         elif status == _OVFLW:
             self._drop(tr, problems, t, "flow control overflow", f"{frame} is FC OVFLW: the receiver refused the "
-                       f"{tr.length}-byte message on {_hex_id(tr.data_id)}")
+                       f"{tr.length}-byte message on {canid.text(tr.data_id)}")
             tr.dropped = False     # nothing more is due; a CF after it is the sender's own fault
         else:
             self._drop(tr, problems, t, "flow status", f"{frame} is an FC with the reserved flow status {status}")

@@ -27,6 +27,7 @@ from udsoncan.Request import Request
 from udsoncan.Response import Response
 from udsoncan.typing import ClientConfig
 
+from bench import canid
 from bench.diag.declaration import Declaration, Did, NodeDiagnostics
 from bench.diag.describe import describe
 from bench.diag.isotp import IsoTpEndpoint, IsoTpParams
@@ -315,6 +316,6 @@ def open_client(bench: Bench, port: TesterPort, declaration: Declaration, node_n
     })
     client = BenchClient(connection, config=cast(ClientConfig, config))
     client.node, client.external = node_name, external
-    client.response_name = response_name or f"response 0x{node.response:03X}"
+    client.response_name = response_name or f"response {canid.text(node.response)}"
     client.open()
     return client

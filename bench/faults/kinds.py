@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
+from bench import canid
 from bench.database.codec import Codebook, MessageCodec
 from bench.e2e import Protection
 from bench.errors import did_you_mean
@@ -73,9 +74,10 @@ class FaultKind:
             return f"unknown node {target!r}{did_you_mean(target, codebook.nodes)} (nodes: {', '.join(codebook.nodes)})"
         if self.target == IDENTIFIER:
             try:
-                int(target, 0)
+                canid.parse(target)
             except ValueError:
-                return "TARGET must be an identifier like 0x000"
+                return ("TARGET must be an identifier like 0x000 (11-bit) or 0x18FEF100 (29-bit: above 0x7FF or "
+                        "eight hex digits)")
         return None
 
     def check_reach(self, target: str, codebook: Codebook, simulated: frozenset[str]) -> str | None:
@@ -99,8 +101,8 @@ class FaultKind:
     def act(self, fault: Fault, out: Outgoing) -> None:
         """Change the outgoing frames (only called when `applies`)."""
 
-    def babble(self, fault: Fault, dt: float) -> list[tuple[int, bytes, bool]]:
-        """Frames the fault itself puts on the bus in a tick of `dt` s: (id, data, is_error)."""
+    def babble(self, fault: Fault, dt: float) -> list[tuple[int, bytes]]:
+        """Frames the fault itself puts on the bus in a tick of `dt` s: (frame_id, data), bench.canid."""
         return []
 
     def spec(self) -> str:
@@ -267,14 +269,14 @@ class Flood(FaultKind):
 
     def applies(self, fault: Fault, frame_id: int, codec: MessageCodec) -> bool:
         # No arbitration on the virtual-time bus: a saturating flood wins against every lower priority.
-        return fault.param >= FLOOD_SATURATION and frame_id > int(fault.target, 0)
+        return fault.param >= FLOOD_SATURATION and canid.priority(frame_id) > canid.priority(canid.parse(fault.target))
 
     def act(self, fault: Fault, out: Outgoing) -> None:
         out.dropped = True
 
-    def babble(self, fault: Fault, dt: float) -> list[tuple[int, bytes, bool]]:
+    def babble(self, fault: Fault, dt: float) -> list[tuple[int, bytes]]:
         count = max(1, round(fault.param * dt * 1000.0))
-        frame = (int(fault.target, 0), bytes(8), False)
+        frame = (canid.parse(fault.target), bytes(8))
         return [frame] * count
 
 
@@ -284,8 +286,8 @@ class ErrorFrame(FaultKind):
     def applies(self, fault: Fault, frame_id: int, codec: MessageCodec) -> bool:
         return False
 
-    def babble(self, fault: Fault, dt: float) -> list[tuple[int, bytes, bool]]:
-        return [(0, b"", True)]
+    def babble(self, fault: Fault, dt: float) -> list[tuple[int, bytes]]:
+        return [(canid.ERR, b"")]
 
 
 def _table(*kinds: FaultKind) -> Mapping[str, FaultKind]:

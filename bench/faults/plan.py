@@ -20,6 +20,7 @@ import random
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+from bench.canid import IDENTITY
 from bench.database.codec import Codebook
 from bench.errors import ConfigError
 from bench.faults.kinds import KINDS, MESSAGE, Outgoing, kinds_with_target
@@ -203,9 +204,9 @@ class FaultPlan:
         return bool(self.faults or self.templates)
 
     # -- applied by stations ----------------------------------------------------------------------
-    def babble(self, t: float, dt: float) -> list[tuple[int, bytes, bool]]:
-        """Frames the babbling node and error-frame faults put on the bus this tick: (id, data, is_error)."""
-        out: list[tuple[int, bytes, bool]] = []
+    def babble(self, t: float, dt: float) -> list[tuple[int, bytes]]:
+        """Frames the babbling node and error-frame faults put on the bus this tick: (frame_id, data), bench.canid."""
+        out: list[tuple[int, bytes]] = []
         for fault in self.faults:
             if fault.active(t):
                 frames = KINDS[fault.kind].babble(fault, dt)
@@ -216,7 +217,7 @@ class FaultPlan:
 
     def apply(self, t: float, frame_id: int, data: bytes) -> list[tuple[float, bytes]]:
         """The frames that go on the bus instead of `data`, each with its delay (0: now), s."""
-        codec = self.codebook.by_id.get(frame_id)
+        codec = self.codebook.by_id.get(frame_id & IDENTITY)
         if codec is None:
             return [(0.0, data)]
         out: Outgoing | None = None

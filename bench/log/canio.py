@@ -31,6 +31,7 @@ from typing import Any, BinaryIO, TypedDict
 import can
 from can.io.generic import BinaryIOMessageReader, BinaryIOMessageWriter
 
+from bench import canid
 from bench.checks.monitor import CheckedFrame, Monitor
 from bench.database.codec import load_codebook
 from bench.errors import LogError
@@ -130,12 +131,13 @@ class MCAPWriter(BinaryIOMessageWriter):
             self.recorder.frame(t, msg.arbitration_id, data, direction=direction, **extra)
             return
         self._extra = extra
-        self.monitor.on_frame(t, msg.arbitration_id, data, direction, msg.is_extended_id, msg.is_error_frame)
+        self.monitor.on_frame(t, canid.of_message(msg), data, direction)
 
     def _sink(self, frame: CheckedFrame) -> None:
         if self._extra is None:   # the monitor calls back only from on_frame, which sets the keywords first
             raise RuntimeError("MCAPWriter: a frame from the monitor before any was received")
-        self.recorder.frame(frame.t, frame.arbitration_id, frame.data, direction=frame.direction, valid=frame.valid,
+        self.recorder.frame(frame.t, canid.arbitration_id(frame.frame_id), frame.data, direction=frame.direction,
+                            valid=frame.valid,
                             error=frame.reason, **self._extra)
         if frame.values is not None and frame.codec is not None:
             self.recorder.decoded(frame.t, frame.codec.name, frame.values)

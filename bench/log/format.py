@@ -22,6 +22,8 @@ from typing import Any
 
 import cantools
 
+from bench import canid
+
 FRAMES_TOPIC = "/can/frames"
 CLOCK_METADATA = "bench.clock"   # origin_ns: the log time of bench time 0
 BENCH_METADATA = "bench"         # profile, host, python, bench version, attachments, compression
@@ -153,9 +155,10 @@ def message_schema(message: cantools.database.can.Message) -> dict[str, Any]:
             parts.append("choices: " + ", ".join(f"{value} = {name}" for value, name in signal.choices.items()))
         properties[signal.name] = {"type": "number", "description": " ".join(parts)}
     about = f"{message.comment}; " if message.comment else ""
+    ident = canid.text(canid.of(message.frame_id, message.is_extended_frame))
     return {
         "title": message.name,
-        "description": f"{about}CAN id 0x{message.frame_id:X}, decoded by the bench; null marks a non-finite value",
+        "description": f"{about}CAN id {ident}, decoded by the bench; null marks a non-finite value",
         "type": "object",
         "properties": properties,
     }

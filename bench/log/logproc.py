@@ -78,9 +78,9 @@ class LogProcess:
         self._closed = False
         self.path = path
 
-    def frame(self, t: float, arbitration_id: int, data: bytes, direction: str, valid: bool, error: str) -> None:
+    def frame(self, t: float, frame_id: int, data: bytes, direction: str, valid: bool, error: str) -> None:
         batch = self._batch
-        batch.append((t, arbitration_id, data, direction, valid, error))
+        batch.append((t, frame_id, data, direction, valid, error))
         # the clock every 32nd frame only: a read is a system call in a UML guest (issue 15), and the runner
         # logs every frame on the bus
         if len(batch) >= BATCH_FRAMES or (not len(batch) & 31 and time.monotonic() >= self._deadline):

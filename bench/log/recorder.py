@@ -33,6 +33,7 @@ import cantools
 from cantools.database.namedsignalvalue import NamedSignalValue
 from mcap.writer import CompressionType, Writer
 
+from bench import canid
 from bench import version as bench_version
 from bench.errors import BenchError, LogError
 from bench.log import mcapfast
@@ -286,7 +287,8 @@ class Recorder:
         return entry.channel_id, payload.encode()
 
     def frames(self, frames: Iterable[Sequence[Any]], *, channel: str, codecs: Mapping[int, Decoder]) -> list[str]:
-        """Log a batch of frames `(t, arbitration_id, data, direction, valid, error)` on `/can/frames`, each valid
+        """Log a batch of frames `(t, frame_id, data, direction, valid, error)` on `/can/frames` (`frame_id`: the
+        identifier with its format and kind, bench.canid), each valid
         one whose id has a codec also decoded on `/can/decoded/<codec.name>`: the same records, in the same order
         and chunks, as `frame()` then `decoded()` per frame, at about half the CPU (bench.log.logproc, issue 18).
 
@@ -305,10 +307,10 @@ class Recorder:
         channels: list[int] = []
         payloads: list[bytes] = []
         add_ns, add_channel, add_payload = nss.append, channels.append, payloads.append
-        for t, arbitration_id, data, direction, valid, error in frames:
+        for t, frame_id, data, direction, valid, error in frames:
             if type(data) is not bytes:
                 data = bytes(data)
-            key = (arbitration_id, data, direction, valid, error, channel)
+            key = (frame_id, data, direction, valid, error, channel)
             known = texts.get(key)
             try:
                 # log_ns(t) inline for a bench time (the call was a tenth of the cost of a repeated frame)
@@ -317,7 +319,7 @@ class Recorder:
                     known = self._frame_texts(key, codecs)
             except (LogError, ValueError, TypeError) as exc:   # LogError: the frame; the others: its time
                 problems.append(str(exc) if isinstance(exc, LogError)
-                                else f"run log {self.path}: bad frame {arbitration_id!r} on {channel!r}: {exc}")
+                                else f"run log {self.path}: bad frame {frame_id!r} on {channel!r}: {exc}")
                 continue
             tail, decoded_id, decoded, problem = known
             sec, nsec = divmod(ns, 1_000_000_000)   # a plain tuple below, not one built from an unpacked one
@@ -338,10 +340,15 @@ class Recorder:
                      ) -> tuple[bytes, int, bytes | None, str]:
         """A distinct frame's record tail, its decoded channel and record (None: none), and why none when it
         failed; kept for the frames that repeat it unless the decode failed (each such frame is reported)."""
-        arbitration_id, data, direction, valid, error, channel = key
-        tail = self._frame_tail(arbitration_id, data, channel, direction, False, False, False, valid, error,
-                                False, False, False, None, None)
-        codec = codecs.get(arbitration_id) if valid else None
+        frame_id, data, direction, valid, error, channel = key
+        wrong = canid.problem(frame_id)
+        if wrong is not None:
+            raise LogError(f"run log {self.path}: bad frame {frame_id!r} on {channel!r}: {wrong}")
+        tail = self._frame_tail(canid.arbitration_id(frame_id), data, channel, direction, canid.is_extended(frame_id),
+                                canid.is_error(frame_id), canid.is_remote(frame_id), valid, error,
+                                canid.is_fd(frame_id), bool(frame_id & canid.BRS), bool(frame_id & canid.ESI),
+                                None, None)
+        codec = codecs.get(frame_id & canid.IDENTITY) if valid else None
         if codec is None:
             known: tuple[bytes, int, bytes | None, str] = (tail, 0, None, "")
         else:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import heapq
 from collections.abc import Collection, Iterator, Mapping
 
+from bench import canid
 from bench.database.codec import Codebook, MessageCodec
 from bench.errors import ConfigError, SignalError
 
@@ -71,7 +72,7 @@ class Restbus:
 
     def set_tick(self, dt: float) -> None:
         """Schedule every message on ticks of `dt` seconds: its period is its DBC cycle time in ticks, its first
-        frame at tick `frame id mod period` (messages of equal cycle spread over the period, so the bus load is
+        frame at tick `identifier mod period` (messages of equal cycle spread over the period, so the bus load is
         even; deterministic). ConfigError, naming the message, when a cycle time is no whole number of ticks: the
         message could not keep its cycle. Called before the first tick; again with another dt, it schedules anew."""
         if dt == self.dt:
@@ -92,7 +93,7 @@ class Restbus:
         self.dt = dt
         for slot, period in periods:
             slot.period = period
-            slot.next_due = slot.codec.frame_id % period
+            slot.next_due = canid.arbitration_id(slot.codec.frame_id) % period
         self._parked.clear()
         self.schedule[:] = [(p.next_due, p.order, p) for p in self.periodic.values()]
         heapq.heapify(self.schedule)
@@ -167,7 +168,7 @@ class Restbus:
                 if slot.next_due <= tick:           # fell behind (real time): skip, do not burst
                     slot.next_due = tick + slot.period
                 heapq.heappush(queue, (slot.next_due, slot.order, slot))
-                yield slot.codec.frame_id, self.build(slot)
+                yield slot.codec.send_id, self.build(slot)
         finally:   # the caller stopped early (or a value was refused): the rest stay due
             for slot in ready[done:]:
                 heapq.heappush(queue, (slot.next_due, slot.order, slot))

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import can
 
+from bench import canid
+from bench.canid import IDENTITY
 from bench.checks.monitor import Monitor
 from bench.faults.plan import FaultPlan
 from bench.sim.node import Behaviour, DiagnosticSide
@@ -46,7 +48,7 @@ def _due_ticks(schedule: Sequence[tuple[int, int, _Periodic]], tick: int) -> dic
         i = stack.pop()
         if i < n and schedule[i][0] <= tick:
             due, _, slot = schedule[i]
-            out[slot.codec.frame_id] = due
+            out[slot.codec.send_id] = due
             stack.append(2 * i + 1)
             stack.append(2 * i + 2)
     return out
@@ -146,7 +148,7 @@ class Station:
         # back a sender's own frames. A frame with our identifier and other data is a foreign sender:
         # it reaches the monitor (which will flag its counter). Bounded: only the last few are kept.
         self._echoes: dict[int, deque[bytes]] = {
-            p.codec.frame_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
+            p.codec.send_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
         # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (periodic sending
         # offered by the transport, bench/transport/periodic.py)
         self.kernel = self.transport.periodic(restbus)
@@ -164,8 +166,8 @@ class Station:
         self.send_clock: Callable[[], float] | None = None
         self.recent: Callable[[], float] | None = None
         self.timing_label = name
-        # sent this tick: (id, data, error frame, the tick's time or the end of its injected delay, on the schedule)
-        self._outbox: list[tuple[int, bytes, bool, float, bool]] = []
+        # sent this tick: (frame_id, data, the tick's time or the end of its injected delay, on the schedule)
+        self._outbox: list[tuple[int, bytes, float, bool]] = []
         self._due: dict[int, int] = {}
         self._t_before = 0.0
         # Frames some listeners take besides the monitor (diagnostics: ISO-TP endpoints), by identifier
@@ -230,7 +232,10 @@ class Station:
         for msg in frames:
             count += 1
             data = bytes(msg.data)
-            pending = echoes.get(msg.arbitration_id)
+            frame_id = getattr(msg, "frame_id", None)   # the bench's own receivers give it (bench.canid)
+            if frame_id is None:
+                frame_id = canid.of_message(msg)
+            pending = echoes.get(frame_id)
             if pending and data in pending:
                 pending.remove(data)   # our own frame looped back (udp_multicast does): already logged as tx
             else:
@@ -243,10 +248,10 @@ class Station:
                         t = t_poll
                 else:   # one socket delivers in order: a stamp never goes back (one of another base could)
                     t = self._last_rx = max(self._last_rx, stamp(msg.timestamp))
-                monitor.on_frame(t, msg.arbitration_id, data, "rx", msg.is_extended_id, msg.is_error_frame)
-                if listeners and msg.arbitration_id in listeners and not msg.is_error_frame:
-                    for listener in listeners[msg.arbitration_id]:
-                        listener.on_frame(t, msg.arbitration_id, data)
+                monitor.on_frame(t, frame_id, data, "rx")
+                if listeners and frame_id in listeners:   # (an error frame's frame_id is no listener's)
+                    for listener in listeners[frame_id]:
+                        listener.on_frame(t, frame_id, data)
                 if t_first is None:
                     t_first = t
         if t_first is not None and self.self_timing is not None and self.recent is not None and stamp is not None:
@@ -303,10 +308,10 @@ class Station:
         outbox, self._outbox = self._outbox, []
         due_ticks, self._due = self._due, {}
         timing, monitor, label = self.self_timing, self.monitor, self.timing_label
-        for frame_id, data, is_error, due, scheduled in outbox:
-            monitor.on_frame(sent, frame_id, data, "tx", False, is_error)
-            state = monitor.states.get(frame_id)
-            if timing is None or state is None or is_error:
+        for frame_id, data, due, scheduled in outbox:
+            monitor.on_frame(sent, frame_id, data, "tx")
+            state = monitor.states.get(frame_id & IDENTITY)
+            if timing is None or state is None:
                 continue
             tick = due_ticks.get(frame_id) if scheduled else None
             # A late station skipped ticks: the frame was due at its schedule's tick. One due before the previous
@@ -336,20 +341,17 @@ class Station:
             for due, frame_id, frame in ready:
                 self._transmit(t, frame_id, frame, due=due)   # due when its (injected) delay ended
         if self.babbles:
-            for frame_id, data, is_error in faults.babble(t, dt):
-                self._transmit(t, frame_id, data, is_error)
+            for frame_id, data in faults.babble(t, dt):
+                self._transmit(t, frame_id, data)
 
-    def _transmit(self, t: float, frame_id: int, data: bytes, is_error: bool = False, due: float | None = None) -> None:
+    def _transmit(self, t: float, frame_id: int, data: bytes, due: float | None = None) -> None:
         try:
-            if is_error:
-                self.transport.send_error(t, frame_id, data)
-            else:
-                self._send(t, frame_id, data)   # the transport's fastest way for its bus
+            self._send(t, frame_id, data)   # the transport's fastest way for its bus
         except can.CanError as exc:
             self.send_errors += 1   # a full queue or bus-off: the frame never reached the bus
             if self.send_errors == 1:   # the first one now; the count at the end of the run (bench.run)
-                log.warning("%s station: the bus driver refused a frame (0x%03X at %.3f s): %s; the frame was "
-                            "not sent", self.name, frame_id, t, exc)
+                log.warning("%s station: the bus driver refused a frame (%s at %.3f s): %s; the frame was "
+                            "not sent", self.name, canid.text(frame_id), t, exc)
             self.monitor.note_send_failure(t, frame_id, str(exc))
             return
         self.sent += 1
@@ -360,8 +362,8 @@ class Station:
             echoes.append(data)
         if self.send_clock is not None:   # real time: logged when the tick's frames are out (_flush)
             if self._immediate:
-                self.monitor.on_frame(self.send_clock(), frame_id, data, "tx", False, is_error)
+                self.monitor.on_frame(self.send_clock(), frame_id, data, "tx")
                 return
-            self._outbox.append((frame_id, data, is_error, t if due is None else due, due is None))
+            self._outbox.append((frame_id, data, t if due is None else due, due is None))
             return
-        self.monitor.on_frame(t, frame_id, data, "tx", False, is_error)
+        self.monitor.on_frame(t, frame_id, data, "tx")

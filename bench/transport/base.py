@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Protocol
 
 import can
 
+from bench import canid
 from bench.transport.capabilities import delivers_own_frames
 
 if TYPE_CHECKING:
@@ -53,10 +54,8 @@ class Transport(Protocol):
         """Up to `limit` pending frames; the first may be waited for up to `timeout` s, the rest only if here."""
 
     def send(self, t: float, frame_id: int, data: bytes) -> None:
-        """A classic 11-bit data frame at bench time `t`; a refused frame raises can.CanError."""
-
-    def send_error(self, t: float, frame_id: int, data: bytes) -> None:
-        """An error frame (a babbling node's, bench.faults.plan)."""
+        """A frame at bench time `t`: its identifier, format and kind (an error frame, a CAN FD frame...) are
+        `frame_id`'s (bench.canid); a refused frame raises can.CanError."""
 
     def periodic(self, restbus: Restbus) -> KernelPeriodic | None:
         """Periodic sending offered by the bus for `restbus`'s messages (SocketCAN's broadcast manager), or None."""
@@ -92,12 +91,7 @@ class PythonCanTransport:
             msg = bus.recv(0.0)
 
     def send(self, t: float, frame_id: int, data: bytes) -> None:
-        self.bus.send(can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
-                                  is_fd=False, is_error_frame=False))
-
-    def send_error(self, t: float, frame_id: int, data: bytes) -> None:
-        self.bus.send(can.Message(timestamp=t, arbitration_id=frame_id, data=data, is_extended_id=False,
-                                  is_fd=False, is_error_frame=True))
+        self.bus.send(can.Message(timestamp=t, data=data, **canid.message_kwargs(frame_id)))
 
     def periodic(self, restbus: Restbus) -> KernelPeriodic | None:
         return None

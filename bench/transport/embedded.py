@@ -20,6 +20,7 @@ from typing import Any, final
 
 import can
 
+from bench import canid
 from bench.transport.base import PythonCanTransport, ReceivedFrame
 
 _new_message = object.__new__
@@ -48,35 +49,47 @@ def _copy(msg: can.Message, channel: Any, is_rx: bool) -> can.Message:
 
 @final   # no subclasses: the receive paths test `type(item) is VirtualFrame`, the fast test
 class VirtualFrame:
-    """A classic 11-bit data frame sent with `VirtualTimeBus.send_raw`: what a station reads of a frame
-    (the fields of can.Message it needs, as bench.transport.socketcan_rx.RawFrame), one object shared by every
-    receiver, never changed; a python-can `recv` turns it into the receiver's own can.Message."""
+    """A frame sent with `VirtualTimeBus.send_raw`: its frame_id (bench.canid: identifier, format and kind) and
+    data, which is what a station reads of a frame, one object shared by every receiver, never changed; a
+    python-can `recv` turns it into the receiver's own can.Message."""
 
-    __slots__ = ("timestamp", "arbitration_id", "data")
-    is_extended_id = False
-    is_error_frame = False
+    __slots__ = ("timestamp", "frame_id", "data")
 
-    def __init__(self, timestamp: float, arbitration_id: int, data: bytes) -> None:
+    def __init__(self, timestamp: float, frame_id: int, data: bytes) -> None:
         self.timestamp = timestamp
-        self.arbitration_id = arbitration_id
+        self.frame_id = frame_id
         self.data = data
+
+    # what a station reads of a can.Message (bench.transport.base.ReceivedFrame)
+    @property
+    def arbitration_id(self) -> int:
+        return canid.arbitration_id(self.frame_id)
+
+    @property
+    def is_extended_id(self) -> bool:
+        return canid.is_extended(self.frame_id)
+
+    @property
+    def is_error_frame(self) -> bool:
+        return canid.is_error(self.frame_id)
 
 
 def _message(frame: VirtualFrame, channel: Any, is_rx: bool) -> can.Message:
     """A receiver's can.Message of a raw frame, as `_copy` makes one of a sent can.Message."""
     msg = _new_message(can.Message)
     msg.timestamp = frame.timestamp
-    msg.arbitration_id = frame.arbitration_id
-    msg.is_extended_id = False
-    msg.is_remote_frame = False
-    msg.is_error_frame = False
+    frame_id = frame.frame_id
+    msg.arbitration_id = canid.arbitration_id(frame_id)
+    msg.is_extended_id = bool(frame_id & canid.EFF)
+    msg.is_remote_frame = bool(frame_id & canid.RTR)
+    msg.is_error_frame = bool(frame_id & canid.ERR)
     msg.channel = channel
     msg.dlc = len(frame.data)
     msg.data = bytearray(frame.data)
-    msg.is_fd = False
+    msg.is_fd = bool(frame_id & canid.FD)
     msg.is_rx = is_rx
-    msg.bitrate_switch = False
-    msg.error_state_indicator = False
+    msg.bitrate_switch = bool(frame_id & canid.BRS)
+    msg.error_state_indicator = bool(frame_id & canid.ESI)
     return msg
 
 
@@ -167,13 +180,13 @@ class VirtualTimeBus(can.BusABC):
             if inbox.waiters:
                 inbox.wake()
 
-    def send_raw(self, t: float, arbitration_id: int, data: bytes) -> None:
-        """Send a classic 11-bit data frame stamped `t` without a can.Message (the stations' hot path: one
+    def send_raw(self, t: float, frame_id: int, data: bytes) -> None:
+        """Send a frame (its frame_id: bench.canid) stamped `t` without a can.Message (the stations' hot path: one
         shared VirtualFrame for every receiver; python-can's `recv` still gives each its own can.Message)."""
         mine = self._inbox
         if mine.closed:
             raise can.CanOperationError(f"{self.channel_info} is shut down")
-        frame = VirtualFrame(t, arbitration_id, bytes(data))
+        frame = VirtualFrame(t, frame_id, bytes(data))
         for inbox in self._net.inboxes:
             if inbox is mine:
                 if not self._own:
@@ -253,7 +266,7 @@ class EmbeddedTransport(PythonCanTransport):
         super().__init__(bus)
         self._inbox = bus.queue
         self._raw_frames = bus.raw_frames
-        self.send = bus.send_raw   # type: ignore[method-assign, assignment]  # hot path: no call in between
+        self.send = bus.send_raw   # type: ignore[method-assign]  # hot path: no call in between
 
     def frames(self, timeout: float, limit: int) -> Iterable[ReceivedFrame]:
         inbox = self._inbox

@@ -25,8 +25,8 @@ How (docs/spec/e2e.md: the counter +1 per transmission, through the profile's ra
   (inverted filters joined with CAN_RAW_JOIN_FILTERS, Linux >= 4.1). A foreign sender on an identifier the
   kernel sends is therefore not seen while the kernel sends it.
 
-Only messages of 8 bytes with a cycle time of at least MIN_CYCLE_S qualify (an unprotected message is handed
-over as one frame). The echo socket lives as long as the station (it closes with the process).
+Only classical (not CAN FD) messages of 8 bytes with a cycle time of at least MIN_CYCLE_S qualify (an unprotected
+message is handed over as one frame). The echo socket lives as long as the station (it closes with the process).
 Set BENCH_KERNEL_PERIODIC=0 in the environment to keep every message on the tick scheduler.
 """
 
@@ -42,7 +42,8 @@ from typing import TYPE_CHECKING, Any
 
 import can
 
-from bench.transport.socketcan_rx import CAN_EFF_FLAG, CAN_RTR_FLAG, SO_TIMESTAMPNS, FastReceiver, plain_socketcan
+from bench import canid
+from bench.transport.socketcan_rx import SO_TIMESTAMPNS, FastReceiver, plain_socketcan
 
 if TYPE_CHECKING:
     from bench.e2e import Protection
@@ -62,11 +63,16 @@ ECHO_READ_LIMIT = 1 << 16   # frames one look at the echo socket takes at most (
 
 # linux/can.h and linux/can/raw.h (Python's socket module lacks CAN_INV_FILTER)
 CAN_INV_FILTER = 0x20000000
-CAN_SFF_MASK = 0x7FF
 CAN_RAW_JOIN_FILTERS = 6
 _FILTER = struct.Struct("=II")
-_EXACT_STANDARD = CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG   # mask: this 11-bit data frame and no other
+_EXACT_STANDARD = canid.SFF_MASK | canid.EFF | canid.RTR   # mask: this 11-bit data frame and no other
+_EXACT_EXTENDED = canid.EFF_MASK | canid.EFF | canid.RTR   # mask: this 29-bit data frame and no other
 _clock = time.monotonic   # the kernel's BCM timers run on CLOCK_MONOTONIC too
+
+
+def _exact(frame_id: int) -> int:
+    """The filter mask that takes exactly this identifier's data frames (11- or 29-bit)."""
+    return _EXACT_EXTENDED if frame_id & canid.EFF else _EXACT_STANDARD
 
 
 def _raw_socket() -> socket.socket:
@@ -86,7 +92,7 @@ def counter_cycle(protection: Protection, frame_id: int, data: bytes, first_coun
     for k in range(protection.counter_modulo):
         frame = bytearray(data)
         protection.protect(frame, first_counter + k)
-        frames.append(can.Message(arbitration_id=frame_id, data=frame, is_extended_id=False, is_fd=False))
+        frames.append(can.Message(data=frame, **canid.message_kwargs(frame_id)))
     return frames
 
 
@@ -115,8 +121,9 @@ class KernelPeriodic:
     def __init__(self, bus: Any, restbus: Restbus) -> None:
         self.bus = bus
         self.restbus = restbus
-        self.slots = {slot.codec.frame_id: slot for slot in restbus.periodic.values()
-                      if slot.codec.length == FRAME_LENGTH and (slot.codec.cycle_time or 0.0) >= MIN_CYCLE_S}
+        self.slots = {slot.codec.send_id: slot for slot in restbus.periodic.values()
+                      if slot.codec.length == FRAME_LENGTH and not slot.codec.frame_id & canid.FD
+                      and (slot.codec.cycle_time or 0.0) >= MIN_CYCLE_S}
         self.tasks: dict[int, _Task] = {}
         self._last: dict[int, bytes] = {}
         self._stable: dict[int, int] = {}
@@ -238,7 +245,7 @@ class KernelPeriodic:
     def _frames(self, slot: Any, frame_id: int, data: bytes, base: int) -> list[can.Message]:
         if slot.codec.protection is not None:
             return counter_cycle(slot.codec.protection, frame_id, data, base)
-        return [can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=False)]
+        return [can.Message(data=data, **canid.message_kwargs(frame_id))]
 
     def _start(self, slot: Any, frame_id: int, data: bytes, payload: bytes) -> bool:
         protection = slot.codec.protection
@@ -319,8 +326,8 @@ class KernelPeriodic:
         """The echo socket takes exactly the kernel's identifiers; the bus socket everything else."""
         ids = sorted(self.tasks)
         self.echo.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER,
-                             b"".join(_FILTER.pack(i, _EXACT_STANDARD) for i in ids))
-        inverted = [_FILTER.pack(i | CAN_INV_FILTER, _EXACT_STANDARD) for i in ids] or [_FILTER.pack(0, 0)]
+                             b"".join(_FILTER.pack(i & canid.CAN_ID, _exact(i)) for i in ids))
+        inverted = [_FILTER.pack((i & canid.CAN_ID) | CAN_INV_FILTER, _exact(i)) for i in ids] or [_FILTER.pack(0, 0)]
         self.bus.socket.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER, b"".join(inverted))
 
     # -- receive side (the station's tick) ------------------------------------------------------------
@@ -340,7 +347,7 @@ class KernelPeriodic:
             return      # found empty just now (bench.sim.clock.WallClock.wait_until)
         tasks = self.tasks
         for frame in self._echo_rx.frames(0.0, ECHO_READ_LIMIT):
-            frame_id, data = frame.arbitration_id, frame.data
+            frame_id, data = frame.frame_id, frame.data
             task = tasks.get(frame_id)
             protection = None if task is None else task.slot.codec.protection
             if protection is not None and len(data) == FRAME_LENGTH:

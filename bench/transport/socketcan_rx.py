@@ -28,16 +28,17 @@ from typing import Any
 
 import can
 
+from bench import canid
 from bench.transport.capabilities import raw_can_socket
 
 ENV_SWITCH = "BENCH_FAST_RX"           # "0": every frame through python-can's recv
 CANFD_MTU = 72
-CAN_EFF_FLAG, CAN_RTR_FLAG, CAN_ERR_FLAG = 0x80000000, 0x40000000, 0x20000000
-_HEADER = struct.Struct("=IB")         # can_id, len (struct can_frame / canfd_frame)
+_FLAGS = struct.Struct("=IBB")         # can_id, len, flags (struct canfd_frame; can_frame: __pad)
 _TIMESPEC = struct.Struct("@ll")       # SO_TIMESTAMPNS: seconds, nanoseconds
 _ANCILLARY = socket.CMSG_SPACE(_TIMESPEC.size) if hasattr(socket, "CMSG_SPACE") else 0
-_FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 _CLASSIC = struct.Struct("=IBB1xB8s")  # struct can_frame as python-can's build_can_frame packs it (len8_dlc = len)
+_FD = struct.Struct("=IBB2x64s")        # struct canfd_frame: can_id, len, flags, two reserved bytes, data
+CANFD_BRS, CANFD_ESI, CANFD_FDF = 0x01, 0x02, 0x04   # canfd_frame.flags (linux/can.h)
 SO_TIMESTAMPNS = 35                    # asm-generic/socket.h (Python's socket module lacks it before 3.12)
 _CMSG_HEADER = socket.CMSG_LEN(0) if hasattr(socket, "CMSG_LEN") else 16   # cmsghdr, before its data
 
@@ -72,34 +73,45 @@ _recvmmsg = _libc_recvmmsg()
 
 
 class RawFrame:
-    """What a station needs of a received frame (the fields of can.Message it reads)."""
+    """What a station needs of a received frame: its frame_id (bench.canid: SocketCAN's can_id, and the CAN FD
+    flags above it), time and data; the fields of can.Message it stands for are read from the frame_id."""
 
-    __slots__ = ("timestamp", "arbitration_id", "data", "is_extended_id", "is_error_frame")
+    __slots__ = ("timestamp", "frame_id", "data")
 
-    def __init__(self, timestamp: float, arbitration_id: int, data: bytes, is_extended_id: bool,
-                 is_error_frame: bool) -> None:
+    def __init__(self, timestamp: float, frame_id: int, data: bytes) -> None:
         self.timestamp = timestamp
-        self.arbitration_id = arbitration_id
+        self.frame_id = frame_id
         self.data = data
-        self.is_extended_id = is_extended_id
-        self.is_error_frame = is_error_frame
+
+    @property
+    def arbitration_id(self) -> int:
+        return canid.arbitration_id(self.frame_id)
+
+    @property
+    def is_extended_id(self) -> bool:
+        return canid.is_extended(self.frame_id)
+
+    @property
+    def is_error_frame(self) -> bool:
+        return canid.is_error(self.frame_id)
 
 
 def parse(frame: bytes, ancillary: list[tuple[int, int, bytes]]) -> RawFrame:
     """One received struct can_frame/canfd_frame and its SO_TIMESTAMPNS, as python-can reads them."""
     seconds, nanoseconds = _TIMESPEC.unpack_from(ancillary[0][2])
-    return _frame_at(frame, 0, seconds + nanoseconds * 1e-9)
+    return _frame_at(frame, 0, seconds + nanoseconds * 1e-9, len(frame) == CANFD_MTU)
 
 
-def _frame_at(buffer: bytes | memoryview, base: int, timestamp: float) -> RawFrame:
-    """The struct can_frame/canfd_frame at `base` of `buffer`, as python-can's capture_message reads it."""
-    can_id, length = _HEADER.unpack_from(buffer, base)
-    if length not in _FD_LENGTHS:          # python-can rounds an odd FD length up to the next valid one
-        length = min(n for n in _FD_LENGTHS if n >= length)
-    extended = bool(can_id & CAN_EFF_FLAG)
-    data = b"" if can_id & CAN_RTR_FLAG else bytes(buffer[base + 8:base + 8 + length])   # a remote frame: none
-    return RawFrame(timestamp, can_id & (0x1FFFFFFF if extended else 0x7FF), data, extended,
-                    bool(can_id & CAN_ERR_FLAG))
+def _frame_at(buffer: bytes | memoryview, base: int, timestamp: float, fd: bool) -> RawFrame:
+    """The struct can_frame (or canfd_frame when `fd`, by its size) at `base` of `buffer`, as python-can's
+    capture_message reads it."""
+    can_id, length, flags = _FLAGS.unpack_from(buffer, base)
+    if length not in canid.FD_LENGTHS:     # python-can rounds an odd FD length up to the next valid one
+        length = canid.fd_length(length)
+    data = b"" if can_id & canid.RTR else bytes(buffer[base + 8:base + 8 + length])   # a remote frame: none
+    if fd:
+        can_id |= canid.FD | (canid.BRS if flags & CANFD_BRS else 0) | (canid.ESI if flags & CANFD_ESI else 0)
+    return RawFrame(timestamp, can_id, data)
 
 
 def plain_socketcan(bus: can.BusABC) -> bool:
@@ -150,7 +162,7 @@ class MMsgBatch:
                 timestamp = seconds + nanoseconds * 1e-9
             else:
                 timestamp = 0.0     # no stamp: outside any clock's window, the frame gets the time of reading
-            out.append(_frame_at(frames, i * CANFD_MTU, timestamp))
+            out.append(_frame_at(frames, i * CANFD_MTU, timestamp, headers[i].len == CANFD_MTU))
         return out
 
 
@@ -204,14 +216,23 @@ class FastReceiver:
             yield parse(frame, ancillary)
 
     def send_frame(self, frame_id: int, data: bytes) -> None:
-        """A classic 11-bit data frame with one non-blocking send() (python-can's send: a clock read, a
+        """A frame (its frame_id: bench.canid) with one non-blocking send() (python-can's send: a clock read, a
         select() and the send); a full queue raises CanOperationError as python-can's does."""
         try:
             length = len(data)
-            sent = self.sock.send(_CLASSIC.pack(frame_id, length, 0, length, data), socket.MSG_DONTWAIT)
+            if frame_id <= canid.CAN_ID:
+                frame = _CLASSIC.pack(frame_id, length, 0, length, data)
+            else:
+                flags = (CANFD_FDF | (CANFD_BRS if frame_id & canid.BRS else 0)
+                         | (CANFD_ESI if frame_id & canid.ESI else 0))
+                frame = _FD.pack(frame_id & canid.CAN_ID, canid.fd_length(length), flags, data)
+            sent = self.sock.send(frame, socket.MSG_DONTWAIT)
         except (BlockingIOError, InterruptedError) as exc:
             raise can.CanOperationError("Transmit buffer full") from exc
+        except ValueError as exc:   # longer than a CAN FD frame
+            raise can.CanOperationError(str(exc)) from None
         except OSError as exc:
             raise can.CanOperationError(f"Failed to transmit: {exc.strerror}", exc.errno) from exc
-        if sent != _CLASSIC.size:
+        if sent != len(frame):
             raise can.CanOperationError("Transmit buffer full")
+

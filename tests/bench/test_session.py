@@ -17,7 +17,7 @@ def project():
 
 def _frames_of(session: BenchSession) -> list[tuple[float, int, bytes]]:
     frames: list[tuple[float, int, bytes]] = []
-    session.runner.monitor.sink = lambda f: frames.append((round(f.t, 9), f.arbitration_id, f.data))
+    session.runner.monitor.sink = lambda f: frames.append((round(f.t, 9), f.frame_id, f.data))
     return frames
 
 

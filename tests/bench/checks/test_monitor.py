@@ -5,7 +5,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench import e2e
+from bench import canid, e2e
 from bench.checks.monitor import Monitor
 from bench.database.codec import Codebook
 from bench.sim.restbus import Restbus
@@ -83,13 +83,15 @@ def test_timeout_after_three_cycles(codebook: Codebook) -> None:
 
 
 @settings(max_examples=400, deadline=None)
-@given(frame_id=st.integers(0, 0x1FFFFFFF), data=st.binary(max_size=64), extended=st.booleans(),
-       error=st.booleans())
-def test_arbitrary_frames_never_raise(codebook: Codebook, frame_id: int, data: bytes, extended: bool,
-                                      error: bool) -> None:
+@given(identifier=st.integers(0, 0x1FFFFFFF), data=st.binary(max_size=64), extended=st.booleans(),
+       error=st.booleans(), remote=st.booleans(), fd=st.booleans())
+def test_arbitrary_frames_never_raise(codebook: Codebook, identifier: int, data: bytes, extended: bool,
+                                      error: bool, remote: bool, fd: bool) -> None:
     monitor = Monitor(codebook, keep_history=True)
+    frame_id = canid.of(identifier if extended else identifier & canid.SFF_MASK, extended, is_error=error,
+                        is_remote=remote, is_fd=fd, bitrate_switch=fd)
     for t in (0.0, 0.01):
-        monitor.on_frame(t, frame_id, data, "rx", extended, error)
+        monitor.on_frame(t, frame_id, data, "rx")
     monitor.check_timeouts(1.0)
 
 
@@ -134,7 +136,7 @@ def test_the_sink_gets_each_frame_as_one_object_with_its_verdict(codebook: Codeb
     monitor.on_frame(0.01, codec.frame_id, frames[1], "tx")
     monitor.on_frame(0.02, 0x7FE, b"\x01", "rx")                       # no message of the databases
     monitor.on_frame(0.03, codec.frame_id, frames[1][:2], "rx")        # shorter than the DBC says
-    assert [(f.t, f.arbitration_id, f.direction, f.valid) for f in got] == [
+    assert [(f.t, f.frame_id, f.direction, f.valid) for f in got] == [
         (0.0, codec.frame_id, "rx", True), (0.01, codec.frame_id, "tx", True), (0.02, 0x7FE, "rx", False),
         (0.03, codec.frame_id, "rx", False)]
     assert got[1].data == frames[1] and got[1].codec is codec and got[1].values is not None

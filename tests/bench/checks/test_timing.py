@@ -212,7 +212,7 @@ def test_tables_reach_the_html_report(timing_codebook: Codebook) -> None:
     bad = LatencyPair("bad", ("Cmd", "Angel"), ("Sts", "Angle"))
     tables = bus(timing_codebook, [PAIR, bad], cmd, sts).tables(timing_codebook)
     cycle, latency_ = tables
-    assert cycle.rows[0] == ["Cmd", "0x10", "10", "100", "10.00", "10.00", "10.00", "+0.0", "0", "yes"]
+    assert cycle.rows[0] == ["Cmd", "0x010", "10", "100", "10.00", "10.00", "10.00", "+0.0", "0", "yes"]
     assert cycle.rows[1][3] == "100"
     assert latency_.rows[0][2:12] == ["0.05", "1", "1", "43.00", "43.00", "43.00", "43.00", "0", "1", "0"]
     assert "Angel" in latency_.rows[1][-1]

@@ -68,7 +68,8 @@ def test_monitor_shows_the_plant_messages_with_their_rates(tmp_path: Path) -> No
     binary = tmux()
     group = ipv4_group()
     env = {**os.environ, "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8", "TERM": "xterm-256color"}
-    env.pop("TMUX", None)
+    for name in ("TMUX", "COLUMNS", "LINES"):   # the screen's size is tmux's (an xdist worker has COLUMNS=80)
+        env.pop(name, None)
     plant_log = (tmp_path / "plant.txt").open("w")
     plant = subprocess.Popen([sys.executable, "-m", "bench", "plant", "--interface", "udp_multicast",
                               "--channel", group, "--duration", "60"], cwd=ROOT, stdout=plant_log,

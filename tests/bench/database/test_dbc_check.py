@@ -158,11 +158,17 @@ def test_frame_length_and_extended_id() -> None:
     result = check_text(text)
     line = line_of(text, "BO_ 2147483904 ECU_Status")
     assert only(warnings(result, "frame-length")).line == line   # the contract's 8 bytes; the bench copes
-    assert only(errors(result, "frame-id")).line == line
+    assert not errors(result, "frame-id")                        # a 29-bit identifier is one the bench sends
     assert errors(result, "fit")  # the E2E signals no longer fit in 6 bytes
     assert "does not fit" in only(errors(result, "e2e")).text    # nor does the declared P11 header
     longer = check_text(GOOD.replace("BO_ 256 ECU_Status: 8 ECU", "BO_ 256 ECU_Status: 12 ECU"))
     assert "classical CAN" in only(errors(longer, "frame-length")).text
+    fd = GOOD.replace("BO_ 256 ECU_Status: 8 ECU", "BO_ 256 ECU_Status: 10 ECU") + \
+        'BA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN","ExtendedCAN","reserved","reserved","reserved","reserved",' \
+        '"reserved","reserved","reserved","reserved","reserved","reserved","reserved","reserved","StandardCAN_FD",' \
+        '"ExtendedCAN_FD";\nBA_ "VFrameFormat" BO_ 256 14;\n'
+    odd = check_text(fd)                                          # CAN FD: 10 bytes is no DLC length, 12 goes out
+    assert not errors(odd, "frame-length") and "as 12 bytes" in only(warnings(odd, "frame-length")).text
 
 
 def test_multiplexed_message_is_rejected() -> None:

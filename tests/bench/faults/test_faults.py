@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from bench import canid
 from bench.cli import main
 from bench.database.codec import Codebook, load_codebook
 from bench.errors import ConfigError
@@ -124,7 +125,7 @@ def test_node_and_bus_faults(codebook: Codebook) -> None:
     plan.add(Fault("flood", "0x000", 0, 9, 8))
     plan.add(Fault("error_frame", "bus", 0, 9))
     frames = plan.babble(1.0, 0.001)
-    assert sum(1 for f in frames if f[0] == 0 and not f[2]) == 8 and sum(f[2] for f in frames) == 1
+    assert frames.count((0x000, bytes(8))) == 8 and frames.count((canid.ERR, b"")) == 1 and len(frames) == 9
 
 
 def test_unknown_targets_are_clear_errors(codebook: Codebook) -> None:

@@ -115,13 +115,13 @@ def test_a_refused_frame_writes_nothing_and_says_why(tmp_path: Path, codebook: C
     good = (0.001, codec.message.frame_id, bytes(codec.message.length), "rx", True, "")
     frames: list[Frame] = [good, (0.002, codec.message.frame_id, b"\0" * 8, "up", True, ""),
                            (-1.0, codec.message.frame_id, b"\0" * 8, "rx", True, ""),
-                           (0.003, 0x2000_0000, b"", "rx", True, ""), good]
+                           (0.003, 0x800, b"", "rx", True, ""), good]   # 11-bit beyond 0x7FF (bench.canid)
     path = tmp_path / "refused.mcap"
     recorder = Recorder(path, [load_dbc(CHASSIS_DBC), load_dbc(BENCH_DBC)])
     problems = recorder.frames(frames, channel="bench", codecs=codebook.by_id)
     recorder.close()
     assert len(problems) == 3
-    assert "direction" in problems[0] and "time -1.0" in problems[1] and "arbitration id" in problems[2]
+    assert "direction" in problems[0] and "time -1.0" in problems[1] and "above 0x7FF" in problems[2]
     assert all(problem.startswith(f"run log {path}: bad frame ") for problem in problems)   # frame()'s text
     assert [f.t for f in read_frames(path)] == [0.001, 0.001]
     assert [name for _, name, _ in read_decoded(path)] == [codec.name, codec.name]

@@ -11,6 +11,7 @@ from typing import Any
 import can
 import pytest
 
+from bench import canid
 from bench.transport import PythonCanTransport, VirtualTimeBus, open_bus, transport_for
 from bench.transport.embedded import EmbeddedTransport
 from bench.transport.socketcan import SocketcanTransport
@@ -69,7 +70,7 @@ def test_python_cans_virtual_bus_goes_through_recv_and_send() -> None:
         out, into = transport_for(sender), transport_for(receiver)
         assert type(out) is PythonCanTransport and into.receive_stamped and not into.stamped_batches
         out.send(0.0, 0x102, b"\xAA")
-        out.send_error(0.0, 0x000, b"")
+        out.send(0.0, canid.ERR, b"")      # an error frame (bench.canid)
         frames = list(into.frames(1.0, 8))
         assert [(f.arbitration_id, bytes(f.data), f.is_error_frame) for f in frames] == \
             [(0x102, b"\xAA", False), (0x000, b"", True)]
