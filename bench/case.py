@@ -426,11 +426,11 @@ class Case:
         restbus = self._runner.restbus
         restbus.reset_all()
         wanted = None if stimulus is None else {command, *stimulus}
-        unknown = set() if wanted is None else wanted - set(restbus.periodic)
+        unknown = set() if wanted is None else wanted - set(restbus.slots)
         if unknown:
             raise BenchError(f"start_scenario(stimulus=...): {', '.join(sorted(unknown))} is no periodic stimulus "
-                             f"message (stimulus: {', '.join(sorted(restbus.periodic))})")
-        for name in restbus.periodic:
+                             f"message (stimulus: {', '.join(sorted(restbus.slots))})")
+        for name in restbus.slots:
             if wanted is None or name in wanted:
                 restbus.resume_sending(name)
             else:
@@ -664,7 +664,7 @@ class Case:
         # A simulated node's periodic message the restbus sends now is due on the bus whether it came or not (a
         # fault may have dropped every frame); an external node's are known only by their frames.
         sent = {name for station in self.session.stations
-                for name, slot in station.restbus.periodic.items() if slot.enabled}
+                for name, slot in station.restbus.slots.items() if slot.enabled}
         if messages is None:
             names = [n for n, s in self._monitor.by_name.items() if s.codec.cycle_time and (
                 n in sent or s.intervals_dropped + len(s.intervals) > self._interval_marks.get(n, 0))]

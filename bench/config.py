@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from bench.contract import Requirement, load_requirements
 from bench.database import overrides as overrides_table
+from bench.database import sendtype
 from bench.e2e.config import PARAMETERS as E2E_PARAMETERS
 from bench.errors import ConfigError, SignalError, did_you_mean
 from bench.transport import EMBEDDED, is_embedded
@@ -304,9 +305,10 @@ def _messages_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
                               f"got {cycle!r}")
         send_type = values.get(overrides_table.SEND_TYPE)
         if send_type is not None and send_type not in overrides_table.SEND_TYPES:
-            raise ConfigError(f"{where} {overrides_table.SEND_TYPE} {send_type!r}: the bench's restbus knows "
-                              f"{', '.join(repr(t) for t in overrides_table.SEND_TYPES)} only (it sends every "
-                              "message periodically at its cycle time)")
+            meant = sendtype.kind_of(send_type)
+            hint = f" (did you mean {meant!r}?)" if meant else ""
+            raise ConfigError(f"{where} {overrides_table.SEND_TYPE} {send_type!r} is no send type the bench knows"
+                              f"{hint}; its send types: {', '.join(overrides_table.SEND_TYPES)}")
         out[message] = dict(values)
     return out
 

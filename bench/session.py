@@ -79,7 +79,7 @@ def _live_value(station: Station, did: Did, now: Callable[[], float]) -> Callabl
         return now
     if did.signal:
         message, _, signal = did.signal.partition(".")
-        if message in station.restbus.periodic:
+        if message in station.restbus.slots:
             return functools.partial(station.restbus.value, message, signal)
     if did.input:
         message, _, signal = did.input.partition(".")

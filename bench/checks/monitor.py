@@ -26,12 +26,14 @@ from typing import Any
 
 from bench import canid, e2e
 from bench.canid import IDENTITY
+from bench.database import sendtype
 from bench.database.codec import Codebook, DecodeError, MessageCodec
 from bench.diag.isotp import IsoTpFraming, IsoTpParams, IsoTpProblem
 from bench.errors import BenchError, BenchLimit
 
 TIMEOUT_CYCLES = 3   # docs/spec/k-matrix.md: a message not seen for 3 x its cycle time is timed out
 TIME_EPS = 1e-9      # s: bench times are sums of ticks; equal times must compare equal
+GAP_SLACK = 0.001    # s: an event frame this much sooner than its minimum gap is still in time (one tick)
 # Memory stays flat in long runs: each list keeps at most its cap (trimmed in halves, amortised), and
 # counts what it dropped so that queries reaching before the retained data fail loudly, never silently.
 HISTORY_CAP = 3000       # frames of decoded history per message kept from before the case in progress
@@ -101,11 +103,14 @@ class MessageState:
     recent_tx: deque[bytes] = field(default_factory=lambda: deque(maxlen=OWN_ECHO_FRAMES))   # its last payloads
     senders: e2e.SenderTracker | None = None  # counter streams, followed after a sequence error
     calm: int = 0                            # accepted frames in a row while they are followed
+    unchanged: int = 0                       # an on-change message's frames in a row with the values of the last
     # The message's time limits, s, computed once (inf without a cycle time: never reached); the same sums
     # as written out, so a comparison with them decides as before.
     timeout_s: float = field(init=False)     # a consumer's timeout: TIMEOUT_CYCLES cycles after the last valid
     gap_s: float = field(init=False)         # a reception gap that ends the counter streams (two senders)
     foreign_s: float = field(init=False)     # a received frame this soon after the station's own is another's
+    base_timeout_s: float = field(init=False)   # timeout_s of a periodic message while it sends (cyclic_if_active)
+    plain_cyclic: bool = field(init=False)   # a frame every cycle whatever its values: no send-type rule to judge
 
     @property
     def e2e_status(self) -> dict[str, int]:
@@ -114,7 +119,10 @@ class MessageState:
 
     def __post_init__(self) -> None:
         cycle = self.codec.cycle_time
-        self.timeout_s = math.inf if cycle is None else TIMEOUT_CYCLES * cycle + TIME_EPS
+        periodic = self.codec.sending.periodic   # an event message is never late for being silent
+        self.timeout_s = math.inf if cycle is None or not periodic else TIMEOUT_CYCLES * cycle + TIME_EPS
+        self.base_timeout_s = self.timeout_s
+        self.plain_cyclic = self.codec.sending.kind == sendtype.CYCLIC
         self.gap_s = math.inf if cycle is None else SENDERS_GAP_CYCLES * cycle + TIME_EPS
         p = self.codec.protection
         self.rx = None if p is None else e2e.Receiver(p.counter_modulo, p.max_delta_counter, p.sm)
@@ -249,6 +257,15 @@ class Monitor:
                 sink(CheckedFrame(t, frame_id, data, direction, False, reason, codec, None))
             return False
         assert values is not None
+        if not state.plain_cyclic:   # judged by its send type (bench.database.sendtype)
+            rule = self._sending(state, values, t, prev_seen)
+            if rule:
+                state.invalid["send-type"] = state.invalid.get("send-type", 0) + 1
+                state.last_invalid = True
+                self._invalid(InvalidFrame(t, frame_id, codec.name, rule))
+                if sink:
+                    sink(CheckedFrame(t, frame_id, data, direction, False, rule, codec, None))
+                return False
         if starting:   # a valid frame (so logged), not applied: the E2E state machine is not VALID yet
             state.starting += 1
             if sink:
@@ -267,6 +284,36 @@ class Monitor:
         if sink:
             sink(CheckedFrame(t, frame_id, data, direction, True, "", codec, values))
         return True
+
+    @staticmethod
+    def _sending(state: MessageState, values: Mapping[str, float], t: float, prev_seen: float | None) -> str:
+        """What a valid frame breaks of its message's send type ("" when nothing): an event frame sooner than its
+        minimum gap after the previous one (a tick's slack: a real bus's receive times jitter by less), an
+        on-change frame without a change beyond its repetitions. A cyclic-if-active message is late only while
+        active: its timeout holds while its last frame has a signal away from the inactive value."""
+        codec = state.codec
+        sending = codec.sending
+        kind = sending.kind
+        if kind == sendtype.IF_ACTIVE:
+            inactive = codec.inactive or {}
+            active = any(values[n] != v for n, v in inactive.items() if n not in codec.e2e_signals)
+            state.timeout_s = state.base_timeout_s if active else math.inf
+            return ""
+        if kind not in (sendtype.ON_CHANGE, sendtype.ON_WRITE):
+            return ""
+        latest = state.latest
+        same = latest is not None and all(latest.get(n) == v for n, v in values.items() if n not in codec.e2e_signals)
+        state.unchanged = state.unchanged + 1 if same else 0
+        repeat = same and state.unchanged <= sending.repetitions     # one of an event's repetitions
+        if kind == sendtype.ON_CHANGE and same and not repeat:
+            return (f"send type on_change: sent again without a change ({state.unchanged} alike after the first; "
+                    f"GenMsgNrOfRepetition allows {sending.repetitions})")
+        gap, what = ((sending.repeat_gap, "its repetitions' gap is") if repeat
+                     else (sending.min_gap, "its minimum gap is"))
+        if gap and prev_seen is not None and t - prev_seen < gap - GAP_SLACK:
+            return (f"send type {kind}: {(t - prev_seen) * 1000:.1f} ms after its previous frame, {what} "
+                    f"{gap * 1000:g} ms ({'GenMsgCycleTimeFast' if repeat else 'GenMsgDelayTime'})")
+        return ""
 
     def _trim_history(self, state: MessageState) -> None:
         """Drop the frames before `history_from` beyond the last HISTORY_CAP, and beyond HISTORY_MAX any frame;
@@ -361,7 +408,7 @@ class Monitor:
             cycle = state.codec.cycle_time
             if cycle is None or state.timed_out_flag or state.last_valid is None:
                 continue
-            if now - state.last_valid > TIMEOUT_CYCLES * cycle + TIME_EPS:
+            if now - state.last_valid > state.timeout_s:
                 self._time_out(state)
         for ids, checker in self._connections:   # ISO-TP's N_Bs / N_Cr of a diagnostic exchange in progress
             for problem in checker.check_timeouts(now):

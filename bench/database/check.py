@@ -48,7 +48,7 @@ import cantools
 from cantools.database.can import Database, Message, Signal
 
 from bench import canid
-from bench.database import overrides
+from bench.database import overrides, sendtype
 from bench.database.codec import RANGE_SLACK, carried_range, diagnostic_kind, field_range
 from bench.e2e import config as e2e_config
 from bench.e2e.profiles import P01_MODES, PROFILES, Field, Protection
@@ -305,7 +305,8 @@ def check_text(text: str, path: Path | str = "<text>", e2e_mode: str = OPTIONAL,
     attribute_defaults = {name: d.default_value for name, d in definitions.items()}
     protections = e2e_overrides or {}
     for message in messages:
-        _check_message(message, lines, attribute_defaults, findings, supplied.get(message.name, {}), strict)
+        _check_message(message, lines, attribute_defaults, findings, supplied.get(message.name, {}), definitions,
+                       strict)
         result.protections.append(_check_e2e(message, definitions, protections.get(message.name), lines,
                                              e2e_mode == REQUIRED, findings))
     if strict_error is not None:
@@ -401,7 +402,7 @@ def _check_duplicates(messages: list[Message], lines: _Lines, findings: list[Fin
 
 # -- one message -------------------------------------------------------------------------------------
 def _check_message(message: Message, lines: _Lines, defaults: dict[str, object], findings: list[Finding],
-                   supplied: Mapping[str, Any], strict: bool = False) -> None:
+                   supplied: Mapping[str, Any], definitions: Mapping[str, Any], strict: bool = False) -> None:
     """`supplied`: bench.toml's [messages.NAME] for this message (what the project gives over its database)."""
     line = lines.of_message(message)
     name = message.name
@@ -430,7 +431,7 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
         add(WARNING, "sender", "no sender node: no node of the bench will simulate it")
     if not message.comment:
         add(WARNING, "comment", "no comment")
-    _check_timing(message, lines, defaults, add, supplied)
+    _check_timing(message, lines, defaults, add, supplied, definitions)
     _check_layout(message, lines, findings)
     for signal in message.signals:
         _check_signal(message, signal, lines, findings, strict)
@@ -445,10 +446,22 @@ def _attribute(message: Message, name: str, defaults: dict[str, object]) -> tupl
 
 
 def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], add: _Add,
-                  supplied: Mapping[str, Any]) -> None:
-    """Each error that bench.toml can fix names the key that fixes it (bench.database.overrides)."""
+                  supplied: Mapping[str, Any], definitions: Mapping[str, Any]) -> None:
+    """The send type (bench.database.sendtype) and, for a periodic one, the cycle time. Each error that bench.toml can
+    fix names the key that fixes it (bench.database.overrides)."""
     if diagnostic_kind(message):   # ISO-TP traffic on request: no cycle time, no send type (bench.diag)
         return
+    at_type = lines.message_attr.get((_dbc_id(message), "GenMsgSendType"))
+    try:
+        how = sendtype.sending(message, definitions, supplied.get(overrides.SEND_TYPE))
+    except sendtype.SendTypeError as exc:
+        add(ERROR, "send-type", f"{exc}; " + overrides.hint(message.name, overrides.SEND_TYPE, '"cyclic"'), at_type)
+        return
+    if how.source.startswith("no GenMsgSendType"):
+        add(WARNING, "send-type",
+            f"{how.source}; " + overrides.hint(message.name, overrides.SEND_TYPE, f'"{how.kind}"'))
+    if not how.periodic:
+        return      # sent when a value is set: no cycle time needed
     cycle_hint = overrides.hint(message.name, overrides.CYCLE_TIME, "<ms>")
     if overrides.CYCLE_TIME in supplied:
         pass   # bench.toml gives it: whatever the database says
@@ -459,21 +472,12 @@ def _check_timing(message: Message, lines: _Lines, defaults: dict[str, object], 
         cycle, explicit = _attribute(message, "GenMsgCycleTime", defaults)
         at = lines.message_attr.get((_dbc_id(message), "GenMsgCycleTime"))
         if cycle is None:
-            add(ERROR, "cycle-time", f"no GenMsgCycleTime: the restbus cannot send it periodically; {cycle_hint}")
+            add(ERROR, "cycle-time", f"no GenMsgCycleTime for its send type {how.kind} ({how.source}): the restbus "
+                f"cannot send it periodically; {cycle_hint}")
         elif not isinstance(cycle, (int, float)) or not math.isfinite(cycle) or cycle <= 0:
             origin = "" if explicit else " (the attribute's default; the message sets none)"
-            add(ERROR, "cycle-time", f"GenMsgCycleTime {cycle!r}{origin} is not a positive number of ms: "
-                f"the restbus would never send it; {cycle_hint}", at)
-    if message.dbc is None or overrides.SEND_TYPE in supplied:
-        return
-    send_type = message.send_type
-    at = lines.message_attr.get((_dbc_id(message), "GenMsgSendType"))
-    if send_type is None:
-        add(ERROR, "send-type", "no GenMsgSendType: the restbus does not know how to send it; "
-            + overrides.hint(message.name, overrides.SEND_TYPE, '"cyclic"'))
-    elif "cyclic" not in str(send_type).lower():
-        add(WARNING, "send-type", f"GenMsgSendType {send_type!r} is not cyclic: the restbus sends every "
-            "message at its cycle time", at)
+            add(ERROR, "cycle-time", f"GenMsgCycleTime {cycle!r}{origin} is not a positive number of ms, and its "
+                f"send type {how.kind} ({how.source}) is periodic; {cycle_hint}", at)
 
 
 def _bits(signal: Signal) -> list[int]:

@@ -31,7 +31,7 @@ from cantools.database import errors as cantools_errors
 from cantools.database.can import Database, Message, Signal
 
 from bench import canid, e2e
-from bench.database import overrides
+from bench.database import overrides, sendtype
 from bench.errors import DatabaseError, SignalError, did_you_mean
 
 
@@ -136,9 +136,11 @@ class MessageCodec:
     """Encode and decode one message; E2E bytes are left to `bench.e2e`."""
 
     def __init__(self, message: Message, database_name: str, protection: e2e.Protection | None = None,
-                 cycle_time_ms: float | None = None, definitions: Mapping[str, Any] | None = None) -> None:
-        """`cycle_time_ms`: bench.toml's [messages.NAME] cycle time over the database's (bench.database.overrides);
-        `definitions`: the database's attribute definitions (defaults of the attributes a message does not set)."""
+                 cycle_time_ms: float | None = None, definitions: Mapping[str, Any] | None = None,
+                 send_type: str | None = None) -> None:
+        """`cycle_time_ms`, `send_type`: bench.toml's [messages.NAME] over the database's (bench.database.overrides);
+        `definitions`: the database's attribute definitions (defaults of the attributes a message does not set).
+        A send type the bench cannot use raises sendtype.SendTypeError."""
         self.message = message
         self.database = database_name
         self.name: str = message.name
@@ -155,6 +157,16 @@ class MessageCodec:
         self.cycle_time: float | None = cycle_ms / 1000.0 if cycle_ms else None
         #: "request" / "response": ISO-TP traffic (bench.diag), judged by its framing, never by cycle, E2E or range
         self.diagnostic: str = diagnostic_kind(message)
+        #: how it is sent (bench.database.sendtype): the restbus sends it so, the monitor judges it so; a diagnostic
+        #: message is written by the diagnostic stack on request
+        self.sending: sendtype.Sending = (sendtype.Sending(sendtype.ON_WRITE, source="diagnostic message")
+                                          if self.diagnostic else sendtype.sending(message, definitions, send_type))
+        #: each signal's inactive value (a cyclic_if_active message is silent while every signal has it)
+        self.inactive: dict[str, float] | None = None
+        if self.sending.kind == sendtype.IF_ACTIVE:
+            raw = sendtype.inactive_values(message, definitions) or {}
+            self.inactive = {s.name: raw[s.name] * float(s.scale) + float(s.offset) if s.name in raw
+                             else (s.raw_initial or 0) * float(s.scale) + float(s.offset) for s in message.signals}
         self.signals: tuple[SignalCodec, ...] = tuple(
             SignalCodec(
                 name=s.name, start=s.start, length=s.length, signed=s.is_signed,
@@ -522,7 +534,12 @@ class Codebook:
                     over = f" (with bench.toml [e2e.{message.name}])" if message.name in protections else ""
                     raise DatabaseError(f"{db_name}{over}: {exc}") from None
                 cycle_ms = overrides.cycle_time_ms(message_overrides, message.name)
-                codec = MessageCodec(message, db_name, protection, cycle_ms, definitions)
+                try:
+                    codec = MessageCodec(message, db_name, protection, cycle_ms, definitions,
+                                         overrides.send_type(message_overrides, message.name))
+                except sendtype.SendTypeError as exc:
+                    raise DatabaseError(f"{db_name}: message {message.name}: {exc}; "
+                                        + overrides.hint(message.name, overrides.SEND_TYPE, '"cyclic"')) from None
                 other = self.by_id.get(codec.frame_id) or self.by_name.get(codec.name)
                 if other is not None:
                     raise DatabaseError(

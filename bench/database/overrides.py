@@ -6,7 +6,7 @@ own value, the way `[e2e.NAME]` supplies end-to-end protection:
 
     [messages.BrakeStatus]
     cycle_time_ms = 10
-    send_type = "cyclic"
+    send_type = "cyclic"        # or on_change, on_write, cyclic_if_active, cyclic_and_on_change
 
 Only the form is checked when bench.toml is read (`bench.config`); a message name no database has is refused with the
 databases (`bench.database.codec.Codebook`, `bench dbc check`), with the name meant.
@@ -17,14 +17,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from bench.database import sendtype
 from bench.errors import did_you_mean
 
 TABLE = "messages"
 CYCLE_TIME = "cycle_time_ms"
 SEND_TYPE = "send_type"
 KEYS = (CYCLE_TIME, SEND_TYPE)
-#: The send types the restbus has: it sends every message periodically at its cycle time.
-SEND_TYPES = ("cyclic",)
+SEND_TYPES = sendtype.KINDS      # send_type's values (bench.database.sendtype)
 
 MessageOverrides = Mapping[str, Mapping[str, Any]]
 
@@ -33,6 +33,12 @@ def cycle_time_ms(overrides: MessageOverrides | None, message: str) -> float | N
     """The cycle time bench.toml gives this message, ms; None when it gives none."""
     value = (overrides or {}).get(message, {}).get(CYCLE_TIME)
     return None if value is None else float(value)
+
+
+def send_type(overrides: MessageOverrides | None, message: str) -> str | None:
+    """The send type bench.toml gives this message; None when it gives none."""
+    value = (overrides or {}).get(message, {}).get(SEND_TYPE)
+    return None if value is None else str(value)
 
 
 def unknown_messages(overrides: MessageOverrides | None, names: list[str]) -> list[str]:

@@ -1,4 +1,8 @@
-"""Restbus simulation: every message of the simulated nodes, sent at its DBC cycle time.
+"""Restbus simulation: every message of the simulated nodes, sent by its send type (bench.database.sendtype).
+
+Cyclic messages go out at their cycle time; event messages (on change, on write) when a value is set, at least
+their minimum gap apart and repeated as their database says; a cyclic-if-active message only while a signal differs
+from its inactive value (and once more when it goes inactive); a cyclic-and-on-change message both ways.
 
 Values start at the DBC start values; code (a test case or a node's behaviour) sets them by name.
 The E2E counter and CRC are filled here by each message's profile (`bench.e2e.Protection`, docs/spec/e2e.md).
@@ -16,6 +20,7 @@ import heapq
 from collections.abc import Collection, Iterator, Mapping
 
 from bench import canid
+from bench.database import sendtype
 from bench.database.codec import Codebook, MessageCodec
 from bench.errors import ConfigError, SignalError
 
@@ -23,9 +28,10 @@ from bench.errors import ConfigError, SignalError
 TICK_FIT = 1e-6
 
 
-class _Periodic:
+class _Slot:
     __slots__ = ("codec", "values", "period", "next_due", "counter", "enabled", "sent_values", "payload", "frames",
-                 "order", "modulo")
+                 "order", "modulo", "kind", "periodic", "events", "pending", "next_event", "gap", "repeat", "start",
+                 "inactive_sent", "plain_cyclic")
 
     def __init__(self, codec: MessageCodec, order: int) -> None:
         self.codec = codec
@@ -42,9 +48,19 @@ class _Periodic:
         self.payload = b""
         self.modulo = codec.protection.counter_modulo if codec.protection is not None else 1
         self.frames: list[bytes | None] = [None] * self.modulo
+        sending = codec.sending
+        self.kind = sending.kind
+        self.periodic = sending.periodic       # on the schedule at its cycle time
+        self.events = sending.events           # sent when a value is set (on change, on write)
+        self.plain_cyclic = sending.kind == sendtype.CYCLIC   # a frame every cycle, whatever its values
+        self.pending = 0                       # event frames still to send (the frame and its repetitions)
+        self.next_event = 0                    # first tick an event frame may go out (its minimum gap after the last)
+        self.gap = self.repeat = 1             # ticks: the minimum gap between event frames; between repetitions
+        self.start = 0                         # ticks before its first frame (GenMsgStartDelayTime)
+        self.inactive_sent = True              # cyclic_if_active: its last frame said "inactive" (or none yet): silent
 
 
-def _order(slot: _Periodic) -> int:
+def _order(slot: _Slot) -> int:
     return slot.order
 
 
@@ -59,16 +75,19 @@ class Restbus:
     def __init__(self, codebook: Codebook, nodes: Collection[str]) -> None:
         self.codebook = codebook
         self.nodes = frozenset(nodes)
-        self.periodic: dict[str, _Periodic] = {}
+        self.slots: dict[str, _Slot] = {}
         for codec in sorted(codebook.sent_by(self.nodes), key=lambda c: c.frame_id):
-            if codec.cycle_time is not None:
-                self.periodic[codec.name] = _Periodic(codec, len(self.periodic))
+            if codec.diagnostic or (codec.sending.periodic and codec.cycle_time is None):
+                continue   # sent by the diagnostic stack; a periodic one without a cycle time (bench dbc check)
+            self.slots[codec.name] = _Slot(codec, len(self.slots))
+        #: event messages with frames to send (an event frame's minimum gap or repetitions may still hold them)
+        self.events: list[_Slot] = []
         self.dt: float | None = None   # s per tick, from the scheduler; None: no tick yet, nothing scheduled
         # The schedule: (next due tick, order, message), so a tick looks at the messages due then, not at all of
         # them; a stopped message that falls due waits aside (parked) until it is resumed. Read-only for others:
         # schedule[0][0] is the next due tick (a station skips `due` before it). Filled in place by `set_tick`.
-        self.schedule: list[tuple[int, int, _Periodic]] = []
-        self._parked: dict[int, _Periodic] = {}
+        self.schedule: list[tuple[int, int, _Slot]] = []
+        self._parked: dict[int, _Slot] = {}
 
     def set_tick(self, dt: float) -> None:
         """Schedule every message on ticks of `dt` seconds: its period is its DBC cycle time in ticks, its first
@@ -79,8 +98,14 @@ class Restbus:
             return
         if not dt > 0:
             raise ConfigError(f"restbus: a tick of {dt!r} s is no tick (it must be a positive number of seconds)")
-        periods: list[tuple[_Periodic, int]] = []
-        for slot in self.periodic.values():
+        periods: list[tuple[_Slot, int]] = []
+        for slot in self.slots.values():
+            sending = slot.codec.sending
+            slot.gap = max(1, round(sending.min_gap / dt))
+            slot.repeat = max(1, round(sending.repeat_gap / dt))
+            slot.start = slot.next_event = round(sending.start_delay / dt)
+            if not slot.periodic:
+                continue
             cycle = slot.codec.cycle_time
             assert cycle is not None
             ticks = cycle / dt
@@ -93,9 +118,9 @@ class Restbus:
         self.dt = dt
         for slot, period in periods:
             slot.period = period
-            slot.next_due = canid.arbitration_id(slot.codec.frame_id) % period
+            slot.next_due = slot.start or canid.arbitration_id(slot.codec.frame_id) % period
         self._parked.clear()
-        self.schedule[:] = [(p.next_due, p.order, p) for p in self.periodic.values()]
+        self.schedule[:] = [(p.next_due, p.order, p) for p in self.slots.values() if p.periodic]
         heapq.heapify(self.schedule)
 
     def set(self, message: str, **signals: float | int | str) -> None:
@@ -103,12 +128,27 @@ class Restbus:
         slot = self._slot(message)
         for name, value in signals.items():
             slot.codec.physical(name, value)
+        if slot.events:
+            self._event(slot, signals)
         slot.values.update(signals)
 
     def set_unchecked(self, message: str, signals: Mapping[str, float | int | str]) -> None:
         """Set values without checking now (for behaviours stepping every tick); checked at send."""
-        slot = self.periodic.get(message)
-        (self._slot(message) if slot is None else slot).values.update(signals)
+        slot = self.slots.get(message)
+        if slot is None:
+            slot = self._slot(message)
+        if slot.events:
+            self._event(slot, signals)
+        slot.values.update(signals)
+
+    def _event(self, slot: _Slot, signals: Mapping[str, float | int | str]) -> None:
+        """An event message was written (before its values change): its frame and repetitions become due, for an
+        on-change one only when a value changes."""
+        if slot.kind != sendtype.ON_WRITE and all(slot.values.get(k) == v for k, v in signals.items()):
+            return
+        slot.pending = 1 + slot.codec.sending.repetitions
+        if slot not in self.events:
+            self.events.append(slot)
 
     def value(self, message: str, signal: str) -> float:
         """What the restbus sends for one signal now (physical; an enumeration's number): a simulated node's live
@@ -121,10 +161,13 @@ class Restbus:
 
     def reset_values(self, message: str) -> None:
         slot = self._slot(message)
-        slot.values = dict(slot.codec.start_values())
+        start = slot.codec.start_values()
+        if slot.events and slot.values != start:
+            self._event(slot, start)
+        slot.values = dict(start)
 
     def reset_all(self) -> None:
-        for name in self.periodic:
+        for name in self.slots:
             self.reset_values(name)
 
     def stop_sending(self, message: str) -> None:
@@ -139,8 +182,8 @@ class Restbus:
         if self._parked.pop(slot.order, None) is not None:
             heapq.heappush(self.schedule, (slot.next_due, slot.order, slot))
 
-    def _slot(self, message: str) -> _Periodic:
-        slot = self.periodic.get(message)
+    def _slot(self, message: str) -> _Slot:
+        slot = self.slots.get(message)
         if slot is None:
             codec = self.codebook[message]
             raise SignalError(f"{message} is sent by {', '.join(codec.senders)}, which this bus handle "
@@ -148,10 +191,15 @@ class Restbus:
         return slot
 
     def due(self, tick: int) -> Iterator[tuple[int, bytes]]:
-        """The frames due at this tick, each with its counter and checksum, in the messages' order."""
+        """The frames due at this tick, each with its counter and checksum: the periodic ones in the messages' order,
+        then the event frames whose minimum gap has passed."""
         queue = self.schedule
-        if not queue or queue[0][0] > tick:
-            return
+        if queue and queue[0][0] <= tick:
+            yield from self._periodic_due(queue, tick)
+        if self.events:
+            yield from self._events_due(tick)
+
+    def _periodic_due(self, queue: list[tuple[int, int, _Slot]], tick: int) -> Iterator[tuple[int, bytes]]:
         ready = []
         while queue and queue[0][0] <= tick:
             ready.append(heapq.heappop(queue)[2])
@@ -168,12 +216,38 @@ class Restbus:
                 if slot.next_due <= tick:           # fell behind (real time): skip, do not burst
                     slot.next_due = tick + slot.period
                 heapq.heappush(queue, (slot.next_due, slot.order, slot))
+                if not slot.plain_cyclic and slot.kind == sendtype.IF_ACTIVE and not self._active(slot):
+                    if slot.inactive_sent:
+                        continue             # inactive, and its last frame said so: silent until a value changes
+                    slot.inactive_sent = True
+                else:
+                    slot.inactive_sent = False
                 yield slot.codec.send_id, self.build(slot)
         finally:   # the caller stopped early (or a value was refused): the rest stay due
             for slot in ready[done:]:
                 heapq.heappush(queue, (slot.next_due, slot.order, slot))
 
-    def build(self, slot: _Periodic) -> bytes:
+    def _events_due(self, tick: int) -> Iterator[tuple[int, bytes]]:
+        for slot in list(self.events):
+            if not slot.enabled or tick < slot.next_event:
+                continue
+            slot.pending -= 1
+            slot.next_event = tick + (slot.repeat if slot.pending else slot.gap)
+            if not slot.pending:
+                self.events.remove(slot)
+            yield slot.codec.send_id, self.build(slot)
+
+    @staticmethod
+    def _active(slot: _Slot) -> bool:
+        """Whether a cyclic-if-active message has a signal away from its inactive value."""
+        inactive = slot.codec.inactive or {}
+        for name, value in slot.values.items():
+            number = float(slot.codec.by_name[name].choices[value]) if isinstance(value, str) else value
+            if name in inactive and number != inactive[name] and name not in slot.codec.e2e_signals:
+                return True
+        return False
+
+    def build(self, slot: _Slot) -> bytes:
         """The next frame of a message: its values checked and encoded (or the last frame's payload when they
         are unchanged), then its counter and checksum."""
         codec = slot.codec

@@ -25,7 +25,7 @@ from bench.transport import ReceivedFrame, Transport, transport_for
 
 if TYPE_CHECKING:
     from bench.checks.timing import SelfTiming
-    from bench.sim.restbus import _Periodic
+    from bench.sim.restbus import _Slot
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +39,7 @@ POLL_BATCH = 64
 LATE_CYCLES = 2
 
 
-def _due_ticks(schedule: Sequence[tuple[int, int, _Periodic]], tick: int) -> dict[int, int]:
+def _due_ticks(schedule: Sequence[tuple[int, int, _Slot]], tick: int) -> dict[int, int]:
     """{frame id: the tick it was due at} of the restbus' schedule entries due by `tick` (a heap: only the entries
     that are due and their children are looked at)."""
     out: dict[int, int] = {}
@@ -74,12 +74,12 @@ class _StationIO:
 
     def stop_sending(self, message: str) -> None:
         restbus = self._station.restbus
-        if message in restbus.periodic:      # a message of an external node is not this station's to switch
+        if message in restbus.slots:      # a message of an external node is not this station's to switch
             restbus.stop_sending(message)
 
     def resume_sending(self, message: str) -> None:
         restbus = self._station.restbus
-        if message in restbus.periodic:
+        if message in restbus.slots:
             restbus.resume_sending(message)
 
     # A behaviour lives in the tick's time (the time it steps to): received frames time out against it, without
@@ -148,7 +148,7 @@ class Station:
         # back a sender's own frames. A frame with our identifier and other data is a foreign sender:
         # it reaches the monitor (which will flag its counter). Bounded: only the last few are kept.
         self._echoes: dict[int, deque[bytes]] = {
-            p.codec.send_id: deque(maxlen=ECHO_WINDOW) for p in restbus.periodic.values()}
+            p.codec.send_id: deque(maxlen=ECHO_WINDOW) for p in restbus.slots.values()}
         # socketcan only: the kernel's broadcast manager sends the messages whose payload stays (periodic sending
         # offered by the transport, bench/transport/periodic.py)
         self.kernel = self.transport.periodic(restbus)
@@ -292,8 +292,8 @@ class Station:
                     self.send(t, frame_id, data)
         else:
             schedule = self._schedule
-            if schedule and schedule[0][0] <= tick:   # Restbus.due's own first test, without its generator
-                if self.send_clock is not None:
+            if (schedule and schedule[0][0] <= tick) or self.restbus.events:   # Restbus.due's own tests
+                if self.send_clock is not None and schedule and schedule[0][0] <= tick:
                     self._due = _due_ticks(schedule, tick)
                 for frame_id, data in self.restbus.due(tick):
                     self.send(t, frame_id, data)

@@ -101,7 +101,7 @@ class _Task:
                  "last_counter", "next_check", "checked")
 
     def __init__(self, slot: Any, frame_id: int, task: Any, payload: bytes, base: int, t0: float) -> None:
-        self.slot = slot                 # the restbus' _Periodic
+        self.slot = slot                 # the restbus' _Slot
         self.frame_id = frame_id
         self.task = task                 # python-can's CyclicSendTask (a BCM TX_SETUP)
         self.payload = payload
@@ -121,8 +121,8 @@ class KernelPeriodic:
     def __init__(self, bus: Any, restbus: Restbus) -> None:
         self.bus = bus
         self.restbus = restbus
-        self.slots = {slot.codec.send_id: slot for slot in restbus.periodic.values()
-                      if slot.codec.length == FRAME_LENGTH and not slot.codec.frame_id & canid.FD
+        self.slots = {slot.codec.send_id: slot for slot in restbus.slots.values()
+                      if slot.plain_cyclic and slot.codec.length == FRAME_LENGTH and not slot.codec.frame_id & canid.FD
                       and (slot.codec.cycle_time or 0.0) >= MIN_CYCLE_S}
         self.tasks: dict[int, _Task] = {}
         self._last: dict[int, bytes] = {}

@@ -39,7 +39,7 @@ def test_start_scenario_uses_the_configured_names(on_bench: tuple[BenchSession, 
     assert protocol is not None
     case.start_scenario(Vehicle="EV4WIS")
     (command, id_signal), (ack, ack_signal) = protocol.command, protocol.ack
-    sent = session.runner.restbus.periodic[command].values[id_signal]            # type: ignore[union-attr]
+    sent = session.runner.restbus.slots[command].values[id_signal]            # type: ignore[union-attr]
     assert sent >= 1 and case.value(ack, ack_signal) == sent
     case.start_scenario(Vehicle="EV4WIS")                                          # the next id, acknowledged
     assert case.value(ack, ack_signal) == sent % 255 + 1                           # ScenarioId: 8 bits, 0..255

@@ -266,7 +266,7 @@ def test_e2e_table_is_read_by_autosar_names(tmp_path: Path) -> None:
     ("[messages.DRV_Steering]\ncycle_time_ms = 0\n", "cycle_time_ms must be a positive number of milliseconds"),
     ("[messages.DRV_Steering]\ncycle_time_ms = true\n", "cycle_time_ms must be a positive number of milliseconds"),
     ('[messages.DRV_Steering]\ncycle_time_ms = "10"\n', "cycle_time_ms must be a positive number of milliseconds"),
-    ('[messages.DRV_Steering]\nsend_type = "OnChange"\n', "send_type 'OnChange': the bench's restbus knows 'cyclic'"),
+    ('[messages.DRV_Steering]\nsend_type = "OnChange"\n', "is no send type the bench knows (did you mean 'on_change'"),
 ], ids=["typo", "prefix", "not-a-table", "profile-number", "id-text", "list-byte", "bool",
        "messages-typo", "messages-not-a-table", "messages-zero", "messages-bool", "messages-text",
        "messages-send-type"])

@@ -79,7 +79,7 @@ def test_a_second_vcu_joins(bench):
     session = bench.session
     second = Station("vcu-2", VirtualTimeBus(channel=session.channel), Restbus(session.codebook, {"VCU"}),
                      Monitor(session.codebook), session.now)
-    for slot in second.restbus.periodic.values():
+    for slot in second.restbus.slots.values():
         slot.counter = 9
     bench.every(0.001, lambda t: second.tick(round(t / 0.001), t, 0.001))
     bench.run(1.0)

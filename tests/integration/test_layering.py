@@ -153,8 +153,8 @@ def test_the_import_scan_sees_relative_and_from_imports() -> None:
 
 # -- the log package ------------------------------------------------------------------------------------------
 #: What bench/log/ may import of the bench besides itself: the frame checks it logs with, the errors, the version.
-LOG_MAY_IMPORT = {"bench", "bench.version", "bench.errors", "bench.database.codec", "bench.checks.monitor",
-                  "bench.config", "bench.diag"}
+LOG_MAY_IMPORT = {"bench", "bench.version", "bench.errors", "bench.canid", "bench.database.codec",
+                  "bench.checks.monitor", "bench.config", "bench.diag"}
 #: The one module that may reach into mcap's private state (its bytes are compared with mcap's public writer's,
 #: tests/bench/log/test_recorder.py).
 MCAP_FAST_PATH = "bench/log/mcapfast.py"
@@ -194,9 +194,9 @@ def test_no_private_mcap_name_outside_the_fast_path() -> None:
 
 
 # -- the transport package ------------------------------------------------------------------------------------
-#: What bench/transport/ may import of the bench besides itself: the errors, and, for its types and the kernel's
-#: periodic sending, the restbus it sends and the E2E protection of its frames.
-TRANSPORT_MAY_IMPORT = {"bench", "bench.errors", "bench.sim.restbus", "bench.e2e"}
+#: What bench/transport/ may import of the bench besides itself: the errors, a frame's identity (bench.canid), and,
+#: for its types and the kernel's periodic sending, the restbus it sends and the E2E protection of its frames.
+TRANSPORT_MAY_IMPORT = {"bench", "bench.errors", "bench.canid", "bench.sim.restbus", "bench.e2e"}
 
 
 def test_the_transport_package_sits_below_the_station() -> None:

@@ -15,7 +15,7 @@ def _frames(codebook: Codebook, message: str, count: int, **values: float) -> li
     restbus = Restbus(codebook, codebook[message].senders)
     if values:
         restbus.set(message, **values)
-    slot = restbus.periodic[message]
+    slot = restbus.slots[message]
     return [restbus.build(slot) for _ in range(count)]
 
 

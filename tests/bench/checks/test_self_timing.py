@@ -201,7 +201,7 @@ def _frames_with_gap(session: BenchSession, message: str, t0: float, gap_from: i
     `gap_from` (as `bench plant` in another process, stalled, would leave them)."""
     codec = session.codebook[message]
     restbus = Restbus(session.codebook, set(codec.senders))
-    slot = restbus.periodic[message]
+    slot = restbus.slots[message]
     times = [t0 + 0.01 * i for i in range(1, gap_from + 1)] + [t0 + 0.1 + 0.01 * i for i in range(gap_from, 20)]
     for t in times:
         session.monitor.on_frame(t, codec.frame_id, restbus.build(slot), "rx")
@@ -235,7 +235,7 @@ def test_a_stalled_plant_gapping_only_its_own_io_is_no_failure_of_the_dut(
     for k, message in enumerate(("IO_SbwHandWheel", "IO_SbwPinion", "IO_SbwCurrents")):
         codec = session.codebook[message]
         assert codec.cycle_time == cycle and tuple(codec.senders) == ("PLANT",)
-        slot = restbus.periodic[message]
+        slot = restbus.slots[message]
         times = [case.start + 0.001 * k + cycle * i for i in range(1, 11)]
         times += [times[-1] + stall + cycle * i for i in range(10)]
         for t in times:
@@ -259,7 +259,7 @@ def test_a_plant_stall_seen_past_its_bound_only_on_its_5_ms_io_is_no_failure_of_
         codec = session.codebook[message]
         cycle = codec.cycle_time
         assert cycle is not None and tuple(codec.senders) == ("PLANT",)
-        slot = restbus.periodic[message]
+        slot = restbus.slots[message]
         times = [case.start + cycle * i for i in range(1, round(0.05 / cycle) + 1)]   # both stall at +0.05 s
         times += [times[-1] + stall + cycle * i for i in range(10)]
         for t in times:
@@ -335,7 +335,7 @@ def test_a_history_beyond_the_bench_limit_is_the_benchs_error(monkeypatch: pytes
     codebook = load_codebook(load_config().databases)
     monitor = Monitor(codebook, keep_history=True)
     restbus = Restbus(codebook, codebook["DRV_Pedals"].senders)
-    slot = restbus.periodic["DRV_Pedals"]
+    slot = restbus.slots["DRV_Pedals"]
     frame_id = slot.codec.frame_id
     monitor.history_from = 0.0
     for i in range(300):   # within the limit: all kept

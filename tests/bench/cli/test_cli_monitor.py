@@ -162,7 +162,7 @@ def test_the_view_shows_e2e_errors_unknown_ids_and_timeouts(codebook: Codebook) 
 
     restbus = Restbus(codebook, ["WHL_FL"])
     restbus.set("WHL_Status_FL", SteerAngle=12.5)
-    slot = restbus.periodic["WHL_Status_FL"]
+    slot = restbus.slots["WHL_Status_FL"]
     frame_id = codebook["WHL_Status_FL"].frame_id
     live = LiveMonitor(Monitor(codebook), window=2.0)
     for i in range(100):                                  # 1 s of frames every 10 ms, stamped 1000 s + t

@@ -203,16 +203,25 @@ def test_zero_cycle_time_points_at_its_attribute() -> None:
     assert finding.line == line_of(text, '"GenMsgCycleTime" BO_ 256')
 
 
-def test_send_type_missing_and_not_cyclic() -> None:
-    missing = GOOD.replace('BA_ "GenMsgSendType" BO_ 256 0;\n', "").replace(
-        'BA_DEF_ BO_  "GenMsgSendType" ENUM  "Cyclic","NoMsgSendType";\n', "").replace(
-        'BA_DEF_DEF_  "GenMsgSendType" "NoMsgSendType";\n', "")
-    assert only(errors(check_text(missing), "send-type"))
-    event = GOOD.replace('BA_ "GenMsgSendType" BO_ 256 0;', 'BA_ "GenMsgSendType" BO_ 256 1;')
-    result = check_text(event)
-    finding = only(warnings(result, "send-type"))
-    assert "NoMsgSendType" in finding.text and finding.line == line_of(event, '"GenMsgSendType" BO_ 256')
-    assert result.accepted
+NO_SEND_TYPE = GOOD.replace('BA_ "GenMsgSendType" BO_ 256 0;\n', "").replace(
+    'BA_DEF_ BO_  "GenMsgSendType" ENUM  "Cyclic","NoMsgSendType";\n', "").replace(
+    'BA_DEF_DEF_  "GenMsgSendType" "NoMsgSendType";\n', "")
+
+
+def test_send_type_missing_event_and_unknown() -> None:
+    """No send type at all: the bench's default (cyclic, it has a cycle time), a warning naming the key; an event
+    send type needs no cycle time; a send type the bench does not know is an error naming the key."""
+    missing = only(warnings(check_text(NO_SEND_TYPE), "send-type"))
+    assert "no GenMsgSendType: cyclic" in missing.text and 'send_type = "cyclic"' in missing.text
+    event = GOOD.replace('BA_ "GenMsgSendType" BO_ 256 0;', 'BA_ "GenMsgSendType" BO_ 256 1;').replace(
+        'BA_ "GenMsgCycleTime" BO_ 256 10;\n', "")
+    result = check_text(event)        # NoMsgSendType: sent when written (on_write), no cycle time needed
+    assert result.accepted and not errors(result, "send-type") and not errors(result, "cycle-time")
+    unknown = GOOD.replace('"Cyclic","NoMsgSendType"', '"Cyclic","NotUsed"').replace(
+        'BA_ "GenMsgSendType" BO_ 256 0;', 'BA_ "GenMsgSendType" BO_ 256 1;')
+    finding = only(errors(check_text(unknown), "send-type"))
+    assert "'NotUsed' is no send type the bench knows" in finding.text and 'send_type = "cyclic"' in finding.text
+    assert finding.line == line_of(unknown, '"GenMsgSendType" BO_ 256')
 
 
 def test_timing_errors_name_the_bench_toml_key_that_fixes_them() -> None:
@@ -222,12 +231,11 @@ def test_timing_errors_name_the_bench_toml_key_that_fixes_them() -> None:
     assert "bench.toml [messages.ECU_Status] cycle_time_ms = <ms>" in only(errors(check_text(no_cycle),
                                                                                   "cycle-time")).text
     assert check_text(no_cycle, message_overrides={"ECU_Status": {"cycle_time_ms": 10}}).accepted
-    no_send_type = GOOD.replace('BA_ "GenMsgSendType" BO_ 256 0;\n', "").replace(
-        'BA_DEF_ BO_  "GenMsgSendType" ENUM  "Cyclic","NoMsgSendType";\n', "").replace(
-        'BA_DEF_DEF_  "GenMsgSendType" "NoMsgSendType";\n', "")
-    assert 'bench.toml [messages.ECU_Status] send_type = "cyclic"' in only(errors(check_text(no_send_type),
+    unknown = GOOD.replace('"Cyclic","NoMsgSendType"', '"Cyclic","NotUsed"').replace(
+        'BA_ "GenMsgSendType" BO_ 256 0;', 'BA_ "GenMsgSendType" BO_ 256 1;')
+    assert 'bench.toml [messages.ECU_Status] send_type = "cyclic"' in only(errors(check_text(unknown),
                                                                                   "send-type")).text
-    assert check_text(no_send_type, message_overrides={"ECU_Status": {"send_type": "cyclic"}}).accepted
+    assert check_text(unknown, message_overrides={"ECU_Status": {"send_type": "cyclic"}}).accepted
 
 
 def test_a_projects_messages_table_reaches_dbc_check(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -584,10 +592,8 @@ KNOWN_REJECTIONS = {
     "LICENSE-cantools": "syntax",             # not a DBC at all
     "bad_message_length.dbc": "fit",          # Signal1 at bit 8 of a 1-byte message
     "issue_63.dbc": "overlap",                # HtrRes and MaxRes share byte 5
-    "issue_725.dbc": "cycle-time",            # and GenSigStartValue 254, range [0|250]: a warning (--strict: error)
     "issue_199.dbc": "load",                  # a standard id wider than 11 bits: cantools refuses the file
     "multiplex.dbc": "multiplex",
-    "motohawk.dbc": "cycle-time",             # no GenMsgCycleTime anywhere
 }
 
 
@@ -609,13 +615,18 @@ def test_corpus_file_is_accepted_or_rejected_cleanly(path: Path, capsys: pytest.
 
 
 @pytest.mark.skipif(not CORPUS_FILES, reason=f"no corpus at {CORPUS}")
-def test_corpus_accepts_only_files_without_messages() -> None:
-    """Every message of the corpus lacks something the restbus needs (a cycle time at least), so only the
-    files with no message at all are accepted (with a warning)."""
+def test_corpus_accepts_a_file_only_when_each_message_can_be_sent() -> None:
+    """An accepted file's periodic messages (Vector's Cyclic or IfActive, or no send type with a cycle time) each
+    have a positive cycle time, counted here from cantools' reading, not from the check's."""
     results = [check_file(p) for p in CORPUS_FILES]
-    accepted = {r.path.name for r in results if r.accepted}
-    assert accepted and all(r.messages == 0 for r in results if r.accepted)
-    assert all(r.findings for r in results)
+    accepted = [r.path for r in results if r.accepted]
+    assert accepted and all(r.findings for r in results)
+    for path in accepted:
+        for message in cantools.database.load_file(str(path), strict=False).messages:
+            declared = str(message.send_type or "").lower()
+            periodic = "cyclic" in declared or "ifactive" in declared or (not declared and message.cycle_time)
+            if periodic and not message.is_multiplexed():
+                assert message.cycle_time and message.cycle_time > 0, (path.name, message.name)
 
 
 # -- the ARXML corpus: no line numbers, findings name the message --------------------------------------------

@@ -45,7 +45,7 @@ def sent(book: Codebook, name: str, count: int) -> list[bytes]:
     """`count` frames of a message as the bench's restbus builds them."""
     restbus = Restbus(book, ["ECU"])
     restbus.set(name, Level=42.0)
-    slot = restbus.periodic[name]
+    slot = restbus.slots[name]
     return [restbus.build(slot) for _ in range(count)]
 
 

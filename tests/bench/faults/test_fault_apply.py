@@ -11,7 +11,7 @@ MSG = "VCU_WheelCmd_FL"
 
 def _frame(codebook: Codebook) -> tuple[int, bytes]:
     restbus = Restbus(codebook, ["VCU"])
-    slot = restbus.periodic[MSG]
+    slot = restbus.slots[MSG]
     restbus.set(MSG, SteerAngleCmd=12.5)
     return slot.codec.frame_id, restbus.build(slot)
 

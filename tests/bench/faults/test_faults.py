@@ -25,7 +25,7 @@ ROOT = repo.ROOT
 
 def _frame(codebook: Codebook, counter: int = 5) -> tuple[int, bytes]:
     restbus = Restbus(codebook, ["VCU"])
-    slot = restbus.periodic[MSG]
+    slot = restbus.slots[MSG]
     slot.counter = counter
     restbus.set(MSG, SteerAngleCmd=12.5)
     return slot.codec.frame_id, restbus.build(slot)
@@ -93,7 +93,7 @@ def test_freezes_hold_the_value_at_the_fault_start(codebook: Codebook) -> None:
     plan = FaultPlan(codebook)
     counter_fault = plan.add(Fault("counter_freeze", MSG, 0, 9))
     restbus = Restbus(codebook, ["VCU"])
-    slot = restbus.periodic[MSG]
+    slot = restbus.slots[MSG]
     frame_id = slot.codec.frame_id
     counters = []
     for _ in range(3):

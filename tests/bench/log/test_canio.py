@@ -135,7 +135,7 @@ def test_writer_with_a_dbc_checks_and_decodes_like_a_run(tmp_path: Path) -> None
     codebook = load_codebook([CHASSIS_DBC])
     restbus = Restbus(codebook, ["WHL_FL"])
     restbus.set("WHL_Status_FL", SteerAngle=12.5)
-    slot = restbus.periodic["WHL_Status_FL"]
+    slot = restbus.slots["WHL_Status_FL"]
     frame_id = codebook["WHL_Status_FL"].frame_id
     log = tmp_path / "decoded.mcap"
     with can.Logger(str(log), dbc=f"{CHASSIS_DBC},{BENCH_DBC}") as writer:

@@ -122,7 +122,7 @@ def test_injected_faults_are_no_second_sender(codebook: Codebook, kind: str, par
     plan = FaultPlan(codebook)
     plan.add(Fault(kind, MESSAGE, 0.2, 0.6, param))
     restbus = Restbus(codebook, codebook[MESSAGE].senders)
-    slot = restbus.periodic[MESSAGE]
+    slot = restbus.slots[MESSAGE]
     monitor = Monitor(codebook)
     frame_id = codebook[MESSAGE].frame_id
     delayed: list[tuple[float, bytes]] = []
@@ -186,7 +186,7 @@ def test_two_senders_on_the_virtual_bus(codebook: Codebook) -> None:
     stations = []
     for name, bus, start in (("vcu-1", buses[0], 0), ("vcu-2", buses[1], 9)):
         restbus = Restbus(codebook, {"VCU"})
-        for slot in restbus.periodic.values():
+        for slot in restbus.slots.values():
             slot.counter = start       # the second VCU's counters 9 ahead
         stations.append(Station(name, bus, restbus, Monitor(codebook), lambda: clock["t"]))
     watcher = Monitor(codebook)

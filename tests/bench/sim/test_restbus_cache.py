@@ -99,7 +99,7 @@ def test_cached_frames_equal_a_fresh_encoding(scenario: tuple[str, list[tuple[st
     name, steps = scenario
     codec = CODEBOOK[name]
     restbus = Restbus(CODEBOOK, codec.senders)
-    slot = restbus.periodic[name]
+    slot = restbus.slots[name]
     model: dict[str, object] = dict(codec.start_values())
     counter = 0
     for kind, values in steps:
@@ -130,7 +130,7 @@ def test_a_bad_value_is_refused_at_every_send(codebook: Codebook, name: str) -> 
     """A value set unchecked that is out of range is refused at every send, not only the first, even after the
     same message was sent (and cached) with good values; the counter does not move for a refused frame."""
     restbus = Restbus(codebook, codebook[name].senders)
-    slot = restbus.periodic[name]
+    slot = restbus.slots[name]
     first = restbus.build(slot)
     assert restbus.build(slot) != first       # another counter
     signal = next(s for s in codebook[name].signals if s.maximum is not None and s.name != "Checksum")
@@ -146,7 +146,7 @@ def test_a_bad_value_is_refused_at_every_send(codebook: Codebook, name: str) -> 
 
 def _scan_due(restbus: Restbus, tick: int) -> Iterator[tuple[int, bytes]]:
     """The restbus' schedule as it was written before its queue: every message looked at every tick."""
-    for slot in restbus.periodic.values():
+    for slot in restbus.slots.values():
         if tick < slot.next_due or not slot.enabled:
             continue
         slot.next_due += slot.period
@@ -169,7 +169,7 @@ def test_the_schedule_sends_what_a_scan_of_every_message_sent(node: str, steps: 
     ours, theirs = Restbus(CODEBOOK, nodes), Restbus(CODEBOOK, nodes)
     ours.set_tick(0.001)     # the scheduler's tick, given as a scheduler gives it
     theirs.set_tick(0.001)
-    names = sorted(ours.periodic)
+    names = sorted(ours.slots)
     tick = 0
     for skip, action, pick in steps:
         name = names[pick % len(names)]
