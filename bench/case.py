@@ -500,7 +500,11 @@ class Case:
                                 f"{state.last_valid:.3f} s)")
             return NoFrames(f"{message} timed out (last frame at {state.last_valid:.3f} s)")
         if signal not in latest:
-            self.session.codebook[message].physical(signal, 0.0)  # raises the clear error
+            codec = self.session.codebook[message]
+            codec.physical(signal, 0.0)  # raises the clear error
+            if codec.multiplexed:        # a signal of a variant not received yet
+                return NoFrames(f"no frame of {message} with {signal} (a multiplexed signal) since the scenario "
+                                "started")
         return latest[signal]
 
     def history(self, message: str, signal: str, since: float | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -271,13 +271,18 @@ class Monitor:
             if sink:
                 sink(CheckedFrame(t, frame_id, data, direction, True, "", codec, values))
             return False
-        state.latest = values
+        if codec.multiplexed:   # a frame carries its variant's signals: the others keep their last values
+            state.latest = {**(state.latest or {}), **values}
+        else:
+            state.latest = values
         state.last_valid = t
         state.last_invalid = False
         state.timed_out_flag = False
         if self.keep_history:
             state.history_t.append(t)
-            state.history_v.append(tuple(values.values()))
+            # (a multiplexed frame: NaN for the signals it does not carry, which `history` leaves out)
+            state.history_v.append(tuple(values.get(n, math.nan) for n in codec.signal_names) if codec.multiplexed
+                                   else tuple(values.values()))
             length = len(state.history_t)
             if length > 2 * HISTORY_CAP and length > state.history_limit:
                 self._trim_history(state)
@@ -468,6 +473,9 @@ class Monitor:
                              f"({self.history_from:.3f} s); from before it only the last {HISTORY_CAP}-"
                              f"{2 * HISTORY_CAP} frames are kept (from {ts[0]:.3f} s): ask for less")
         start = _first_at_or_after(ts, since)
+        if state.codec.multiplexed:   # the frames that carried the signal
+            pairs = [(t, v[index]) for t, v in zip(ts[start:], vs[start:]) if v[index] == v[index]]
+            return [t for t, _ in pairs], [v for _, v in pairs]
         return ts[start:], [v[index] for v in vs[start:]]
 
     @property

@@ -424,9 +424,6 @@ def _check_message(message: Message, lines: _Lines, defaults: dict[str, object],
     elif message.length != FRAME_LENGTH:
         add(WARNING, "frame-length", f"length {message.length} byte{'s' * (message.length != 1)}: the contract's "
             f"frames are {FRAME_LENGTH} bytes (docs/spec/k-matrix.md); the bench sends and judges it at its length")
-    if message.is_multiplexed():
-        add(ERROR, "multiplex", "multiplexed message: the bench's codec and monitor need every signal in "
-            "every frame")
     if not message.senders:
         add(WARNING, "sender", "no sender node: no node of the bench will simulate it")
     if not message.comment:

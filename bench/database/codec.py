@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -178,6 +178,18 @@ class MessageCodec:
             for s in message.signals
         )
         self.by_name: dict[str, SignalCodec] = {s.name: s for s in self.signals}
+        #: a multiplexed message's frames, one per combination of multiplexer values (the database's order): each
+        #: the multiplexer values and the signals that frame carries; () for a plain message
+        self.variants: tuple[tuple[dict[str, int], tuple[str, ...]], ...] = (
+            tuple(variants(message.signal_tree)) if message.is_multiplexed() else ())
+        self.multiplexed: bool = bool(self.variants)
+        #: each multiplexer signal's values in the database
+        self.multiplexer_values: dict[str, tuple[int, ...]] = {}
+        for chosen, _ in self.variants:
+            for name, value in chosen.items():
+                known = self.multiplexer_values.setdefault(name, ())
+                if value not in known:
+                    self.multiplexer_values[name] = (*known, value)
         self.signal_names: tuple[str, ...] = tuple(s.name for s in self.signals)
         # The end-to-end protection (docs/spec/e2e.md): from the database (DBC attributes or ARXML) or bench.toml,
         # checked by the Codebook; None: the message is unprotected (judged on its length, timing and ranges).
@@ -453,6 +465,21 @@ class MessageCodec:
             else:
                 out[name] = self.physical(name, value)
         return out
+
+
+def variants(tree: Sequence[Any]) -> list[tuple[dict[str, int], tuple[str, ...]]]:
+    """The frames a multiplexed message can be (cantools' `signal_tree`, cascaded multiplexers included): each the
+    values of its multiplexers and the signals it carries, in the database's order."""
+    found: list[tuple[dict[str, int], tuple[str, ...]]] = [({}, ())]
+    for node in tree:
+        if isinstance(node, str):
+            found = [(chosen, (*names, node)) for chosen, names in found]
+            continue
+        for multiplexer, branches in node.items():
+            found = [({**chosen, multiplexer: value, **inner}, (*names, multiplexer, *inner_names))
+                     for chosen, names in found for value, branch in branches.items()
+                     for inner, inner_names in variants(branch)]
+    return found
 
 
 def field_range(signal: Signal) -> tuple[float, float]:

@@ -16,8 +16,8 @@ for being silent, and a cyclic one is. The bench's names, and the database attri
 
 An event frame is repeated `GenMsgNrOfRepetition` times, `GenMsgCycleTimeFast` apart (else `GenMsgDelayTime`, else
 one tick); the first frame of any message waits `GenMsgStartDelayTime`. bench.toml's `[messages.NAME] send_type`
-(the names above) overrides the database's. An ARXML frame is cyclic when its timing has a cycle time, else on
-change; a DBC message without any GenMsgSendType is cyclic when it has a cycle time, else sent when written.
+(the names above) overrides the database's. An ARXML frame, and a DBC message without any GenMsgSendType, is cyclic
+when it has a cycle time, else sent when written.
 """
 
 from __future__ import annotations
@@ -104,8 +104,9 @@ def sending(message: Message, definitions: Mapping[str, Any] | None = None, over
         kind, source = kind_of(override), f"bench.toml send_type {override!r}"
         if kind is None:
             raise SendTypeError(f"send_type {override!r} is no send type the bench knows ({', '.join(KINDS)})")
-    elif message.dbc is None:     # ARXML: its timing has a cycle time or it is event-controlled
-        kind, source = (CYCLIC if message.cycle_time else ON_CHANGE), "the frame's timing"
+    elif message.dbc is None:     # ARXML: its timing has a cycle time, or it is sent when written
+        kind = CYCLIC if message.cycle_time else ON_WRITE
+        source = "the frame's cyclic timing" if message.cycle_time else "no cyclic timing: sent when written"
     else:
         declared = message.send_type if message.send_type is not None else attribute("GenMsgSendType")
         if declared is None:   # the database says nothing: cyclic with a cycle time (as an interaction layer)

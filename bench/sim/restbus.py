@@ -31,7 +31,7 @@ TICK_FIT = 1e-6
 class _Slot:
     __slots__ = ("codec", "values", "period", "next_due", "counter", "enabled", "sent_values", "payload", "frames",
                  "order", "modulo", "kind", "periodic", "events", "pending", "next_event", "gap", "repeat", "start",
-                 "inactive_sent", "plain_cyclic")
+                 "inactive_sent", "plain_cyclic", "variant", "pinned")
 
     def __init__(self, codec: MessageCodec, order: int) -> None:
         self.codec = codec
@@ -52,12 +52,15 @@ class _Slot:
         self.kind = sending.kind
         self.periodic = sending.periodic       # on the schedule at its cycle time
         self.events = sending.events           # sent when a value is set (on change, on write)
-        self.plain_cyclic = sending.kind == sendtype.CYCLIC   # a frame every cycle, whatever its values
+        # a frame every cycle, whatever its values, and the same frame while they stay (not multiplexed)
+        self.plain_cyclic = sending.kind == sendtype.CYCLIC and not codec.multiplexed
         self.pending = 0                       # event frames still to send (the frame and its repetitions)
         self.next_event = 0                    # first tick an event frame may go out (its minimum gap after the last)
         self.gap = self.repeat = 1             # ticks: the minimum gap between event frames; between repetitions
         self.start = 0                         # ticks before its first frame (GenMsgStartDelayTime)
         self.inactive_sent = True              # cyclic_if_active: its last frame said "inactive" (or none yet): silent
+        self.variant = 0                       # a multiplexed message: the index of its next frame's variant
+        self.pinned: dict[str, int] = {}       # multiplexer values a case set: only variants with them are sent
 
 
 def _order(slot: _Slot) -> int:
@@ -128,6 +131,8 @@ class Restbus:
         slot = self._slot(message)
         for name, value in signals.items():
             slot.codec.physical(name, value)
+            if name in slot.codec.multiplexer_values:
+                slot.pinned[name] = self._multiplexer_value(slot, name, value)
         if slot.events:
             self._event(slot, signals)
         slot.values.update(signals)
@@ -159,8 +164,21 @@ class Restbus:
             return float(slot.codec.by_name[signal].choices[value])
         return float(value)
 
+    @staticmethod
+    def _multiplexer_value(slot: _Slot, name: str, value: float | int | str) -> int:
+        """The raw multiplexer value a case sets (a SignalError naming the database's values when it has none)."""
+        codec = slot.codec
+        sig = codec.by_name[name]
+        raw = round((codec.physical(name, value) - sig.offset) / sig.scale)
+        known = codec.multiplexer_values[name]
+        if raw not in known:
+            raise SignalError(f"{codec.name}.{name}: {value!r} is no multiplexer value of the database "
+                              f"(its values: {', '.join(str(k * sig.scale + sig.offset) for k in known)})")
+        return raw
+
     def reset_values(self, message: str) -> None:
         slot = self._slot(message)
+        slot.pinned.clear()
         start = slot.codec.start_values()
         if slot.events and slot.values != start:
             self._event(slot, start)
@@ -238,6 +256,25 @@ class Restbus:
             yield slot.codec.send_id, self.build(slot)
 
     @staticmethod
+    def _next_variant(slot: _Slot) -> dict[str, float | int | str]:
+        """A multiplexed message's values for its next frame: the next of its variants (the database's order, one
+        per frame; only those with the multiplexer values a case set), its multiplexers set to that variant's."""
+        codec = slot.codec
+        pinned = slot.pinned
+        count = len(codec.variants)
+        for step in range(count):
+            index = (slot.variant + step) % count
+            chosen = codec.variants[index][0]
+            if all(chosen.get(name, value) == value for name, value in pinned.items()):
+                slot.variant = index + 1
+                values = dict(slot.values)
+                for name, raw in chosen.items():
+                    sig = codec.by_name[name]
+                    values[name] = raw * sig.scale + sig.offset
+                return values
+        return dict(slot.values)     # no variant has the pinned values (a cascaded one set alone): as set
+
+    @staticmethod
     def _active(slot: _Slot) -> bool:
         """Whether a cyclic-if-active message has a signal away from its inactive value."""
         inactive = slot.codec.inactive or {}
@@ -252,6 +289,8 @@ class Restbus:
         are unchanged), then its counter and checksum."""
         codec = slot.codec
         values = slot.values
+        if codec.multiplexed:
+            values = self._next_variant(slot)
         if values != slot.sent_values:
             snapshot = dict(values)          # what is checked is what the cache remembers
             data = codec.encode(codec.checked(snapshot))

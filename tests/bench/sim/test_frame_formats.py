@@ -156,3 +156,39 @@ def test_an_fd_database_on_a_classical_bus_is_refused_at_the_door(codebook: Code
     with pytest.raises(ConfigError, match=r"CAN FD messages on a bus opened as classical CAN: Fd64 .*fd = true"):
         resolve_bus_options(project, BusOptions(), codebook)
     assert resolve_bus_options(project, BusOptions(fd=True), codebook).fd is True
+
+
+def test_e2e_profile_5_protects_a_64_byte_fd_frame(tmp_path: Path) -> None:
+    """The fixture's Profile 5 message made a 64-byte CAN FD frame with a signal in its last bytes: the restbus's
+    frames pass autosar-e2e's own P05 check over all 64 bytes, the monitor applies them, and a bit flipped in byte
+    61 fails both."""
+    from e2e import p05
+
+    from tests.repo import ROOT
+
+    text = (ROOT / "tests" / "fixtures" / "e2e_profiles.dbc").read_text(encoding="utf-8")
+    text = text.replace("BO_ 261 P05_Status: 8 ECU", "BO_ 261 P05_Status: 64 ECU").replace(
+        ' SG_ Level : 24|16@1+ (0.1,0) [0|1000] "%" TESTER',
+        ' SG_ Level : 24|16@1+ (0.1,0) [0|1000] "%" TESTER\n SG_ Far : 488|16@1+ (1,0) [0|65535] "-" TESTER')
+    text += ('BA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN","ExtendedCAN","reserved","reserved","reserved",'
+             '"reserved","reserved","reserved","reserved","reserved","reserved","reserved","reserved","reserved",'
+             '"StandardCAN_FD","ExtendedCAN_FD";\nBA_ "VFrameFormat" BO_ 261 14;\n')
+    path = tmp_path / "fd_e2e.dbc"
+    path.write_text(text, encoding="utf-8")
+    from bench.database.codec import load_codebook
+
+    book = load_codebook([path])
+    codec = book["P05_Status"]
+    assert canid.is_fd(codec.frame_id) and codec.length == 64 and codec.protection is not None
+    restbus = Restbus(book, ["ECU"])
+    restbus.set("P05_Status", Level=42.0, Far=0xBEEF)
+    frames = [restbus.build(restbus.slots["P05_Status"]) for _ in range(20)]
+    assert all(len(f) == 64 and p05.e2e_p05_check(bytearray(f), 4661) for f in frames)
+    monitor = Monitor(book)
+    applied = [monitor.on_frame(k * 0.01, codec.frame_id, f, "rx") for k, f in enumerate(frames)]
+    assert applied == [False] + [True] * 19 and monitor.state("P05_Status").latest["Far"] == 0xBEEF
+    damaged = bytearray(frames[5])
+    damaged[61] ^= 0x01
+    assert not p05.e2e_p05_check(bytearray(damaged), 4661)
+    assert not monitor.on_frame(0.2, codec.frame_id, bytes(damaged), "rx")
+    assert monitor.invalid_log[-1].reason.startswith("E2E ERROR: CRC wrong")
