@@ -212,12 +212,10 @@ class Restbus:
         """The frames due at this tick, each with its counter and checksum: the periodic ones in the messages' order,
         then the event frames whose minimum gap has passed."""
         queue = self.schedule
-        if queue and queue[0][0] <= tick:
-            yield from self._periodic_due(queue, tick)
-        if self.events:
-            yield from self._events_due(tick)
-
-    def _periodic_due(self, queue: list[tuple[int, int, _Slot]], tick: int) -> Iterator[tuple[int, bytes]]:
+        if not queue or queue[0][0] > tick:
+            if self.events:
+                yield from self._events_due(tick)
+            return
         ready = []
         while queue and queue[0][0] <= tick:
             ready.append(heapq.heappop(queue)[2])
@@ -244,6 +242,8 @@ class Restbus:
         finally:   # the caller stopped early (or a value was refused): the rest stay due
             for slot in ready[done:]:
                 heapq.heappush(queue, (slot.next_due, slot.order, slot))
+        if self.events:
+            yield from self._events_due(tick)
 
     def _events_due(self, tick: int) -> Iterator[tuple[int, bytes]]:
         for slot in list(self.events):
