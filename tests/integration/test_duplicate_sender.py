@@ -12,6 +12,7 @@ import time
 import can
 import pytest
 
+from bench import canid
 from bench.checks.monitor import Monitor
 from bench.database.codec import Codebook
 from tests.child import Child
@@ -41,8 +42,7 @@ def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
         while not stop.is_set():
             msg = listener.recv(0.1)
             if msg is not None:
-                watcher.on_frame(time.monotonic() - t0, msg.arbitration_id, bytes(msg.data), "rx",
-                                 msg.is_extended_id, msg.is_error_frame)
+                watcher.on_frame(time.monotonic() - t0, canid.of_message(msg), bytes(msg.data), "rx")
 
     thread = threading.Thread(target=listen, daemon=True)
     thread.start()
@@ -69,6 +69,7 @@ def test_two_plant_processes_on_udp_multicast(codebook: Codebook) -> None:
 
 SECOND_VCU_CASE = '''
 from bench.transport import VirtualTimeBus
+from bench import canid
 from bench.checks.monitor import Monitor
 from bench.sim.restbus import Restbus
 from bench.sim.station import Station
