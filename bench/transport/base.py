@@ -10,7 +10,7 @@ here and in its adapter (bench.transport.embedded, .socketcan, .udp), never foun
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Protocol, final
 
 import can
 
@@ -35,6 +35,34 @@ class ReceivedFrame(Protocol):
     def is_extended_id(self) -> bool: ...
     @property
     def is_error_frame(self) -> bool: ...
+
+
+@final   # no subclasses: the embedded bus's receive paths test `type(item) is Frame`, the fast test
+class Frame:
+    """A received frame as the bench's own receivers hand it over: its frame_id (bench.canid: SocketCAN's can_id,
+    and the CAN FD flags above it), time and data, never changed. The embedded bus shares one with every receiver
+    (`VirtualTimeBus.send_raw`; python-can's `recv` turns it into the receiver's own can.Message), the SocketCAN
+    receiver makes one per frame it reads (bench.transport.socketcan_rx); the can.Message fields a station reads
+    (ReceivedFrame) come from the frame_id."""
+
+    __slots__ = ("timestamp", "frame_id", "data")
+
+    def __init__(self, timestamp: float, frame_id: int, data: bytes) -> None:
+        self.timestamp = timestamp
+        self.frame_id = frame_id
+        self.data = data
+
+    @property
+    def arbitration_id(self) -> int:
+        return canid.arbitration_id(self.frame_id)
+
+    @property
+    def is_extended_id(self) -> bool:
+        return canid.is_extended(self.frame_id)
+
+    @property
+    def is_error_frame(self) -> bool:
+        return canid.is_error(self.frame_id)
 
 
 class Transport(Protocol):

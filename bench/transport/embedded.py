@@ -16,12 +16,12 @@ import time
 import weakref
 from collections import deque
 from collections.abc import Iterable, Iterator
-from typing import Any, final
+from typing import Any
 
 import can
 
 from bench import canid
-from bench.transport.base import PythonCanTransport, ReceivedFrame
+from bench.transport.base import Frame, PythonCanTransport, ReceivedFrame
 
 _new_message = object.__new__
 
@@ -47,34 +47,7 @@ def _copy(msg: can.Message, channel: Any, is_rx: bool) -> can.Message:
     return copy
 
 
-@final   # no subclasses: the receive paths test `type(item) is VirtualFrame`, the fast test
-class VirtualFrame:
-    """A frame sent with `VirtualTimeBus.send_raw`: its frame_id (bench.canid: identifier, format and kind) and
-    data, which is what a station reads of a frame, one object shared by every receiver, never changed; a
-    python-can `recv` turns it into the receiver's own can.Message."""
-
-    __slots__ = ("timestamp", "frame_id", "data")
-
-    def __init__(self, timestamp: float, frame_id: int, data: bytes) -> None:
-        self.timestamp = timestamp
-        self.frame_id = frame_id
-        self.data = data
-
-    # what a station reads of a can.Message (bench.transport.base.ReceivedFrame)
-    @property
-    def arbitration_id(self) -> int:
-        return canid.arbitration_id(self.frame_id)
-
-    @property
-    def is_extended_id(self) -> bool:
-        return canid.is_extended(self.frame_id)
-
-    @property
-    def is_error_frame(self) -> bool:
-        return canid.is_error(self.frame_id)
-
-
-def _message(frame: VirtualFrame, channel: Any, is_rx: bool) -> can.Message:
+def _message(frame: Frame, channel: Any, is_rx: bool) -> can.Message:
     """A receiver's can.Message of a raw frame, as `_copy` makes one of a sent can.Message."""
     msg = _new_message(can.Message)
     msg.timestamp = frame.timestamp
@@ -93,7 +66,7 @@ def _message(frame: VirtualFrame, channel: Any, is_rx: bool) -> can.Message:
     return msg
 
 
-class _Inbox(deque[can.Message | VirtualFrame]):
+class _Inbox(deque[can.Message | Frame]):
     """One bus's pending frames. The channel registry holds inboxes, never buses, so a dropped bus is
     collected. `qsize()`/`empty()` as python-can's virtual bus exposes its `queue`."""
 
@@ -182,11 +155,11 @@ class VirtualTimeBus(can.BusABC):
 
     def send_raw(self, t: float, frame_id: int, data: bytes) -> None:
         """Send a frame (its frame_id: bench.canid) stamped `t` without a can.Message (the stations' hot path: one
-        shared VirtualFrame for every receiver; python-can's `recv` still gives each its own can.Message)."""
+        shared Frame for every receiver; python-can's `recv` still gives each its own can.Message)."""
         mine = self._inbox
         if mine.closed:
             raise can.CanOperationError(f"{self.channel_info} is shut down")
-        frame = VirtualFrame(t, frame_id, bytes(data))
+        frame = Frame(t, frame_id, bytes(data))
         for inbox in self._net.inboxes:
             if inbox is mine:
                 if not self._own:
@@ -197,8 +170,8 @@ class VirtualTimeBus(can.BusABC):
             if inbox.waiters:
                 inbox.wake()
 
-    def raw_frames(self, timeout: float, limit: int) -> Iterator[VirtualFrame | can.Message]:
-        """Up to `limit` pending frames as they were sent (a VirtualFrame or the receiver's can.Message copy,
+    def raw_frames(self, timeout: float, limit: int) -> Iterator[Frame | can.Message]:
+        """Up to `limit` pending frames as they were sent (a Frame or the receiver's can.Message copy,
         both with the fields a station reads; python-can's filters are not applied): the first may be waited
         for up to `timeout` s, the rest only if already here."""
         inbox = self._inbox
@@ -223,7 +196,7 @@ class VirtualTimeBus(can.BusABC):
         inbox = self._inbox
         if inbox:
             item = inbox.popleft()
-            if type(item) is VirtualFrame:
+            if type(item) is Frame:
                 return _message(item, inbox.channel, True), False
             return item, False
         if inbox.closed:
@@ -247,7 +220,7 @@ class VirtualTimeBus(can.BusABC):
             item = inbox.popleft()
         except IndexError:   # another thread took it first
             return None, False
-        if type(item) is VirtualFrame:
+        if type(item) is Frame:
             return _message(item, inbox.channel, True), False
         return item, False
 

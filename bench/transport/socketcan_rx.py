@@ -29,6 +29,7 @@ from typing import Any
 import can
 
 from bench import canid
+from bench.transport.base import Frame
 from bench.transport.capabilities import raw_can_socket
 
 ENV_SWITCH = "BENCH_FAST_RX"           # "0": every frame through python-can's recv
@@ -72,37 +73,13 @@ def _libc_recvmmsg() -> Any:
 _recvmmsg = _libc_recvmmsg()
 
 
-class RawFrame:
-    """What a station needs of a received frame: its frame_id (bench.canid: SocketCAN's can_id, and the CAN FD
-    flags above it), time and data; the fields of can.Message it stands for are read from the frame_id."""
-
-    __slots__ = ("timestamp", "frame_id", "data")
-
-    def __init__(self, timestamp: float, frame_id: int, data: bytes) -> None:
-        self.timestamp = timestamp
-        self.frame_id = frame_id
-        self.data = data
-
-    @property
-    def arbitration_id(self) -> int:
-        return canid.arbitration_id(self.frame_id)
-
-    @property
-    def is_extended_id(self) -> bool:
-        return canid.is_extended(self.frame_id)
-
-    @property
-    def is_error_frame(self) -> bool:
-        return canid.is_error(self.frame_id)
-
-
-def parse(frame: bytes, ancillary: list[tuple[int, int, bytes]]) -> RawFrame:
+def parse(frame: bytes, ancillary: list[tuple[int, int, bytes]]) -> Frame:
     """One received struct can_frame/canfd_frame and its SO_TIMESTAMPNS, as python-can reads them."""
     seconds, nanoseconds = _TIMESPEC.unpack_from(ancillary[0][2])
     return _frame_at(frame, 0, seconds + nanoseconds * 1e-9, len(frame) == CANFD_MTU)
 
 
-def _frame_at(buffer: bytes | memoryview, base: int, timestamp: float, fd: bool) -> RawFrame:
+def _frame_at(buffer: bytes | memoryview, base: int, timestamp: float, fd: bool) -> Frame:
     """The struct can_frame (or canfd_frame when `fd`, by its size) at `base` of `buffer`, as python-can's
     capture_message reads it."""
     can_id, length, flags = _FLAGS.unpack_from(buffer, base)
@@ -111,7 +88,7 @@ def _frame_at(buffer: bytes | memoryview, base: int, timestamp: float, fd: bool)
     data = b"" if can_id & canid.RTR else bytes(buffer[base + 8:base + 8 + length])   # a remote frame: none
     if fd:
         can_id |= canid.FD | (canid.BRS if flags & CANFD_BRS else 0) | (canid.ESI if flags & CANFD_ESI else 0)
-    return RawFrame(timestamp, can_id, data)
+    return Frame(timestamp, can_id, data)
 
 
 def plain_socketcan(bus: can.BusABC) -> bool:
@@ -140,7 +117,7 @@ class MMsgBatch:
         self._frames_view = memoryview(self.frames).cast("B")
         self._control_view = memoryview(self.control).cast("B")
 
-    def receive(self, fd: int, limit: int) -> list[RawFrame]:
+    def receive(self, fd: int, limit: int) -> list[Frame]:
         """The frames waiting in socket `fd`, up to min(limit, size), without waiting (one system call)."""
         count = min(limit, self.size)
         headers = self.headers
@@ -184,7 +161,7 @@ class FastReceiver:
     def fileno(self) -> int:
         return int(self.sock.fileno())
 
-    def frames(self, timeout: float, limit: int) -> Iterator[RawFrame]:
+    def frames(self, timeout: float, limit: int) -> Iterator[Frame]:
         """Up to `limit` frames: the first may be waited for up to `timeout` s, the rest only if waiting."""
         sock = self.sock
         if timeout > 0:
