@@ -40,7 +40,7 @@ STRICT_HELP = ("check only: what the bench survives in a database but a contract
 #: Where `Protection.describe()` is broken into lines in the table: before each group of parameters.
 _PARTS = re.compile(r", (?=CRC bits|counter bits|MaxDeltaCounter|window)")
 E2E_HELP = ("check only: may a message go without E2E protection? optional (the default): yes, it is listed as "
-            "unprotected; required: every message must declare a profile (E2E_Profile P01/P02/P05/P11 and the "
+            "unprotected; required: every message must declare a profile (E2E_Profile P01/P02/P05/P07/P11 and the "
             "other E2E_* attributes, ARXML E2E properties, or bench.toml [e2e]), an unprotected one is an error "
             "(how the contract's own databases are checked). A declared protection is checked either way.")
 CHECK_DESCRIPTION = (
@@ -48,7 +48,7 @@ CHECK_DESCRIPTION = (
     "tables, E2E protection); print per message the protection the bench will apply (profile, DataID or "
     "DataIDList, CRC and counter bits, MaxDeltaCounter, the state machine's window) or 'unprotected', then every "
     "finding with its file and line (ARXML: with its message). A message is protected when it declares an AUTOSAR "
-    "E2E profile: DBC attributes E2E_Profile (None, P01, P02, P05, P11), E2E_DataID, E2E_DataIDMode, "
+    "E2E profile: DBC attributes E2E_Profile (None, P01, P02, P05, P07, P11), E2E_DataID, E2E_DataIDMode, "
     "E2E_DataIDList, E2E_Offset, E2E_DataLength, E2E_MaxDeltaCounter, E2E_WindowSize, E2E_MinOkState*/"
     "E2E_MaxErrorState* (Init, Valid, Invalid); ARXML E2E properties; bench.toml [e2e.MESSAGE] over both when the "
     "files are the project's. A declaration no profile can use is an error; a signal over the CRC or counter "

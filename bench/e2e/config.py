@@ -30,11 +30,11 @@ SM_PARAMETERS = {
 }
 #: Every parameter by AUTOSAR name, with what it is (the DBC definitions, `bench dbc check`'s help, the docs).
 PARAMETERS: dict[str, str] = {
-    "Profile": "None, P01, P02, P05 or P11",
-    "DataID": "16-bit Data ID (P01, P05, P11)",
+    "Profile": "None, P01, P02, P05, P07 or P11",
+    "DataID": "16-bit Data ID (P01, P05, P11); 32-bit (P07)",
     "DataIDMode": "how the Data ID enters the CRC: BOTH, ALT, LOW, NIBBLE (P01); BOTH, NIBBLE (P11)",
     "DataIDList": "P02: 16 Data IDs, one per counter value, as hex bytes '0A 0B ...'",
-    "Offset": "bit of the E2E header's first bit (the CRC's), a multiple of 8 (P01, P05, P11)",
+    "Offset": "bit of the E2E header's first bit (the CRC's), a multiple of 8 (P01, P05, P07, P11)",
     "DataLength": "bits covered by the CRC (0: the whole frame)",
     "MaxDeltaCounter": "largest counter step a receiver accepts (OKSOMELOST above 1)",
     "WindowSize": "statuses the state machine counts",
@@ -160,7 +160,7 @@ def build(name: str, frame_length: int, found: Declared) -> Protection:
     id_list = b""
     if profile == "P02":
         id_list = _id_list(name, values.get("DataIDList"))
-    data_id = integer("DataID", 0, 0, 0xFFFF)
+    data_id = integer("DataID", 0, 0, 0xFFFFFFFF if profile == "P07" else 0xFFFF)
     offset = 0 if profile == "P02" else integer("Offset", 0, 0, 8 * frame_length)
     if offset % 8:
         raise ProtectionError(f"{name}: E2E Offset {offset} is not a multiple of 8")
@@ -177,7 +177,7 @@ def build(name: str, frame_length: int, found: Declared) -> Protection:
                         length=data_length // 8,
                         max_delta_counter=integer("MaxDeltaCounter", DEFAULT_MAX_DELTA_COUNTER, 1, 255),
                         sm=sm, source=found.source)
-    header_end = max(result.crc.start + result.crc.length, result.counter.start + result.counter.length)
+    header_end = result.header_end
     covered = 8 * (result.length or frame_length)
     if header_end > 8 * frame_length or header_end > covered:
         raise ProtectionError(f"{name}: the {profile} header (bits {result.crc.start}-{header_end - 1}) does not fit "

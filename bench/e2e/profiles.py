@@ -12,12 +12,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from e2e import p01, p02, p05, p11
+from e2e import p01, p02, p05, p07, p11
 from e2e.crc import calculate_crc8
 
 #: The profiles the bench speaks, by the name a database gives them (DBC attribute E2E_Profile, ARXML
 #: category, bench.toml [e2e]).
-PROFILES = ("P01", "P02", "P05", "P11")
+PROFILES = ("P01", "P02", "P05", "P07", "P11")
 
 #: Data ID modes of the profiles that have them (P01: all four; P11: BOTH and NIBBLE).
 P01_MODES = {"BOTH": p01.E2E_P01_DATAID_BOTH, "ALT": p01.E2E_P01_DATAID_ALT,
@@ -27,22 +27,29 @@ P11_MODES = {"BOTH": p11.E2E_P11_DATAID_BOTH, "NIBBLE": p11.E2E_P11_DATAID_NIBBL
 
 @dataclass(frozen=True, slots=True)
 class Field:
-    """A field of the E2E header in the frame: first bit (Intel numbering, bit 0 = LSB of byte 0) and length."""
+    """A field of the E2E header in the frame: first bit (Intel numbering, bit 0 = LSB of byte 0) and length;
+    `big_endian`: whole bytes, most significant first (Profile 7's fields), else little-endian bits."""
 
     start: int
     length: int
+    big_endian: bool = False
 
     @property
     def first_byte(self) -> int:
         return self.start // 8
 
     def read(self, data: bytes | bytearray) -> int:
+        if self.big_endian:
+            return int.from_bytes(data[self.start // 8:(self.start + self.length) // 8], "big")
         return (int.from_bytes(data, "little") >> self.start) & ((1 << self.length) - 1)
 
     def write(self, data: bytearray, value: int) -> None:
         """Write `value` (cut to the field's width) into the field, leaving every other bit as it was."""
         mask = (1 << self.length) - 1
         byte, shift = divmod(self.start, 8)
+        if self.big_endian:
+            data[byte:byte + self.length // 8] = (value & mask).to_bytes(self.length // 8, "big")
+            return
         span = (shift + self.length + 7) // 8
         word = int.from_bytes(data[byte:byte + span], "little")
         word = (word & ~(mask << shift)) | ((value & mask) << shift)
@@ -82,8 +89,8 @@ class SMConfig:
 class Protection:
     """One message's E2E protection: its profile, parameters and header fields (docs/spec/e2e.md)."""
 
-    profile: str                      # "P01", "P02", "P05", "P11"
-    data_id: int = 0                  # P01, P05, P11: the 16-bit Data ID
+    profile: str                      # "P01", "P02", "P05", "P07", "P11"
+    data_id: int = 0                  # P01, P05, P11: the 16-bit Data ID; P07: the 32-bit one
     data_id_list: bytes = b""         # P02: 16 Data IDs, one per counter value
     data_id_mode: str = "BOTH"        # P01: BOTH, ALT, LOW, NIBBLE; P11: BOTH, NIBBLE
     offset: int = 0                   # bit offset of the header (the CRC's first bit); P02: 0
@@ -124,6 +131,13 @@ class Protection:
             set_(self, "crc", Field(8 * byte, 16))
             set_(self, "counter", Field(8 * byte + 16, 8))
             set_(self, "counter_modulo", 256)
+            data_id = self.data_id
+        elif self.profile == "P07":   # header: CRC-64, Length, Counter, DataID, each big-endian (20 bytes)
+            module_protect, module_check = p07.e2e_p07_protect, p07.e2e_p07_check
+            kw.update(offset=byte)
+            set_(self, "crc", Field(8 * byte, 64, big_endian=True))
+            set_(self, "counter", Field(8 * byte + 96, 32, big_endian=True))
+            set_(self, "counter_modulo", 1 << 32)
             data_id = self.data_id
         else:
             raise ValueError(f"E2E profile {self.profile!r} is not one of {', '.join(PROFILES)}")
@@ -179,6 +193,12 @@ class Protection:
         return bytes(out)
 
     @property
+    def header_end(self) -> int:
+        """The bit after the E2E header (P07's header also carries its Length and Data ID after the counter)."""
+        end = max(self.crc.start + self.crc.length, self.counter.start + self.counter.length)
+        return end + 32 if self.profile == "P07" else end
+
+    @property
     def header_mask(self) -> int:
         """The CRC and counter fields as a mask over the frame read as one little-endian integer."""
         return ((1 << self.crc.length) - 1) << self.crc.start | ((1 << self.counter.length) - 1) << self.counter.start
@@ -189,6 +209,8 @@ class Protection:
             ident = "DataIDList " + " ".join(f"{b:02X}" for b in self.data_id_list)
         elif self.profile == "P05":
             ident = f"DataID 0x{self.data_id:04X}"
+        elif self.profile == "P07":
+            ident = f"DataID 0x{self.data_id:08X}"
         else:
             ident = f"DataID 0x{self.data_id:04X} {self.data_id_mode}"
         sm = self.sm

@@ -42,7 +42,8 @@ class SenderTracker:
 
     def __init__(self, cycle: float | None, modulo: int, previous: tuple[int, float] | None = None) -> None:
         self.modulo = modulo
-        self.frames_needed = modulo + 1       # every counter value, and then some
+        # every counter value, and then some (a 32-bit counter: as many as an 8-bit one; it never wraps in a run)
+        self.frames_needed = min(modulo, 256) + 1
         self.streams: list[_Stream] = []
         self.switches: dict[tuple[int, int], int] = {}
         self.max_gap = math.inf if cycle is None else STREAM_GAP_CYCLES * cycle

@@ -24,6 +24,8 @@ from bench.database import sendtype
 from bench.database.codec import Codebook, MessageCodec
 from bench.errors import ConfigError, SignalError
 
+#: The largest E2E counter range whose frames the restbus keeps, one per counter value, while the values stay.
+CACHED_COUNTERS = 256
 #: How far a cycle time may lie from a whole number of ticks (relative): float noise, never a real offset.
 TICK_FIT = 1e-6
 
@@ -47,7 +49,8 @@ class _Slot:
         self.sent_values: dict[str, float | int | str] | None = None
         self.payload = b""
         self.modulo = codec.protection.counter_modulo if codec.protection is not None else 1
-        self.frames: list[bytes | None] = [None] * self.modulo
+        # (a 32-bit counter, Profile 7, never comes round within a run: its frames are built each time)
+        self.frames: list[bytes | None] | None = [None] * self.modulo if self.modulo <= CACHED_COUNTERS else None
         sending = codec.sending
         self.kind = sending.kind
         self.periodic = sending.periodic       # on the schedule at its cycle time
@@ -303,16 +306,20 @@ class Restbus:
             payload = bytes(data)
             if payload != slot.payload:
                 slot.payload = payload
-                slot.frames = [None] * slot.modulo
+                if slot.frames is not None:
+                    slot.frames = [None] * slot.modulo
             slot.sent_values = snapshot
         protection = codec.protection
         if protection is None:
             return slot.payload
         counter = slot.counter
-        frame = slot.frames[counter]
+        frames = slot.frames
+        frame = None if frames is None else frames[counter]
         if frame is None:
             data = bytearray(slot.payload)
             protection.protect(data, counter)
-            frame = slot.frames[counter] = bytes(data)
+            frame = bytes(data)
+            if frames is not None:
+                frames[counter] = frame
         slot.counter = protection.next_counter(counter)
         return frame
