@@ -62,8 +62,8 @@ class FaultKind:
     param_doc: ClassVar[str] = ""        # its unit and range
     summary: ClassVar[str]               # what the kind does, one line (help and docs)
 
-    def check_param(self, value: float) -> str | None:
-        """Why PARAM does not fit this kind (None: it fits)."""
+    def check_param(self, value: float, codec: MessageCodec | None = None) -> str | None:
+        """Why PARAM does not fit this kind (None: it fits); `codec`: the target message, when it is one."""
         return None
 
     def check_target(self, target: str, codebook: Codebook) -> str | None:
@@ -152,7 +152,7 @@ class Delay(FaultKind):
     name, param, param_doc = "delay", "SECONDS", "s, > 0"
     summary = "the message's frames are sent SECONDS late"
 
-    def check_param(self, value: float) -> str | None:
+    def check_param(self, value: float, codec: MessageCodec | None = None) -> str | None:
         return None if value > 0 else "a delay needs PARAM > 0 s"
 
     def act(self, fault: Fault, out: Outgoing) -> None:
@@ -167,11 +167,14 @@ class Duplicate(FaultKind):
 
 
 class Bitflip(_Corruption):
-    name, param, param_doc = "bitflip", "BIT", "0..63"
+    name, param, param_doc = "bitflip", "BIT", "0..63 (a CAN FD frame: up to 8 × its length - 1)"
     summary = "bit BIT of the payload is inverted (bit BIT % 8 of byte BIT // 8)"
 
-    def check_param(self, value: float) -> str | None:
-        return None if 0 <= value < 64 else "bit index must be 0..63"
+    def check_param(self, value: float, codec: MessageCodec | None = None) -> str | None:
+        bits = 8 * (codec.length if codec is not None else 64)
+        if 0 <= value < bits and value == int(value):
+            return None
+        return f"bit index must be 0..{bits - 1}" + (f" ({codec.name} has {codec.length} bytes)" if codec else "")
 
     def corrupt(self, fault: Fault, out: Outgoing, data: bytearray) -> bytes:
         bit = int(fault.param)
@@ -261,7 +264,7 @@ class Flood(FaultKind):
     summary = (f"a babbling node sends RATE all-zero frames per ms at IDENTIFIER (e.g. 0x000); from "
                f"{FLOOD_SATURATION:g} per ms on, every frame of a lower priority (higher identifier) is lost")
 
-    def check_param(self, value: float) -> str | None:
+    def check_param(self, value: float, codec: MessageCodec | None = None) -> str | None:
         if value > FLOOD_MAX_RATE:
             return (f"RATE is frames per ms, at most {FLOOD_MAX_RATE:g} (about what a classic CAN bus at 500 kbit/s "
                     f"carries), not {value:g}")

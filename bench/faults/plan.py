@@ -119,7 +119,8 @@ def check_fault(fault: Fault, codebook: Codebook, simulated: frozenset[str] | No
         raise ConfigError(f"fault {fault.describe()}: unknown kind {fault.kind!r} (kinds: {', '.join(KINDS)})")
     if not (fault.start >= 0 and fault.end > fault.start):
         raise ConfigError(f"fault {fault.describe()}: need 0 <= START < END")
-    problem = kind.check_target(fault.target, codebook) or kind.check_param(fault.param)
+    problem = kind.check_target(fault.target, codebook) or kind.check_param(fault.param, codebook.by_name.get(
+        fault.target))
     if problem is None and simulated is not None:
         problem = kind.check_reach(fault.target, codebook, simulated)
     if problem:

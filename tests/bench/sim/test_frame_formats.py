@@ -192,3 +192,13 @@ def test_e2e_profile_5_protects_a_64_byte_fd_frame(tmp_path: Path) -> None:
     assert not p05.e2e_p05_check(bytearray(damaged), 4661)
     assert not monitor.on_frame(0.2, codec.frame_id, bytes(damaged), "rx")
     assert monitor.invalid_log[-1].reason.startswith("E2E ERROR: CRC wrong")
+
+
+def test_a_bitflip_reaches_every_bit_of_an_fd_frame_and_no_further(codebook: Codebook) -> None:
+    """bitflip's BIT runs over the target's own payload: 0..511 on the 64-byte Fd64, 0..63 on the 8-byte Std."""
+    from bench.faults.plan import validate
+
+    assert validate(["bitflip:Fd64:511@1"], codebook) == []
+    for spec, limit in (("bitflip:Fd64:512@1", "0..511 (Fd64 has 64 bytes)"), ("bitflip:Std:64@1", "0..63 (Std")):
+        problems = validate([spec], codebook)
+        assert len(problems) == 1 and limit in problems[0], problems
