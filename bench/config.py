@@ -83,7 +83,7 @@ class ProjectConfig:
     path: Path
     databases: tuple[Path, ...]
     stimulus: tuple[str, ...]
-    plant: str
+    plant: str | None                            # None: no plant, every simulated node is its restbus only
     testcases: Path
     reports: Path
     latency: tuple[LatencyPair, ...] = ()
@@ -179,7 +179,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
         path=path,
         databases=databases,
         stimulus=strings("stimulus"),
-        plant=string("plant"),
+        plant=string("plant") if "plant" in section else None,
         testcases=base / string("testcases"),
         reports=base / string("reports"),
         latency=_latency_pairs(path, data.get("timing", {})),

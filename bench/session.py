@@ -135,11 +135,13 @@ class BenchSession:
         self.plant: Station | None = None
         plant_nodes = set(simulated_nodes(self.codebook, project.stimulus, self.external, "plant"))
         if plant_nodes:
-            factory = load_plant(project.plant)
-            try:
-                behaviours = factory(self.external | set(project.stimulus), settings.vehicle)
-            except ValueError as exc:
-                raise ConfigError(f"plant {project.plant!r}: {exc}") from None
+            behaviours: Sequence[Behaviour] = ()   # no plant: each node is its messages' start values (a restbus)
+            if project.plant is not None:
+                factory = load_plant(project.plant)
+                try:
+                    behaviours = factory(self.external | set(project.stimulus), settings.vehicle)
+                except ValueError as exc:
+                    raise ConfigError(f"plant {project.plant!r}: {exc}") from None
             self.plant = self._station("plant", plant_nodes, Monitor(self.codebook, keep_intervals=False), behaviours)
             self.stations.append(self.plant)
         if role in ("runner", "tester"):   # a tester (bench diag) sends only its requests: no stimulus restbus

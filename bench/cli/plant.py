@@ -86,6 +86,9 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ConfigError(f"--duration: {args.duration} is not a positive number of seconds")
     project = load_config(Path(args.config) if args.config else None)
+    if args.vehicle is not None and project.plant is None:
+        raise ConfigError(f"--vehicle {args.vehicle}: {project.path} names no plant ([bench] plant), so there is no "
+                          "vehicle to choose")
     settings = RunSettings(interface=args.interface, channel=args.channel, external=args.external,
                            vehicle=args.vehicle, bus=given_bus_options(args))
     faults = plant_faults(args.fault)
@@ -104,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, request_stop)
     plant = session.plant
     assert plant is not None
-    console.print(f"bench plant: simulating {', '.join(sorted(plant.restbus.nodes))} on "
+    what = "" if project.plant is not None else " (no plant: each from its database's start values)"
+    console.print(f"bench plant: simulating {', '.join(sorted(plant.restbus.nodes))}{what} on "
                   f"{args.interface} {session.channel or ''}; Ctrl-C to stop", highlight=False)
     session.start()
     end = args.duration if args.duration is not None else math.inf

@@ -178,7 +178,8 @@ def _check_before_running(project: ProjectConfig, args: argparse.Namespace, out_
     if not args.paths:
         problems.extend(_testcases_problems(project))
     external = check(resolve_external, codebook, project.stimulus, args.external)
-    if isinstance(external, set) and set(codebook.nodes) - set(project.stimulus) - external:   # a plant is needed
+    if (project.plant is not None and isinstance(external, set)
+            and set(codebook.nodes) - set(project.stimulus) - external):   # the plant is needed
         try:
             load_plant(project.plant)
         except BenchError as exc:

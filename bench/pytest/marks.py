@@ -145,13 +145,22 @@ def check_marks(marks: CaseMarks, nodes: Collection[str], requirements: Collecti
     return problems
 
 
-def skip_reason(marks: CaseMarks, external: Collection[str]) -> str | None:
-    """The skip text of a reference-only case while one of its nodes is external, else None."""
+def skip_reason(marks: CaseMarks, external: Collection[str], start_values_only: Collection[str] = ()) -> str | None:
+    """The skip text of a reference-only case while one of its nodes is external, or of a case whose DUT the bench
+    plays from the database's start values only (`start_values_only`: a project without a plant simulates every
+    node that is not external so, and such a node has no behaviour to judge); else None."""
     for ref in marks.reference_only:
         real = [n for n in ref.nodes if n in external]
         if real:
             verb = "is" if len(real) == 1 else "are"
             return f"reference_only: {ref.reason} ({', '.join(real)} {verb} external)"
+    played = [n for n in marks.duts if n in start_values_only]
+    if played:
+        verb = "is" if len(played) == 1 else "are"
+        them = "it" if len(played) == 1 else "them"
+        return (f"dut {', '.join(played)} {verb} not on the bus: the bench plays {them} from the database's start "
+                f"values (the project has no plant); put the ECU on the bus and give "
+                f"--external {','.join(played)}")
     return None
 
 

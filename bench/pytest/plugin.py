@@ -193,13 +193,15 @@ def pytest_make_collect_report(collector: pytest.Collector) -> Generator[None, R
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Skip reference-only cases whose node is external; with --bench-dut keep only the cases judging it."""
+    """Skip reference-only cases whose node is external, and in a project without a plant the cases whose DUT is
+    not external (the bench would judge its own start values); with --bench-dut keep only the cases judging it."""
     marked = [(item, read_marks(item)) for item in items]
-    if any(m.reference_only for _, m in marked):
-        project, _ = _facts(config)
+    if any(m.reference_only or m.duts for _, m in marked):
+        project, nodes = _facts(config)
         external = _external(config, project)
+        start_values_only = set(nodes) - set(project.stimulus) - external if project.plant is None else set()
         for item, marks in marked:
-            reason = skip_reason(marks, external)
+            reason = skip_reason(marks, external, start_values_only)
             if reason:
                 item.add_marker(pytest.mark.skip(reason=reason))
     wanted = split_names(config.getoption("--bench-dut"))

@@ -122,11 +122,20 @@ def test_wrong_types_name_the_key(tmp_path: Path, key: str, value: Any) -> None:
     assert f"[bench] {key}" in str(info.value) and str(path) in str(info.value)
 
 
-@pytest.mark.parametrize("key", ["databases", "stimulus", "plant", "testcases", "reports"])
+@pytest.mark.parametrize("key", ["databases", "stimulus", "testcases", "reports"])
 def test_missing_key_names_it(tmp_path: Path, key: str) -> None:
     body = {k: v for k, v in GOOD.items() if k != key}
     with pytest.raises(ConfigError, match=rf"\[bench\] {key} must be"):
         load_config(write(tmp_path, toml({"bench": body})))
+
+
+def test_a_project_without_a_plant(tmp_path: Path) -> None:
+    """`plant` is optional: without it every simulated node is its database's restbus (README "A network without a
+    plant"); an empty one is still an error."""
+    body = {k: v for k, v in GOOD.items() if k != "plant"}
+    assert load_config(write(tmp_path, toml({"bench": body}))).plant is None
+    with pytest.raises(ConfigError, match=r"\[bench\] plant must be a non-empty string"):
+        load_config(write(tmp_path, toml({"bench": {**body, "plant": ""}})))
 
 
 def test_unknown_key(tmp_path: Path) -> None:
