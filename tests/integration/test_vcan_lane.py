@@ -99,8 +99,10 @@ def test_every_lane_selects_test_files() -> None:
     """Each lane's selection (globs, in one place of the script) names test files: a moved campaign fails here,
     not as an empty lane."""
     lane = load_lane_script()
-    assert set(lane.LANES) == {"in-process", "plant-process", "example-vcu"}
+    assert set(lane.LANES) == {"in-process", "plant-process", "example-vcu", "example-epb"}
     for name, spec in lane.LANES.items():
+        assert (lane.ROOT / spec.project / "bench.toml").is_file(), name
+        assert not spec.example or (lane.ROOT / spec.example).is_file(), name
         paths = lane.lane_selection(spec)
         assert bool(paths) == bool(spec.selection), name
         for path in map(Path, paths):
