@@ -25,8 +25,11 @@ How (docs/spec/e2e.md: the counter +1 per transmission, through the profile's ra
   (inverted filters joined with CAN_RAW_JOIN_FILTERS, Linux >= 4.1). A foreign sender on an identifier the
   kernel sends is therefore not seen while the kernel sends it.
 
-Only classical (not CAN FD) messages of 8 bytes with a cycle time of at least MIN_CYCLE_S qualify (an unprotected
-message is handed over as one frame). The echo socket lives as long as the station (it closes with the process).
+Classical messages of 8 bytes and CAN FD messages of any length qualify, with a cycle time of at least MIN_CYCLE_S
+and, when E2E-protected, a counter of at most MAX_FRAMES values (the kernel holds at most 256 frames per task;
+Profile 7's 32-bit counter stays on the tick scheduler); an unprotected message is handed over as one frame. FD
+frames go to the kernel with CAN_FD_FRAME (python-can's task sets it) and come back on an echo socket that takes
+FD frames (CAN_RAW_FD_FRAMES). The echo socket lives as long as the station (it closes with the process).
 Set BENCH_KERNEL_PERIODIC=0 in the environment to keep every message on the tick scheduler.
 """
 
@@ -58,6 +61,7 @@ PRECHECK_S = 0.0015      # the values are compared this long before each of the 
 ECHO_WAIT_S = 0.02       # longest wait, at a hand-over, for the echo of the kernel's last frame
 MIN_CYCLE_S = 4 * STOP_MARGIN_S
 FRAME_LENGTH = 8         # classic CAN frames
+MAX_FRAMES = 256         # frames one BCM task holds at most (the kernel's MAX_NFRAMES)
 ENV_SWITCH = "BENCH_KERNEL_PERIODIC"
 ECHO_READ_LIMIT = 1 << 16   # frames one look at the echo socket takes at most (it is read every tick)
 
@@ -73,6 +77,16 @@ _clock = time.monotonic   # the kernel's BCM timers run on CLOCK_MONOTONIC too
 def _exact(frame_id: int) -> int:
     """The filter mask that takes exactly this identifier's data frames (11- or 29-bit)."""
     return _EXACT_EXTENDED if frame_id & canid.EFF else _EXACT_STANDARD
+
+
+def _kernel_can_send(slot: Any) -> bool:
+    """Whether the kernel may send a restbus message: plain cyclic, at least MIN_CYCLE_S, a classical frame of 8
+    bytes or a CAN FD frame, and a counter cycle (E2E) of at most MAX_FRAMES frames."""
+    codec = slot.codec
+    protection = codec.protection
+    return (slot.plain_cyclic and (codec.cycle_time or 0.0) >= MIN_CYCLE_S
+            and (bool(codec.frame_id & canid.FD) or codec.length == FRAME_LENGTH)
+            and (protection is None or protection.counter_modulo <= MAX_FRAMES))
 
 
 def _raw_socket() -> socket.socket:
@@ -121,9 +135,7 @@ class KernelPeriodic:
     def __init__(self, bus: Any, restbus: Restbus) -> None:
         self.bus = bus
         self.restbus = restbus
-        self.slots = {slot.codec.send_id: slot for slot in restbus.slots.values()
-                      if slot.plain_cyclic and slot.codec.length == FRAME_LENGTH and not slot.codec.frame_id & canid.FD
-                      and (slot.codec.cycle_time or 0.0) >= MIN_CYCLE_S}
+        self.slots = {slot.codec.send_id: slot for slot in restbus.slots.values() if _kernel_can_send(slot)}
         self.tasks: dict[int, _Task] = {}
         self._last: dict[int, bytes] = {}
         self._stable: dict[int, int] = {}
@@ -141,6 +153,8 @@ class KernelPeriodic:
         try:
             self.echo.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER, b"")   # nothing until a task starts
             self.echo.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)   # the log's time: the kernel's send
+            if any(frame_id & canid.FD for frame_id in self.slots):
+                self.echo.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FD_FRAMES, 1)
             self.echo.bind((bus.channel,))
             self.echo.setblocking(False)
             bus.socket.setsockopt(socket.SOL_CAN_RAW, CAN_RAW_JOIN_FILTERS, struct.pack("=i", 1))
@@ -350,6 +364,6 @@ class KernelPeriodic:
             frame_id, data = frame.frame_id, frame.data
             task = tasks.get(frame_id)
             protection = None if task is None else task.slot.codec.protection
-            if protection is not None and len(data) == FRAME_LENGTH:
+            if protection is not None and len(data) == task.slot.codec.length:  # type: ignore[union-attr]
                 task.last_counter = protection.counter_of(data)  # type: ignore[union-attr]
             yield frame_id, data, frame.timestamp

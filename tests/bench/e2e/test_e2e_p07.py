@@ -15,6 +15,7 @@ from e2e import crc, p07
 from bench import e2e as bench_e2e
 from bench.database.codec import Codebook
 from bench.errors import DatabaseError
+from tests.repo import VFRAMEFORMAT_DEFINITION
 
 DATA_ID = 0x0EB00200
 DBC = f'''VERSION ""
@@ -26,8 +27,7 @@ BO_ 512 Status: 64 ECU
  SG_ Tail : 496|16@1+ (1,0) [0|65535] "" Vector__XXX
 BO_ 513 Short: 16 ECU
  SG_ Value : 0|16@1+ (1,0) [0|65535] "" Vector__XXX
-BA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN","ExtendedCAN","reserved","reserved","reserved","reserved","reserved",\
-"reserved","reserved","reserved","reserved","reserved","reserved","reserved","StandardCAN_FD","ExtendedCAN_FD";
+{VFRAMEFORMAT_DEFINITION}
 BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
 BA_DEF_ BO_ "E2E_Profile" ENUM "None","P01","P02","P05","P07","P11";
 BA_DEF_ BO_ "E2E_DataID" INT 0 2147483647;

@@ -29,8 +29,9 @@ from bench.sim.restbus import Restbus
 from bench.sim.station import Station
 from bench.transport import BusOptions, VirtualTimeBus, open_bus
 from tests.fakes import ipv4_group
+from tests.repo import VFRAMEFORMAT_DEFINITION
 
-DBC = """VERSION ""
+DBC = f"""VERSION ""
 NS_ :
 BS_:
 BU_: SENDER RECEIVER
@@ -44,8 +45,7 @@ BO_ 2566844672 Fd64: 64 SENDER
 BO_ 512 FdStd: 12 SENDER
  SG_ Value : 80|16@1+ (1,0) [0|65535] "" RECEIVER
 BA_DEF_ BO_ "GenMsgCycleTime" INT 0 10000;
-BA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN","ExtendedCAN","reserved","reserved","reserved","reserved","reserved",\
-"reserved","reserved","reserved","reserved","reserved","reserved","reserved","StandardCAN_FD","ExtendedCAN_FD";
+{VFRAMEFORMAT_DEFINITION}
 BA_DEF_ BO_ "CANFD_BRS" ENUM "0","1";
 BA_DEF_DEF_ "GenMsgCycleTime" 0;
 BA_DEF_DEF_ "VFrameFormat" "StandardCAN";

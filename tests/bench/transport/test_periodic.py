@@ -30,6 +30,7 @@ from bench.transport import periodic
 from tests.fakes import FakeBus
 from tests.integration.vcan import IN_LANE, has_vcan
 from tests.reference import COUNTER_VALUES, counter_of, intact
+from tests.repo import VFRAMEFORMAT_DEFINITION
 
 DT = 0.001
 
@@ -340,6 +341,82 @@ def test_real_bcm_on_vcan(codebook: Codebook) -> None:
                 assert intact(frame_id, bytes(b.data))
         _no_frame_rejected(station.monitor)
         assert abs(station.monitor.frames - sum(len(f) for f in seen.values())) <= 6
+    finally:
+        bus.shutdown()
+        watcher.shutdown()
+
+
+FD_DBC = f"""VERSION ""
+NS_ :
+BS_:
+BU_: ECU
+BO_ 288 FdP05: 32 ECU
+ SG_ Crc : 0|16@1+ (1,0) [0|65535] "" Vector__XXX
+ SG_ Counter : 16|8@1+ (1,0) [0|255] "" Vector__XXX
+ SG_ Value : 24|16@1+ (1,0) [0|65535] "" Vector__XXX
+BO_ 2566844672 FdPlain: 64 ECU
+ SG_ Tail : 496|16@1+ (1,0) [0|65535] "" Vector__XXX
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+{VFRAMEFORMAT_DEFINITION}
+BA_DEF_ BO_ "E2E_Profile" ENUM "None","P01","P02","P05","P07","P11";
+BA_DEF_ BO_ "E2E_DataID" INT 0 65535;
+BA_DEF_DEF_ "GenMsgCycleTime" 0;
+BA_DEF_DEF_ "VFrameFormat" "StandardCAN_FD";
+BA_DEF_DEF_ "E2E_Profile" "None";
+BA_DEF_DEF_ "E2E_DataID" 0;
+BA_ "GenMsgCycleTime" BO_ 288 10;
+BA_ "GenMsgCycleTime" BO_ 2566844672 20;
+BA_ "VFrameFormat" BO_ 2566844672 15;
+BA_ "E2E_Profile" BO_ 288 3;
+BA_ "E2E_DataID" BO_ 288 4660;
+"""
+
+
+@pytest.mark.skipif(not has_vcan("vcan0") and not IN_LANE,
+                    reason="needs SocketCAN and vcan0 (the vcan lane runs it: scripts/vcan-lane)")
+@pytest.mark.realtime
+def test_real_bcm_sends_can_fd_frames() -> None:
+    """CAN FD through the kernel's broadcast manager (vcan0 with MTU 72): a 32-byte message under E2E Profile 5 (its
+    256 counter values are one task's frames) and a 64-byte 29-bit one; an independent socket sees each as FD with
+    the bit rate switch and its length, every P05 frame passes autosar-e2e's check with its counter one up, and the
+    station's log (the echo socket) holds as many frames."""
+    import cantools
+    from e2e import p05
+
+    codebook = Codebook([("fd.dbc", cantools.database.load_string(FD_DBC, "dbc"))])
+    bus = can.Bus(interface="socketcan", channel="vcan0", fd=True, receive_own_messages=False)
+    watcher = can.Bus(interface="socketcan", channel="vcan0", fd=True)
+    t0 = time.monotonic()
+    station = Station("runner", bus, Restbus(codebook, {"ECU"}), Monitor(codebook), lambda: time.monotonic() - t0)
+    try:
+        assert station.kernel is not None and set(station.kernel.slots) == {
+            codebook["FdP05"].send_id, codebook["FdPlain"].send_id}
+        seen: dict[int, list[can.Message]] = {}
+        tick = 0
+        while (t := time.monotonic() - t0) < 2.0:
+            while (msg := watcher.recv(0.0)) is not None:
+                seen.setdefault(msg.arbitration_id, []).append(msg)
+            tick += 1
+            station.tick(tick, t, DT)
+            time.sleep(max(0.0, t0 + tick * DT - time.monotonic()))
+        kernel = station.kernel
+        assert kernel.started == 2
+        for task in list(kernel.tasks.values()):
+            task.task.stop()
+        for frame_id, data, _ in kernel.echoes():
+            station.monitor.on_frame(time.monotonic() - t0, frame_id, data, "tx")
+        while (msg := watcher.recv(0.05)) is not None:
+            seen.setdefault(msg.arbitration_id, []).append(msg)
+        p05_frames, plain = seen[0x120], seen[0x18FEF100]
+        shape = {(m.is_fd, m.bitrate_switch, m.is_extended_id, len(m.data)) for m in p05_frames}
+        assert shape == {(True, True, False, 32)}
+        assert {(m.is_fd, m.bitrate_switch, m.is_extended_id, len(m.data)) for m in plain} == {(True, True, True, 64)}
+        assert all(p05.e2e_p05_check(bytearray(m.data), 0x1234) for m in p05_frames)
+        counters = [m.data[2] for m in p05_frames]
+        assert all((b - a) % 256 == 1 for a, b in zip(counters, counters[1:]))
+        assert len(p05_frames) >= 150 and len(plain) >= 75
+        _no_frame_rejected(station.monitor)
+        assert abs(station.monitor.frames - len(p05_frames) - len(plain)) <= 4
     finally:
         bus.shutdown()
         watcher.shutdown()
