@@ -94,7 +94,12 @@ class FaultMemory:
         if dtc.fault and bench.value(message, signal) != bench.value_table(message, signal)[dtc.name]:
             bench.note(f"{self.node}: {dtc.name} while it lasts: not judged, the fault code is no longer on the bus")
             return
+        t_request = bench.now
         status = self.stored().get(dtc.number, 0)
+        if dtc.fault and self._changed_during(message, signal, dtc.name, t_request):
+            bench.note(f"{self.node}: {dtc.name} while it lasts: not judged, the node's fault code changed while the "
+                       "tester read its status")
+            return
         must = TF | TFTOC | PENDING | TFSLC
         bench.expect_true(f"{self.node}: DTC {dtc.code} {dtc.name} stored while the fault lasts "
                           "(testFailed, testFailedThisOperationCycle, pendingDTC, testFailedSinceLastClear)",
@@ -102,6 +107,15 @@ class FaultMemory:
                           detail=f"requirement {dtc.requirement}; fault code on the bus from "
                                  f"{first - bench.start:.3f} s" if math.isfinite(first) else "fault code never seen")
         self._confirmed(dtc.name, status, lasted)
+
+    def _changed_during(self, message: str, signal: str, code_name: str, t_request: float) -> bool:
+        """Whether a frame of the node from the request until the answer was complete carried another code, or the
+        latest one does now: the node answered from a state the bus no longer shows (e.g. one fault code replaced
+        by the next, a late host reading the answer late)."""
+        bench = self.bench
+        code = bench.value_table(message, signal)[code_name]
+        t, values = bench.history(message, signal, since=t_request)
+        return bool(np.any(values[t <= bench.now] != code)) or bench.value(message, signal) != code
 
     def _confirmed(self, name: str, status: int, lasted: float) -> None:
         bench, dtc = self.bench, self.declaration.dtc(name)
