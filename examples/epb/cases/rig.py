@@ -3,6 +3,8 @@ events. Numbers are those of contract.md."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from bench.case import Case
 
 #: contract.md EPB-03/-04/-06/-07: a reaction within 30 ms, seen in the next EPB_Status (20 ms) or EPB_Event
@@ -11,21 +13,17 @@ REACTION_S = 0.030 + 0.020
 FORCE_KN, RATE_KN_S = 16.0, 20.0
 #: the ramp's time from 0 to 16 kN, and the reaction before it
 RAMP_S = FORCE_KN / RATE_KN_S + REACTION_S
-#: EPB-03: the largest speed at which it applies
-STANDSTILL_KMH = 3.0
 
 
-def state(bench: Case) -> float:
-    return bench.value("EPB_Status", "ParkState")
+def park_state(bench: Case, name: str) -> int:
+    """The number of a ParkState name (the database's value table)."""
+    return bench.value_table("EPB_Status", "ParkState")[name]
 
 
-def code(bench: Case, name: str) -> int:
-    """The number of a ParkState or EventCode name (the database's value tables)."""
-    for message, signal in (("EPB_Status", "ParkState"), ("EPB_Event", "EventCode")):
-        table = bench.value_table(message, signal)
-        if name in table:
-            return table[name]
-    raise KeyError(name)
+def in_state(bench: Case, name: str) -> Callable[[], bool]:
+    """A predicate for `eventually`/`always`: the latest EPB_Status says ParkState `name`."""
+    wanted = park_state(bench, name)
+    return lambda: bench.value("EPB_Status", "ParkState") == wanted
 
 
 def vehicle(bench: Case, speed_kmh: float, pedal: str) -> None:
@@ -53,10 +51,10 @@ def bring_to(bench: Case, wanted: str) -> None:
     """The EPB in RELEASED or APPLIED before a case (the state stays from the last case): one step of the case."""
     vehicle(bench, 0.0, "PRESSED")
     bench.run(0.05)
-    if state(bench) != code(bench, wanted):
+    there = in_state(bench, wanted)
+    if not there():
         switch(bench, "APPLY" if wanted == "APPLIED" else "RELEASE")
-    bench.eventually(f"the EPB is {wanted} before the case", lambda: state(bench) == code(bench, wanted),
-                     RAMP_S + 0.5)
+    bench.eventually(f"the EPB is {wanted} before the case", there, RAMP_S + 0.5)
     bench.run(0.05)   # the event of that move is out before the case looks for its own
 
 

@@ -6,7 +6,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rig import FORCE_KN, RAMP_S, RATE_KN_S, REACTION_S, bring_to, code, expect_events, service, state, switch, vehicle
+from rig import (
+    FORCE_KN,
+    RAMP_S,
+    RATE_KN_S,
+    REACTION_S,
+    bring_to,
+    expect_events,
+    in_state,
+    park_state,
+    service,
+    switch,
+    vehicle,
+)
 
 from bench.case import Case
 
@@ -18,10 +30,10 @@ def test_apply_at_standstill(bench: Case) -> None:
     bring_to(bench, "RELEASED")
     count_before = bench.value("EPB_Info", "ApplyCount")
     t0 = switch(bench, "APPLY")
-    bench.eventually("APPLYING", lambda: state(bench) == code(bench, "APPLYING"), REACTION_S)
+    bench.eventually("APPLYING", in_state(bench, "APPLYING"), REACTION_S)
     bench.expect("motor current while applying", bench.value("EPB_Status", "MotorCurrentLeft"), 8.0, abs_tol=0.005,
                  unit="A")
-    bench.eventually("APPLIED", lambda: state(bench) == code(bench, "APPLIED"), RAMP_S + 0.05)
+    bench.eventually("APPLIED", in_state(bench, "APPLIED"), RAMP_S + 0.05)
     bench.expect("clamp force applied", bench.value("EPB_Status", "ClampForce"), FORCE_KN, abs_tol=0.0005, unit="kN")
     bench.expect("motor current when applied", bench.value("EPB_Status", "MotorCurrentRight"), 0.0, unit="A")
     t, force = bench.history("EPB_Status", "ClampForce", since=t0)
@@ -40,7 +52,7 @@ def test_apply_is_refused_while_moving(bench: Case) -> None:
     vehicle(bench, 30.0, "RELEASED")
     bench.run(0.05)
     t0 = switch(bench, "APPLY")
-    bench.always("stays RELEASED", lambda: state(bench) == code(bench, "RELEASED"), 0.5)
+    bench.always("stays RELEASED", in_state(bench, "RELEASED"), 0.5)
     expect_events(bench, t0, ["REFUSED_MOVING"])
 
 
@@ -50,14 +62,14 @@ def test_release_needs_the_brake_pedal(bench: Case) -> None:
     vehicle(bench, 0.0, "RELEASED")
     bench.run(0.05)
     t0 = switch(bench, "RELEASE")
-    bench.always("stays APPLIED without the brake pedal", lambda: state(bench) == code(bench, "APPLIED"), 0.3)
+    bench.always("stays APPLIED without the brake pedal", in_state(bench, "APPLIED"), 0.3)
     vehicle(bench, 0.0, "PRESSED")
     bench.run(0.05)
     switch(bench, "RELEASE")
-    bench.eventually("RELEASING", lambda: state(bench) == code(bench, "RELEASING"), REACTION_S)
+    bench.eventually("RELEASING", in_state(bench, "RELEASING"), REACTION_S)
     bench.expect("motor current while releasing", bench.value("EPB_Status", "MotorCurrentLeft"), 8.0, abs_tol=0.005,
                  unit="A")
-    bench.eventually("RELEASED", lambda: state(bench) == code(bench, "RELEASED"), RAMP_S + 0.05)
+    bench.eventually("RELEASED", in_state(bench, "RELEASED"), RAMP_S + 0.05)
     bench.expect("clamp force released", bench.value("EPB_Status", "ClampForce"), 0.0, abs_tol=0.0005, unit="kN")
     bench.run(0.05)
     expect_events(bench, t0, ["REFUSED_NO_BRAKE", "RELEASED"])
@@ -77,7 +89,7 @@ def test_no_apply_without_a_trusted_speed(bench: Case, fault: str) -> None:
     t0 = switch(bench, "APPLY")
     bench.run(0.2)
     expect_events(bench, t0, ["REFUSED_NO_SPEED"])
-    bench.expect("still RELEASED", state(bench), code(bench, "RELEASED"))
+    bench.expect("still RELEASED", bench.value("EPB_Status", "ParkState"), park_state(bench, "RELEASED"))
     bench.eventually("SpeedValid VALID after the fault", lambda: bench.value("EPB_Status", "SpeedValid") == 1, 0.6)
 
 
@@ -85,21 +97,21 @@ def test_no_apply_without_a_trusted_speed(bench: Case, fault: str) -> None:
 def test_service_mode(bench: Case) -> None:
     bring_to(bench, "RELEASED")
     service(bench, "ON")
-    bench.eventually("SERVICE", lambda: state(bench) == code(bench, "SERVICE"), REACTION_S)
+    bench.eventually("SERVICE", in_state(bench, "SERVICE"), REACTION_S)
     t0 = switch(bench, "APPLY")
-    bench.always("the switch does nothing in SERVICE", lambda: state(bench) == code(bench, "SERVICE"), 0.3)
+    bench.always("the switch does nothing in SERVICE", in_state(bench, "SERVICE"), 0.3)
     expect_events(bench, t0, [])
     service(bench, "OFF")
-    bench.eventually("RELEASED after ServiceMode OFF", lambda: state(bench) == code(bench, "RELEASED"), REACTION_S)
+    bench.eventually("RELEASED after ServiceMode OFF", in_state(bench, "RELEASED"), REACTION_S)
     bench.set("HIL_ParkSwitch", Switch="NEUTRAL")
     service(bench, "ON")
-    bench.eventually("SERVICE again", lambda: state(bench) == code(bench, "SERVICE"), REACTION_S)
+    bench.eventually("SERVICE again", in_state(bench, "SERVICE"), REACTION_S)
     bench.stop_sending("HIL_Service")
     sent, _ = bench.history("HIL_Service", "ServiceMode")
     last = float(sent[-1])   # the last ON frame: the silence counts from it
-    bench.always("SERVICE through 140 ms of silence", lambda: state(bench) == code(bench, "SERVICE"),
+    bench.always("SERVICE through 140 ms of silence", in_state(bench, "SERVICE"),
                  max(0.0, last + 0.140 - bench.now))
-    bench.eventually("RELEASED at most 200 ms after the last frame", lambda: state(bench) == code(bench, "RELEASED"),
+    bench.eventually("RELEASED at most 200 ms after the last frame", in_state(bench, "RELEASED"),
                      max(0.0, last + 0.200 + 0.020 - bench.now))
     bench.set("HIL_Service", ServiceMode="OFF")
     bench.resume_sending("HIL_Service")
