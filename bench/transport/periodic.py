@@ -363,7 +363,8 @@ class KernelPeriodic:
         for frame in self._echo_rx.frames(0.0, ECHO_READ_LIMIT):
             frame_id, data = frame.frame_id, frame.data
             task = tasks.get(frame_id)
-            protection = None if task is None else task.slot.codec.protection
-            if protection is not None and len(data) == task.slot.codec.length:  # type: ignore[union-attr]
-                task.last_counter = protection.counter_of(data)  # type: ignore[union-attr]
+            if task is not None:
+                codec = task.slot.codec
+                if codec.protection is not None and len(data) in (codec.length, codec.frame_length):  # FD: a DLC's
+                    task.last_counter = codec.protection.counter_of(data)
             yield frame_id, data, frame.timestamp
