@@ -283,10 +283,13 @@ class Case:
             rows += [[f"{t - self.start:.3f}", node, direction, describe(payload, named)]
                      for t, direction, payload in connection.exchanges]
             client.close()
+        ports = list(self._ports.values())
         self._testers, self._ports = {}, {}
         if rows:
             rows.sort(key=lambda row: float(str(row[0])))
-            self.table("Diagnostic exchange", ["t (s)", "node", "", "message"], rows)
+            kernel = sorted({port.channel for port in ports if port.channel is not None})
+            how = f" (the tester on the kernel's ISO-TP of {', '.join(kernel)})" if kernel else ""
+            self.table(f"Diagnostic exchange{how}", ["t (s)", "node", "", "message"], rows)
 
     def close(self) -> None:
         """End of the case (the pytest plugin calls it; a case need not): its timers stop, its case+ fault

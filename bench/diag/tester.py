@@ -31,8 +31,10 @@ from bench import canid
 from bench.diag.declaration import Declaration, Did, NodeDiagnostics
 from bench.diag.describe import describe
 from bench.diag.isotp import IsoTpEndpoint, IsoTpParams
+from bench.diag.kernel_isotp import KernelIsoTpEndpoint, kernel_isotp_available
 from bench.diag.security import documented_key
 from bench.errors import BenchError
+from bench.transport.socketcan import SocketcanTransport
 
 #: How much longer than the server's P2 / P2* the tester waits (ISO 14229-2's P2client: the server's limit plus the
 #: network's delays both ways).
@@ -83,17 +85,24 @@ class DidValue(DidCodec):
 class TesterPort:
     """The tester's ISO-TP endpoint for one node (its physical request and response identifiers), listening on the
     runner's station while a connection uses it. One per node and case: two endpoints on one response identifier
-    would both answer a multi-frame response with a flow control."""
+    would both answer a multi-frame response with a flow control. The endpoint is the bench's own ISO-TP, or on
+    SocketCAN the kernel's (bench.diag.kernel_isotp), which receives the node's frames itself and is polled every
+    tick while open."""
 
-    def __init__(self, station: Station, tx_id: int, rx_id: int, params: IsoTpParams) -> None:
+    def __init__(self, station: Station, tx_id: int, rx_id: int, params: IsoTpParams,
+                 channel: str | None = None) -> None:
         self.station = station
-        self.endpoint = IsoTpEndpoint(tx_id, rx_id, station.send_now, params)
-        self.frame_ids = (rx_id,)
+        self.channel = channel   # the kernel ISO-TP's interface, or None: the bench's own
+        self.kernel = channel is not None
+        self.endpoint: IsoTpEndpoint | KernelIsoTpEndpoint = \
+            KernelIsoTpEndpoint(channel, tx_id, rx_id, params) if channel is not None \
+            else IsoTpEndpoint(tx_id, rx_id, station.send_now, params)
+        self.frame_ids = () if self.kernel else (rx_id,)
         self.users = 0
 
     @property
     def busy(self) -> bool:
-        return self.endpoint.busy
+        return self.kernel or self.endpoint.busy
 
     def on_frame(self, t: float, frame_id: int, data: bytes) -> None:
         self.endpoint.on_frame(t, data)
@@ -103,6 +112,8 @@ class TesterPort:
 
     def acquire(self) -> None:
         if not self.users:
+            if isinstance(self.endpoint, KernelIsoTpEndpoint):
+                self.endpoint.open()
             self.station.listen(self)
         self.users += 1
 
@@ -110,6 +121,8 @@ class TesterPort:
         self.users -= 1
         if not self.users:
             self.station.unlisten(self)
+            if isinstance(self.endpoint, KernelIsoTpEndpoint):
+                self.endpoint.close()
 
 
 class BenchConnection(BaseConnection):
@@ -291,7 +304,17 @@ def tester_port(station: Station, declaration: Declaration, node_name: str) -> T
         raise BenchError(str(exc.args[0])) from None
     protocol = declaration.protocol
     params = IsoTpParams(padding=protocol.padding, block_size=0, stmin=0.0, n_bs=protocol.n_bs, n_cr=protocol.n_cr)
-    return TesterPort(station, node.request, node.response, params)
+    return TesterPort(station, node.request, node.response, params, kernel_isotp_channel(station))
+
+
+def kernel_isotp_channel(station: Station) -> str | None:
+    """The SocketCAN interface whose kernel ISO-TP the tester uses (bench.diag.kernel_isotp), or None: another bus,
+    a kernel without CAN_ISOTP, or BENCH_KERNEL_ISOTP=0."""
+    transport = getattr(station, "transport", None)
+    if not isinstance(transport, SocketcanTransport) or not transport.stamped_batches or not kernel_isotp_available():
+        return None   # (not stamped_batches: a test's stand-in for a socket, no kernel behind it)
+    channel = getattr(transport.bus, "channel", None)
+    return channel if isinstance(channel, str) else None
 
 
 def open_client(bench: Bench, port: TesterPort, declaration: Declaration, node_name: str, *,
