@@ -3,7 +3,8 @@ docs/contract/README.md tells a supplier to judge a real one: three processes on
 limit 0: nothing leaves the host): `bench plant --external NODE` simulates every node but NODE, the example plays
 NODE, and `bench run --external all --dut NODE` runs every case that judges NODE.
 
-What a passing example must show: `bench run` exits 0 (or 3: inconclusive) with no failure or error; at most
+What a passing example must show: `bench run` exits 0 (or 3: inconclusive) with no failure or error (at most
+MAX_RERUNS failed cases that pass when run once more: the example shares the host with the bench); at most
 MAX_INCONCLUSIVE cases inconclusive, each for the bench's or the plant's own lateness (a stall of the host: the
 bench cannot judge the DUT then, docs/reliability.md), the others passed; at least `min_ran` cases ran or were
 inconclusive; every case names NODE as its DUT; only reference-only cases, and cases whose coding selects an
@@ -23,6 +24,7 @@ import re
 import shutil
 import subprocess
 import sys
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +36,13 @@ from tests.repo import ROOT
 
 BENCH = [sys.executable, "-m", "bench"]
 
+
+#: failed cases of an example's campaign that are run once more (a second `bench run` of just those), and then must
+#: pass: the example is a Python process on the same shared host as the bench, and a host that deschedules it makes
+#: it late or off its control loop where a real ECU would not be, unseen by the bench when the bench's own processes
+#: were not stalled too (CI, 2026-11-29: the SBW example's 1 Hz sine peaked 3.32 against 3°, its frames 31 ms apart).
+#: A defect of the example fails the second run too; the first run's failures are shown as a warning.
+MAX_RERUNS = 2
 
 #: inconclusive cases an example's campaign may have (the bench or the plant stalled by the host, about one in a
 #: campaign on this project's 2-core VM in the real-time step, 2026-11-29): more is a bench to look at (issue 34)
@@ -70,10 +79,19 @@ def judge_example(example: Path, node: str, out: Path, *, min_ran: int, seconds:
         assert node not in simulated.replace(",", " ").split(), started     # the bench leaves the node alone
         ecu = Child([*priority, sys.executable, str(example), *bus], ROOT)
         ecu.wait_for("running", 60)
-        run = subprocess.run([*priority, *BENCH, "run", *bus, "--external", "all", "--dut", node, "--out", str(out)],
-                             cwd=ROOT, capture_output=True, text=True, timeout=seconds)
-        assert run.returncode in (0, EXIT_INCONCLUSIVE), _failures(out) + run.stdout[-3000:] + run.stderr[-3000:]
-        campaign = _check_report(out, node, min_ran)
+        command = [*priority, *BENCH, "run", *bus, "--external", "all", "--dut", node]
+        run = subprocess.run([*command, "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=seconds)
+        rerun = _failed(out) if run.returncode not in (0, EXIT_INCONCLUSIVE) else []
+        if 0 < len(rerun) <= MAX_RERUNS:   # the example's own process may have been descheduled: once more
+            again = subprocess.run([*command, "--out", str(out / "rerun"), *rerun], cwd=ROOT, capture_output=True,
+                                   text=True, timeout=seconds)
+            assert again.returncode in (0, EXIT_INCONCLUSIVE), \
+                _failures(out) + "run again:\n" + _failures(out / "rerun") + again.stdout[-2000:] + again.stderr[-2000:]
+            warnings.warn(f"the {node} example failed {len(rerun)} case(s) and passed them when run again (a "
+                          f"descheduled example process?): " + _failures(out).replace("\n", " | ")[:1500], stacklevel=1)
+        else:
+            assert run.returncode in (0, EXIT_INCONCLUSIVE), _failures(out) + run.stdout[-3000:] + run.stderr[-3000:]
+        campaign = _check_report(out, node, min_ran, len(rerun))
     finally:
         outputs = {"ecu": ecu.stop() if ecu is not None else "", "plant": plant.stop()}
     assert ecu is not None and ecu.process.returncode == 0 and "stopped" in outputs["ecu"], outputs["ecu"]
@@ -100,11 +118,19 @@ def _failures(out: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _check_report(out: Path, node: str, min_ran: int) -> Campaign:
+def _failed(out: Path) -> list[str]:
+    """The node ids of the cases a campaign failed (results.json)."""
+    path = out / "results.json"
+    if not path.exists():
+        return []
+    return [c["nodeid"] for c in json.loads(path.read_text())["cases"] if c["outcome"] == "failed"]
+
+
+def _check_report(out: Path, node: str, min_ran: int, passed_again: int = 0) -> Campaign:
     suite = ET.parse(out / "junit.xml").getroot()
     suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
     assert suite is not None
-    assert int(suite.get("failures", "1")) == 0 and int(suite.get("errors", "1")) == 0
+    assert int(suite.get("failures", "1")) == passed_again and int(suite.get("errors", "1")) == 0
     ran, skipped, inconclusive = [], [], []
     for case in suite.findall("testcase"):
         name = case.get("name", "")
