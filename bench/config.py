@@ -34,6 +34,132 @@ DEFAULT_LATENCY_WINDOW = 1.0
 DEFAULT_SCENARIO_TIMEOUT = 2.0
 
 
+# -- bench.toml's tables and keys: the one list the loader refuses unknown keys against and that
+# `python -m bench.cli.configdoc` writes docs/reference/bench-toml.md from --------------------------------------
+@dataclass(frozen=True)
+class Key:
+    """One key: what it sets, whether a table that is there must have it, and a value as written in TOML."""
+
+    text: str
+    example: str
+    required: bool = False
+
+
+@dataclass(frozen=True)
+class TableKeys:
+    """One table (or one entry of a list of tables): how it is written, what it is for, its keys."""
+
+    header: str                   # as written in bench.toml, e.g. "[e2e.MESSAGE]"
+    text: str
+    keys: dict[str, Key]
+    others: str = ""              # what any other key is ("" = refused, naming the key meant)
+    required: bool = False        # every bench.toml has it
+    example_name: str = ""        # MESSAGE or NODE in the example's header
+    example_keys: tuple[str, ...] = ()   # the keys the example shows (default: all)
+
+
+#: a value of each E2E parameter as written in bench.toml
+_E2E_EXAMPLES = {
+    "Profile": '"P11"', "DataID": "0x0222", "DataIDMode": '"NIBBLE"', "DataIDList": '"0A 0B 0C ..."', "Offset": "0",
+    "DataLength": "64", "MaxDeltaCounter": "2", "WindowSize": "3", "MinOkStateInit": "1", "MaxErrorStateInit": "1",
+    "MinOkStateValid": "1", "MaxErrorStateValid": "2", "MinOkStateInvalid": "3", "MaxErrorStateInvalid": "1",
+}
+
+
+SCHEMA: dict[str, TableKeys] = {
+    "bench": TableKeys(
+        "[bench]", "The project: its databases, the nodes the test runner plays, its plant, where its cases and "
+        "reports are. Paths are relative to bench.toml.", {
+            "databases": Key("the DBC or ARXML files of the network, each checked to exist before any case",
+                             '["dbc/network.dbc", "dbc/hil.dbc"]', required=True),
+            "stimulus": Key("the nodes the test runner itself sends (the stimulus)", '["TESTER"]',
+                            required=True),
+            "plant": Key("a plant registered in the entry-point group `bench.plants`; without it the bench plays "
+                         "every node that is neither stimulus nor external from its database (a restbus), and skips "
+                         "a case whose DUT it would play so", '"my_plant"'),
+            "testcases": Key("the folder of the test cases `bench run` runs by default", '"testcases"',
+                             required=True),
+            "reports": Key("the folder under which `bench run` makes a new report folder when no `--out` is given",
+                           '"reports"', required=True),
+        }, required=True),
+    "scenario": TableKeys(
+        "[scenario]", "How the `bench` fixture's `start_scenario` resets the plant: the bench sends a new id in "
+        "`command` (the scenario's settings beside it in the same message) and waits for the plant to echo it in "
+        "`ack`. Without this table `start_scenario` is an error.", {
+            "command": Key("the signal the bench sends the scenario id in, `Message.Signal`",
+                           '"HIL_Control.ScenarioNumber"', required=True),
+            "ack": Key("the signal the plant echoes it in, `Message.Signal`", '"HIL_Status.ScenarioAck"',
+                       required=True),
+            "timeout": Key("s the plant has to acknowledge (default 2)", "2.0"),
+        }),
+    "contract": TableKeys(
+        "[contract]", "The node contracts: markdown whose level-3 headings `### ID — title` are the requirements; "
+        "test cases name the ids they check (`@pytest.mark.req`), and an id that is not there stops collection.", {
+            "documents": Key("globs relative to bench.toml, each matching at least one file",
+                             '["docs/contract/*.md"]'),
+        }),
+    "timing": TableKeys(
+        "[timing]", "The report's timing section.", {
+            "latency": Key("command → status latency pairs, a list of tables (below)",
+                           '[{command = "ECU_Command.Angle", status = "ECU_Status.Angle"}]'),
+        }),
+    "timing.latency": TableKeys(
+        "[timing] latency = [{...}, ...]", "One latency pair: from the onset of a command change by more than "
+        "`threshold` with the status at rest, to the first status frame that moved by more than it the same way.", {
+            "command": Key("the command signal, `Message.Signal`", '"ECU_Command.Angle"', required=True),
+            "status": Key("the status signal that follows it, `Message.Signal`", '"ECU_Status.Angle"',
+                          required=True),
+            "name": Key("the pair's name in the report (default: command → status)", '"ECU steering"'),
+            "threshold": Key("a change larger than this, in the signals' unit (default: one step of the coarser "
+                             "signal)", "0.05"),
+            "window": Key("s the status has to start following (default 1)", "1.0"),
+        }),
+    "bus": TableKeys(
+        "[bus]", "Defaults for the bus, under the command line's options and over the databases' attributes.", {
+            "bitrate": Key("nominal bit rate, bit/s (default: the databases' `Baudrate`)", "500000"),
+            "fd": Key("CAN FD (default: on when the databases' `BusType` is CAN FD)", "true"),
+            "data_bitrate": Key("CAN FD data-phase bit rate, bit/s (needs fd = true)", "2000000"),
+        }, others="a python-can bus argument (e.g. Vector's `app_name`, PCAN's `f_clock_mhz`), passed to "
+                  "`can.Bus` as given and not checked: python-can's drivers read their options from **kwargs, so no "
+                  "signature tells an option from a typo; `interface` and `channel` belong to the command line"),
+    "e2e": TableKeys(
+        "[e2e.MESSAGE]", "A message's AUTOSAR end-to-end protection over what its database declares, by AUTOSAR's "
+        "names (the DBC attributes' without `E2E_`); bench.toml over the database over the contract's defaults "
+        "(docs/spec/e2e.md).",
+        {name: Key(text, _E2E_EXAMPLES[name]) for name, text in E2E_PARAMETERS.items()},
+        example_name="ECU_Status", example_keys=("Profile", "DataID", "MaxDeltaCounter")),
+    "messages": TableKeys(
+        f"[{overrides_table.TABLE}.MESSAGE]", "What a database lacks for one message (it is the OEM's, not the test "
+        "engineer's to edit); `bench dbc check` names the key that fixes each timing error it reports.", {
+            overrides_table.CYCLE_TIME: Key("the cycle time, ms (> 0)", "100"),
+            overrides_table.SEND_TYPE: Key(f"the send type: {', '.join(overrides_table.SEND_TYPES)}", '"cyclic"'),
+        }, example_name="BREMSE_33"),
+    "calibration": TableKeys(
+        "[calibration.NODE]", "The calibration of a real (external) ECU that its cases need to judge it, one "
+        "`NAME = { value = <number>, unit = \"<unit>\" }` per value; used only while NODE is external. Which names "
+        "a node needs is its campaign's to say, checked before the first case.", {
+            "value": Key("a finite number", "0.6", required=True),
+            "unit": Key("its unit, a non-empty string", '"km/h"', required=True),
+        }, example_name="ECU"),
+    "diagnostics": TableKeys(
+        "[diagnostics]", "Diagnostics (UDS on ISO-TP, docs/contract/diagnostics.md).", {
+            "file": Key("the declaration of every node's addresses, DTCs, DIDs and routines, relative to "
+                        "bench.toml", '"dbc/diagnostics.toml"'),
+            "security": Key("an external node's seed/key function `module:function` per node, called as udsoncan's "
+                            "`security_algo`: function(level, seed, params) -> key bytes (default: the documented "
+                            "algorithm, DIAG-SEC-01)", '{ ECU = "my_keys:ecu_key" }'),
+        }),
+}
+
+#: bench.toml's tables; any other is a typo
+TABLES = tuple(name for name in SCHEMA if "." not in name)
+
+
+def keys(table: str) -> tuple[str, ...]:
+    """The keys `table` accepts (a SCHEMA name)."""
+    return tuple(SCHEMA[table].keys)
+
+
 @dataclass(frozen=True)
 class LatencyPair:
     """A command signal and the status signal that follows it, for the report's timing section
@@ -170,7 +296,7 @@ def load_config(path: Path | None = None) -> ProjectConfig:
             raise ConfigError(f"{path}: [bench] {key} must be a non-empty string, got {value!r}")
         return value
 
-    _known_keys(f"{path}: [bench]", section, ("databases", "stimulus", "plant", "testcases", "reports"))
+    _known_keys(f"{path}: [bench]", section, keys("bench"))
     databases = tuple(base / p for p in strings("databases"))
     for database in databases:   # checked here so that `bench run` stops before any case starts
         if not database.is_file():
@@ -198,7 +324,7 @@ def _diagnostics(path: Path, table: Any) -> dict[str, Any]:
     the declaration is read when a session starts (bench.diag.declaration), the functions when a case unlocks."""
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: [diagnostics] must be a table")
-    _known_keys(f"{path}: [diagnostics]", table, ("file", "security"))
+    _known_keys(f"{path}: [diagnostics]", table, keys("diagnostics"))
     if "file" not in table:
         return {}
     name = table["file"]
@@ -219,7 +345,7 @@ def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
     one file; the requirements are read here so that a duplicate id stops the run before any case starts."""
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: [contract] must be a table")
-    _known_keys(f"{path}: [contract]", table, ("documents",))
+    _known_keys(f"{path}: [contract]", table, keys("contract"))
     if "documents" not in table:
         return {}
     patterns = table["documents"]
@@ -244,10 +370,6 @@ def _contract(path: Path, text: str, table: Any) -> dict[str, Any]:
 _BUS_CLI_ONLY = ("interface", "channel")
 
 
-#: bench.toml's tables; any other is a typo
-TABLES = ("bench", "scenario", "contract", "timing", "bus", "e2e", "messages", "calibration", "diagnostics")
-
-
 #: [e2e.MESSAGE] keys whose value is a name; DataIDList is hex text or a list of bytes; every other key a number.
 _E2E_NAMES = ("Profile", "DataIDMode")
 
@@ -258,7 +380,7 @@ def _e2e_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
     without `E2E_`). Only the form is checked here; the values are checked with the databases (`bench.e2e.config`),
     and a message name that no database has is refused there, with the name meant."""
     out: dict[str, dict[str, Any]] = {}
-    for message, where, values in _message_tables(path, "e2e", table, tuple(E2E_PARAMETERS)):
+    for message, where, values in _message_tables(path, "e2e", table, keys("e2e")):
         parameters: dict[str, Any] = {}
         for key, value in values.items():
             if key in _E2E_NAMES:
@@ -297,7 +419,7 @@ def _messages_table(path: Path, table: Any) -> dict[str, dict[str, Any]]:
     """[messages.MESSAGE] cycle_time_ms = 10, send_type = "cyclic": what a database lacks for one message
     (bench.database.overrides)."""
     out: dict[str, dict[str, Any]] = {}
-    for message, where, values in _message_tables(path, overrides_table.TABLE, table, overrides_table.KEYS):
+    for message, where, values in _message_tables(path, overrides_table.TABLE, table, keys("messages")):
         cycle = values.get(overrides_table.CYCLE_TIME)
         if cycle is not None and (isinstance(cycle, bool) or not isinstance(cycle, (int, float))
                                   or not math.isfinite(cycle) or cycle <= 0):
@@ -329,7 +451,7 @@ def _calibration(path: Path, table: Any) -> dict[str, dict[str, tuple[float, str
         for name, item in values.items():
             if not isinstance(item, dict):
                 raise ConfigError(f"{where} {name} must be {{ value = <number>, unit = \"<unit>\" }}, got {item!r}")
-            _known_keys(f"{where} {name}:", item, ("value", "unit"))
+            _known_keys(f"{where} {name}:", item, keys("calibration"))
             value, unit = item.get("value"), item.get("unit")
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ConfigError(f"{where} {name}: value must be a finite number, got {value!r}")
@@ -351,7 +473,7 @@ def _bus_table(path: Path, table: Any) -> BusOptions:
     if cli_only:
         raise ConfigError(f"{path}: [bus] {', '.join(cli_only)}: give it on the command line "
                           f"(--{' / --'.join(cli_only)}), not in bench.toml")
-    extra = {k: v for k, v in table.items() if k not in ("bitrate", "fd", "data_bitrate")}
+    extra = {k: v for k, v in table.items() if k not in keys("bus")}
     for key, value in extra.items():
         if isinstance(value, (dict, list)) and key != "can_filters":
             raise ConfigError(f"{path}: [bus] {key}: python-can bus arguments are plain values, got {value!r}")
@@ -390,7 +512,7 @@ def _latency_pairs(path: Path, timing: Any) -> tuple[LatencyPair, ...]:
     """[timing] latency = [{command = "Msg.Signal", status = "Msg.Signal", name?, threshold?, window?}, ...]"""
     if not isinstance(timing, dict):
         raise ConfigError(f"{path}: [timing] must be a table")
-    _known_keys(f"{path}: [timing]", timing, ("latency",))
+    _known_keys(f"{path}: [timing]", timing, keys("timing"))
     entries = timing.get("latency", [])
     if not isinstance(entries, list):
         raise ConfigError(f"{path}: [timing] latency must be a list of tables, got {entries!r}")
@@ -400,7 +522,7 @@ def _latency_pairs(path: Path, timing: Any) -> tuple[LatencyPair, ...]:
         if not isinstance(entry, dict):
             raise ConfigError(f"{where} must be a table like {{command = \"Msg.Signal\", status = \"Msg.Signal\"}}, "
                               f"got {entry!r}")
-        _known_keys(f"{where}:", entry, ("command", "status", "name", "threshold", "window"))
+        _known_keys(f"{where}:", entry, keys("timing.latency"))
         command, status = (_signal_ref(where, entry, key) for key in ("command", "status"))
         name = entry.get("name", f"{command[0]}.{command[1]} → {status[0]}.{status[1]}")
         if not isinstance(name, str) or not name:
@@ -420,7 +542,7 @@ def _scenario(path: Path, table: Any) -> ScenarioProtocol | None:
     where = f"{path}: [scenario]"
     if not isinstance(table, dict):
         raise ConfigError(f"{where} must be a table")
-    _known_keys(where, table, ("command", "ack", "timeout"))
+    _known_keys(where, table, keys("scenario"))
     for key in ("command", "ack"):
         if key not in table:
             raise ConfigError(f"{where} needs {key} = \"Message.Signal\"")

@@ -23,7 +23,6 @@ from bench.errors import did_you_mean
 TABLE = "messages"
 CYCLE_TIME = "cycle_time_ms"
 SEND_TYPE = "send_type"
-KEYS = (CYCLE_TIME, SEND_TYPE)
 SEND_TYPES = sendtype.KINDS      # send_type's values (bench.database.sendtype)
 
 MessageOverrides = Mapping[str, Mapping[str, Any]]
