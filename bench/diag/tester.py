@@ -313,8 +313,7 @@ def kernel_isotp_channel(station: Station) -> str | None:
     transport = getattr(station, "transport", None)
     if not isinstance(transport, SocketcanTransport) or not transport.stamped_batches or not kernel_isotp_available():
         return None   # (not stamped_batches: a test's stand-in for a socket, no kernel behind it)
-    channel = getattr(transport.bus, "channel", None)
-    return channel if isinstance(channel, str) else None
+    return transport.channel
 
 
 def open_client(bench: Bench, port: TesterPort, declaration: Declaration, node_name: str, *,

@@ -43,6 +43,12 @@ class SocketcanTransport(PythonCanTransport):
     def periodic(self, restbus: Restbus) -> KernelPeriodic | None:
         return KernelPeriodic.attach(self.bus, restbus)
 
+    @property
+    def channel(self) -> str | None:
+        """The interface's name (e.g. vcan0), for a socket of another protocol on it (the kernel's ISO-TP)."""
+        channel = getattr(self.bus, "channel", None)
+        return channel if isinstance(channel, str) else None
+
     def fileno(self) -> int | None:
         if self.fast is not None:
             return self.fast.fileno()
