@@ -110,6 +110,7 @@ class Case:
         self._interval_marks = {name: s.intervals_dropped + len(s.intervals)
                                 for name, s in self._monitor.by_name.items()}
         self._invalid_mark = self._monitor.invalid_dropped + len(self._monitor.invalid_log)
+        self._e2e_marks = {name: s.e2e_status for name, s in self._monitor.by_name.items() if s.rx is not None}
 
     # -- the run ------------------------------------------------------------------------------------
     @property
@@ -483,6 +484,15 @@ class Case:
         if state is not None:
             found += [(t, "timeout") for t in state.timeouts if t >= since]
         return sorted(found)
+
+    def e2e_statuses(self, message: str) -> dict[str, int]:
+        """Frames of an E2E-protected message per AUTOSAR check status (OK, OKSOMELOST, REPEATED, WRONGSEQUENCE,
+        ERROR, ...) since the case (or its latest scenario) started, as the bench's monitor found them: a receiver
+        with the message's own parameters (docs/spec/e2e.md), i.e. what every consumer on the bus was given. Only the
+        statuses that occurred; empty for an unprotected message. Records no step."""
+        state = self._monitor.state(message)
+        before = self._e2e_marks.get(message, {})
+        return {name: n - before.get(name, 0) for name, n in state.e2e_status.items() if n > before.get(name, 0)}
 
     # -- observation -------------------------------------------------------------------------------
     def value(self, message: str, signal: str) -> float:

@@ -139,3 +139,19 @@ def test_expect_clean_bus_judges_each_invalid_frame_as_its_senders(on_bench: tup
     assert not case.expect_clean_bus()
     assert [s.name for s in case.result.failed_steps] == ["no invalid frame on the bus (range, E2E, length)"]
     assert "VCU_WheelCmd_FL" in case.result.failed_steps[0].detail
+
+
+def test_e2e_statuses_count_since_the_scenario_started(on_bench: tuple[BenchSession, Case]) -> None:
+    """One dropped frame of a 20 ms E2E message: the frame after it is OKSOMELOST (docs/spec/e2e.md). Counts start
+    again with each scenario; a name no database has is refused."""
+    session, case = on_bench
+    case.start_scenario(Vehicle="EV4WIS")
+    case.run(0.5)
+    assert set(case.e2e_statuses("DRV_MotionRequest")) == {"OK"}
+    case.inject("drop", "DRV_MotionRequest", after=0.0005, duration=0.020)
+    case.run(0.2)
+    assert case.e2e_statuses("DRV_MotionRequest").get("OKSOMELOST") == 1
+    case.start_scenario(Vehicle="EV4WIS")
+    assert "OKSOMELOST" not in case.e2e_statuses("DRV_MotionRequest")
+    with pytest.raises(Exception, match="DRV_MotionReqest"):
+        case.e2e_statuses("DRV_MotionReqest")

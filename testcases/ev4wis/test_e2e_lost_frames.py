@@ -1,0 +1,47 @@
+"""Lost frames under AUTOSAR E2E: a consumer applies a frame whose counter stepped by 2 (OKSOMELOST).
+
+docs/spec/e2e.md ("OKSOMELOST") chooses MaxDeltaCounter 2 so that one lost or corrupted frame costs only itself,
+and docs/contract/common.md COM-RX-01 has a receiver apply a frame whose status is OK or OKSOMELOST while the state
+machine is VALID. Here every other `DRV_MotionRequest` frame is dropped for 1 s, so that every frame the VCU
+receives comes one counter step late: with the contract's receiver each is OKSOMELOST and applied, its request
+arrives every 40 ms, within its 60 ms timeout (VCU-FLT-01), and VcuFault stays OK (0). A VCU that took OKSOMELOST
+for an error would report REQUEST_INVALID (VCU-FLT-02) at the first of them. The bench's monitor, a receiver with
+the message's own parameters, counts the statuses on the bus: one OKSOMELOST per dropped frame and nothing rejected.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from testcases.stimulus import STIMULUS
+
+CYCLE = 0.020          # DRV_MotionRequest's GenMsgCycleTime
+LOST = 25              # frames dropped, every other one: 1 s
+HALF_TICK = 0.0005     # the drop windows start half a tick late: a frame is never on a window's edge
+REACTION_S = 0.1       # s after the last dropped frame in which VcuFault must still be OK
+
+
+@pytest.mark.dut("VCU")
+@pytest.mark.req("COM-RX-01", "VCU-FLT-02")
+def test_every_other_request_frame_lost(bench) -> None:
+    bench.start_scenario(Vehicle="EV4WIS", stimulus=STIMULUS["EV4WIS"])
+    bench.set("DRV_MotionRequest", DriveMode="PIVOT", PivotX=6.0, PivotY=-1.38, TargetSpeed=1.0)
+    bench.run(1.5)
+    bench.received("VCU_VehicleState", "VcuFault")   # a silent VCU ends the case here, in one line
+    bench.expect("no fault before the frames are lost", bench.value("VCU_VehicleState", "VcuFault"), 0)
+    before = bench.e2e_statuses("DRV_MotionRequest")
+    for k in range(LOST):   # windows of one cycle, one cycle apart: each holds exactly one frame
+        bench.inject("drop", "DRV_MotionRequest", after=2 * k * CYCLE + HALF_TICK, duration=CYCLE)
+    bench.always("VcuFault stays OK (0) while every other DRV_MotionRequest frame is lost",
+                 lambda: bench.value("VCU_VehicleState", "VcuFault") == 0, 2 * LOST * CYCLE + REACTION_S)
+    statuses = bench.e2e_statuses("DRV_MotionRequest")
+    lost = statuses.get("OKSOMELOST", 0) - before.get("OKSOMELOST", 0)
+    bench.expect("DRV_MotionRequest frames one counter step late (OKSOMELOST), as the monitor saw them", lost, LOST,
+                 detail="one per dropped frame: the frame after it")
+    rejected = {name: n - before.get(name, 0) for name, n in statuses.items()
+                if name not in ("OK", "OKSOMELOST") and n > before.get(name, 0)}
+    bench.expect_true("no DRV_MotionRequest frame with another status than OK or OKSOMELOST", not rejected,
+                      measured=", ".join(f"{name} {n}" for name, n in rejected.items()) or "none", expected="none")
+    speeds = [bench.value(f"VCU_WheelCmd_{w}", "WheelSpeedCmd") for w in ("FL", "FR", "RL", "RR")]
+    bench.expect_true("the VCU still commands the pivot's wheel speeds", all(s != 0.0 for s in speeds),
+                      measured=", ".join(f"{s:g}" for s in speeds), expected="none 0 rpm")
