@@ -28,7 +28,7 @@ from bench.results.model import CaseResult, FaultRecord, Plot, Series, Table
 from bench.session import BenchSession
 from bench.sim.station import LATE_CYCLES
 
-if TYPE_CHECKING:   # (udsoncan costs 0.3 s of import: loaded when a case first asks for a tester)
+if TYPE_CHECKING:   # (udsoncan costs 0.3 s of import: in virtual time loaded when a case first asks for a tester)
     from udsoncan.client import Client
 
     from bench.diag.tester import TesterPort

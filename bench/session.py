@@ -168,6 +168,10 @@ class BenchSession:
                 station.send_clock = self.clock.now
                 station.recent = self.clock.recent
                 station.timing_label = "stimulus" if station is self.runner else "simulated"
+            if self.declaration is not None and self.runner is not None:
+                # the tester's modules (udsoncan, can-isotp: 0.4 s of import) now, not in the first case that reads
+                # a DTC: there the import stalled the tick loop by 29 and 31 ms, in two runs of the campaign
+                import bench.diag.tester  # noqa: F401
 
     def _diagnostics(self, declaration: Declaration, plant_nodes: set[str]) -> None:
         """The diagnostic side of every simulated node the declaration describes (its UDS server on the plant's

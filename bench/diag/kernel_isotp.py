@@ -17,6 +17,8 @@ import os
 import socket
 from collections import deque
 
+import isotp
+
 from bench import canid
 from bench.diag.isotp import IsoTpParams, IsoTpProblem
 
@@ -57,10 +59,7 @@ class KernelIsoTpEndpoint:
         self._t = 0.0
 
     def open(self) -> None:
-        # can-isotp: its socket wraps the kernel's options (padding, flow control) by name
-        import isotp
-
-        sock = isotp.socket()
+        sock = isotp.socket()   # can-isotp's: it sets the kernel's options (padding, flow control) by name
         sock.set_opts(txpad=self.params.padding)
         sock.set_fc_opts(bs=self.params.block_size, stmin=round(self.params.stmin * 1000))
         mode = isotp.AddressingMode.Normal_29bits if canid.is_extended(self.tx_id) \
