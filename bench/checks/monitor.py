@@ -183,6 +183,16 @@ class Monitor:
         # progress sets it at its start (bench.case.Case), so that it keeps what it asks for over its whole length.
         self.history_from = math.inf
 
+    def join_mid_stream(self) -> None:
+        """Take each E2E message's first intact frame as in sequence (its counter starts the count): for a monitor
+        that joins a bus whose senders are running (`bench monitor`), where AUTOSAR's check would give the first
+        frame of every healthy message REPEATED or WRONGSEQUENCE. That frame still only moves the state machine
+        from NODATA to INIT (not applied, as after power-up). The bench's own runs keep AUTOSAR's rule: their
+        monitor starts before the senders it judges."""
+        for state in self.states.values():
+            if state.rx is not None:
+                state.rx.joins = True
+
     # -- frames ------------------------------------------------------------------------------
     def on_frame(self, t: float, frame_id: int, data: bytes, direction: str) -> bool:
         """Check one frame (`frame_id`: its identifier, format and kind, bench.canid); apply it only when valid and

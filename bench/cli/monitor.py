@@ -258,7 +258,7 @@ def render(live: LiveMonitor, now: float, source: str, elapsed: float) -> Group:
         (f"invalid {invalid}", "bold red" if invalid else "green"), "   ",
         (f"unknown ids {len(live.unknown)}", "bold yellow" if live.unknown else ""),
         f"   messages {seen}/{len(monitor.states)}   window {live.window:g} s   "
-        f"timeout {TIMEOUT_CYCLES}× cycle")
+        f"timeout {TIMEOUT_CYCLES}× cycle   joined mid-stream: a message's first frame starts its E2E counter")
     parts: list[Any] = [header, table]
     if live.unknown:
         top = ", ".join(f"{key} ×{count}" for key, count in live.unknown.most_common(8))
@@ -283,7 +283,9 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--window: {args.window} is not a number of seconds in [0.05, 600]")
     project = load_config(Path(args.config) if args.config else None)
     options, codebook = bus_options_for(project, args)
-    live = LiveMonitor(Monitor(codebook, keep_history=False), args.window)
+    monitor = Monitor(codebook, keep_history=False)
+    monitor.join_mid_stream()   # the bus runs already: a first frame's counter is no fault of its sender
+    live = LiveMonitor(monitor, args.window)
     bus = open_bus(args.interface, args.channel, options)
     channel = args.channel or (UDP_MULTICAST_DEFAULT_GROUP if args.interface == "udp_multicast" else "")
     source = f"{args.interface} {channel}".strip()

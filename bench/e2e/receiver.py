@@ -97,7 +97,7 @@ class Receiver:
     """The check and the state machine of one message, and the consumer's rule: a frame is applied when its
     status is OK or OKSOMELOST and the state machine is VALID after it."""
 
-    __slots__ = ("modulo", "max_delta", "next", "sm", "counts", "steady_ok", "held_back")
+    __slots__ = ("modulo", "max_delta", "next", "sm", "counts", "steady_ok", "held_back", "joins")
 
     def __init__(self, counter_modulo: int, max_delta_counter: int, sm: SMConfig) -> None:
         self.modulo = counter_modulo
@@ -109,6 +109,9 @@ class Receiver:
         self.held_back = False
         self.counts: dict[Status, int] = {}   # frames per status, but for ...
         self.steady_ok = 0                    # ... the OK frames of the steady path, counted here
+        #: A receiver that joins a running stream (`bench monitor`): the first intact frame's counter is taken as
+        #: the one due, where E2E_PXXCheckInit's 0 would make it REPEATED or WRONGSEQUENCE, a fault no sender made.
+        self.joins = False
 
     @property
     def state(self) -> SMState:
@@ -135,6 +138,8 @@ class Receiver:
             self.steady_ok += 1
             return _OK_APPLIED
         first = self.sm.state is SMState.NODATA
+        if first and self.joins and counter is not None and counter < self.modulo:
+            self.next = counter
         status = self.check(counter)
         counts = self.counts
         counts[status] = counts.get(status, 0) + 1

@@ -578,3 +578,22 @@ def test_generated_frames_follow_the_model(codebook: Codebook, start: int,
     if last is not None:
         assert _applied_index(monitor) == last & 0x7F
         assert state.last_valid == pytest.approx(frames[last].t_ms / 1000.0)
+
+
+@pytest.mark.parametrize("first", [0, 7, 13, 14])
+def test_a_monitor_that_joins_mid_stream_takes_the_first_counter(codebook: Codebook, first: int) -> None:
+    """`bench monitor` joins a running bus (issue 34): a healthy stream that starts at any counter gives OK from
+    its first frame, which only moves NODATA to INIT (not applied, as the document's first frame after power-up);
+    the second is applied. Without joining, AUTOSAR's check (E2E_P11CheckInit: 0 is due first) gives the first
+    frame of a stream that does not start at 0 REPEATED (counter 14, the one before 0) or WRONGSEQUENCE."""
+    frames = _steady(list(range(first, first + 5)))
+    joined = Monitor(codebook, keep_history=True)
+    joined.join_mid_stream()
+    verdicts = [joined.on_frame(f.t_ms / 1000.0, FRAME_ID, _wire(i, f), "rx") for i, f in enumerate(frames)]
+    assert verdicts == [False, True, True, True, True]
+    assert joined.state(MESSAGE).e2e_status == {"OK": 5}
+    model = Model()
+    expected = model.receive(first)[0]   # the document's model of a receiver started with its sender
+    strict, _ = _feed(codebook, frames)
+    assert set(strict.state(MESSAGE).e2e_status) - {"OK"} == ({expected} - {"OK"})
+    assert expected == ("OK" if first == 0 else "REPEATED" if first == COUNTER_VALUES - 1 else "WRONGSEQUENCE")
