@@ -178,3 +178,37 @@ def test_reader_is_tolerant_of_a_cut_log_and_clear_about_a_foreign_file(tmp_path
         can.LogReader(str(foreign))
     with pytest.raises(ValueError, match="cannot be appended"):
         MCAPWriter(tmp_path / "again.mcap", append=True)
+
+
+#: one frame of each kind python-can has: what it was must survive the log (issue 34: the log stored error frames as
+#: data frames of id 0 that a replay would have sent)
+KINDS = {
+    "11-bit data": can.Message(arbitration_id=0x123, data=b"\x01\x02", is_extended_id=False),
+    "29-bit data": can.Message(arbitration_id=0x18FF2010, data=bytes(8), is_extended_id=True),
+    "error frame": can.Message(arbitration_id=0x004, data=b"\x00\x04\x00\x00\x00\x00\x00\x00", is_error_frame=True,
+                               is_extended_id=False),
+    "remote frame": can.Message(arbitration_id=0x321, is_remote_frame=True, dlc=4, is_extended_id=False),
+    "29-bit remote frame": can.Message(arbitration_id=0x1ABCDE, is_remote_frame=True, dlc=2, is_extended_id=True),
+    "CAN FD with BRS and ESI": can.Message(arbitration_id=0x200, data=bytes(range(64)), is_fd=True, bitrate_switch=True,
+                                          error_state_indicator=True, is_extended_id=False),
+    "CAN FD without BRS": can.Message(arbitration_id=0x18DA10F1, data=bytes(12), is_fd=True, is_extended_id=True),
+}
+
+
+def _kind(msg: can.Message) -> tuple[object, ...]:
+    return (msg.arbitration_id, msg.is_extended_id, msg.is_error_frame, msg.is_remote_frame, msg.dlc, msg.is_fd,
+            msg.bitrate_switch, msg.error_state_indicator, bytes(msg.data), msg.is_rx)
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_every_frame_kind_survives_python_cans_writer_and_reader(tmp_path: Path, kind: str) -> None:
+    sent = KINDS[kind]
+    sent.timestamp, sent.is_rx = 1.25, False
+    path = tmp_path / "kinds.mcap"
+    with can.Logger(str(path)) as writer:
+        assert isinstance(writer, MCAPWriter)
+        writer.on_message_received(sent)
+    with can.LogReader(str(path)) as reader:
+        got = list(reader)
+    assert [_kind(m) for m in got] == [_kind(sent)]
+    assert got[0].timestamp == pytest.approx(1.25, abs=1e-9)
