@@ -27,6 +27,7 @@ from bench import canid
 FRAMES_TOPIC = "/can/frames"
 CLOCK_METADATA = "bench.clock"   # origin_ns: the log time of bench time 0
 BENCH_METADATA = "bench"         # profile, host, python, bench version, attachments, compression
+COUNTS_METADATA = "bench.counts"  # invalid_frames: written at close, so that a summary needs no frame read
 STEPS_TOPIC = "/bench/steps"
 DECODED_PREFIX = "/can/decoded/"
 DIAG_PREFIX = "/diag/"

@@ -14,18 +14,21 @@ import contextlib
 import io
 import json
 import os
+import struct
 from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 from mcap.exceptions import EndOfFile, McapError
+from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Footer, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from bench.errors import LogError
 from bench.log.format import (
     CLOCK_METADATA,
+    COUNTS_METADATA,
     DECODED_PREFIX,
     FRAMES_TOPIC,
     MAGIC,
@@ -223,7 +226,15 @@ def read_steps(path: str | Path) -> Iterator[dict[str, Any]]:
 
 
 def summarise(path: str | Path) -> LogSummary:
-    """Counts, time span and attachments of a log, and whether it is complete."""
+    """Counts, time span and attachments of a log, and whether it is complete: from the summary section and the
+    invalid-frame count a bench log ends with (a few reads, whatever the log's length), else by reading every
+    record (a cut log, one another program wrote)."""
+    indexed = _indexed_summary(Path(path))
+    return indexed if indexed is not None else _scanned_summary(path)
+
+
+def _scanned_summary(path: str | Path) -> LogSummary:
+    """`summarise` by reading every record."""
     scan = _Scan(path)
     summary = LogSummary(path=scan.path)
     start = end = None
@@ -241,13 +252,45 @@ def summarise(path: str | Path) -> LogSummary:
             summary.channels.setdefault(record.topic, 0)
         elif isinstance(record, Attachment):
             summary.attachments.append(record.name)
-        elif isinstance(record, Metadata):
+        elif isinstance(record, Metadata) and record.name != COUNTS_METADATA:
             summary.metadata.append((record.name, dict(record.metadata)))
     summary.start = None if start is None else start / 1e9
     summary.end = None if end is None else end / 1e9
     summary.complete = scan.complete
     summary.origin = scan.origin_ns / 1e9 if scan.origin_ns else None
     return summary
+
+
+def _indexed_summary(path: Path) -> LogSummary | None:
+    """The summary of a complete bench log from its summary section (statistics, channels, attachment and metadata
+    indexes) and its COUNTS_METADATA; None when it has no such section or record (then every record is read)."""
+    _Scan(path)   # the clear errors of a missing or foreign file
+    try:
+        with path.open("rb") as file:
+            reader = make_reader(file)
+            summary = reader.get_summary()
+            if summary is None or summary.statistics is None:
+                return None
+            metadata = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
+    except (McapError, OSError, ValueError, struct.error):   # a damaged summary: the records will say more
+        return None
+    counts = next((data for name, data in metadata if name == COUNTS_METADATA), None)
+    if counts is None:
+        return None
+    stats = summary.statistics
+    out = LogSummary(path=path, complete=True)
+    out.channels = {channel.topic: stats.channel_message_counts.get(cid, 0) for cid, channel in
+                    sorted(summary.channels.items())}
+    if stats.message_count:
+        out.start, out.end = stats.message_start_time / 1e9, stats.message_end_time / 1e9
+    out.frames = out.channels.get(FRAMES_TOPIC, 0)
+    out.invalid_frames = int(counts.get("invalid_frames", 0))
+    out.attachments = [index.name for index in sorted(summary.attachment_indexes, key=lambda a: a.offset)]
+    out.metadata = [(name, data) for name, data in metadata if name != COUNTS_METADATA]
+    clock = next((data for name, data in metadata if name == CLOCK_METADATA), None)
+    with contextlib.suppress(KeyError, ValueError, TypeError):
+        out.origin = int(clock["origin_ns"]) / 1e9 if clock else None
+    return out
 
 
 def run_start(path: str | Path) -> float | None:

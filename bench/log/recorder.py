@@ -40,6 +40,7 @@ from bench.log import mcapfast
 from bench.log.format import (
     BENCH_METADATA,
     CLOCK_METADATA,
+    COUNTS_METADATA,
     DECIMAL,
     DECODED_PREFIX,
     DIAG_PREFIX,
@@ -191,6 +192,7 @@ class Recorder:
         self._closed = False
         self._close_pending = False
         self._pending = 0
+        self._invalid = 0     # invalid frames written: COUNTS_METADATA at close
         self._deadline = time.monotonic() + self._interval
         atexit.register(self.close)
 
@@ -212,6 +214,8 @@ class Recorder:
         tail = self._frame_tail(arbitration_id, data, channel, direction, is_extended, is_error, is_remote, valid,
                                 error, is_fd, bitrate_switch, error_state_indicator, dlc, channel_number)
         self._write(self._frames_id, ns, FRAME_HEAD % (ns // 1_000_000_000, ns % 1_000_000_000, tail))
+        if not valid:
+            self._invalid += 1
 
     def _frame_tail(
         self, arbitration_id: int, data: bytes, channel: str, direction: str, is_extended: bool, is_error: bool,
@@ -307,6 +311,7 @@ class Recorder:
         channels: list[int] = []
         payloads: list[bytes] = []
         add_ns, add_channel, add_payload = nss.append, channels.append, payloads.append
+        invalid = 0
         for t, frame_id, data, direction, valid, error in frames:
             if type(data) is not bytes:
                 data = bytes(data)
@@ -326,6 +331,8 @@ class Recorder:
             add_ns(ns)
             add_channel(frames_id)
             add_payload(head % (sec, nsec, tail))
+            if not valid:
+                invalid += 1
             if decoded is not None:
                 add_ns(ns)
                 add_channel(decoded_id)
@@ -334,6 +341,7 @@ class Recorder:
                 problems.append(problem)
         if payloads:
             self._write_many(channels, nss, payloads)
+            self._invalid += invalid
         return problems
 
     def _frame_texts(self, key: tuple[int, bytes, str, bool, str, str], codecs: Mapping[int, Decoder]
@@ -548,6 +556,7 @@ class Recorder:
         atexit.unregister(self.close)
         try:
             if not self._broken:  # else leave the file ending at its last whole chunk: still readable
+                self._writer.add_metadata(COUNTS_METADATA, {"invalid_frames": str(self._invalid)})
                 self._writer.finish()  # type: ignore[no-untyped-call]   # mcap's Writer.finish carries no annotations
         finally:
             self._file.close()

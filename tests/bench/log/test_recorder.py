@@ -26,6 +26,7 @@ from mcap.reader import make_reader
 
 from bench.errors import BenchError, LogError
 from bench.log.format import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
+from bench.log import logread
 from bench.log.logread import LoggedFrame, read_decoded, read_frames, read_steps, summarise
 from bench.log.recorder import Recorder
 from tests.repo import BENCH_DBC, CHASSIS_DBC
@@ -180,7 +181,7 @@ def test_mcap_reader_decodes_all_json_against_schemas(log: tuple[Path, Written])
             count += 1
         assert count == len(written.frames) + len(written.decoded) + len(written.steps)
         assert [a.name for a in reader.iter_attachments()] == summary_attachments(path)
-        assert [m.name for m in reader.iter_metadata()] == ["bench"]
+        assert [m.name for m in reader.iter_metadata()] == ["bench", "bench.counts"]   # the counts at close
 
 
 def summary_attachments(path: Path) -> list[str]:
@@ -430,3 +431,16 @@ def test_the_pinned_mcap_is_the_one_the_fast_path_supports() -> None:
     for prefix in bench.log.mcapfast.SUPPORTED:   # each supported release line lies inside the pin, and only those
         assert f"{prefix}0" in spec
     assert "1.5.0" not in spec and "1.7.0" not in spec
+
+
+def test_the_summary_of_a_closed_log_is_read_from_its_index(log: tuple[Path, Written], tmp_path: Path) -> None:
+    """`bench log info` in a few reads (issue 34: 12.4 s on a 50 MB log): the summary section and the invalid-frame
+    count written at close give what reading every record gives; a cut log (no summary) is read record by record."""
+    path, written = log
+    assert logread._indexed_summary(path) is not None
+    indexed = summarise(path)
+    assert indexed == logread._scanned_summary(path)
+    assert indexed.invalid_frames == sum(not f.valid for f in written.frames) > 0
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    assert logread._indexed_summary(cut) is None and not summarise(cut).complete
