@@ -19,6 +19,7 @@ would, and it runs at a lower priority (LOG_NICE): it has no deadline, the simul
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import json
 import logging
@@ -130,11 +131,21 @@ class LogProcess:
             return "the log process ended unexpectedly"
 
 
+def _leave_real_time() -> None:
+    """The child has no deadline: it drops a real-time policy inherited from the run (`chrt -f`, as the README
+    advises on a loaded host), under which nice means nothing and each batch it decodes (tens of ms) would hold a
+    core that the tick loops of the run, the plant and the ECU need. Lowering one's own policy needs no privilege."""
+    with contextlib.suppress(AttributeError, OSError):   # (no sched_* on this platform: nothing was inherited)
+        if os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
 def _serve(conn: Connection, reply: Connection, path: str, databases: list[str], channel: str,
            e2e_overrides: Mapping[str, Mapping[str, Any]] | None = None, diagnostics: str = "") -> None:
     """The child: one Recorder, fed batch by batch until the pipe says stop or closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # Ctrl-C and SIGTERM are for the run; it closes us
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _leave_real_time()
     try:
         os.nice(LOG_NICE)
     except OSError as exc:   # not fatal: the log is only written later than it could be

@@ -146,7 +146,11 @@ def test_pytest_plugin_options_reach_python_can(tmp_path: Path, fake_pcan: tuple
                              "--bench-interface", "pcan", "--bench-channel", "PCAN_USBBUS2", "--bench-bitrate",
                              "1000000", "--bench-out", str(tmp_path / "out")],
                             cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, result.stdout + result.stderr
+    # what is judged here is the options, not the case: a case the bench made inconclusive on a stalled host (pytest
+    # reports it failed, "inconclusive: bench late by ...") ran on the bus all the same
+    failed = [line for line in result.stdout.splitlines() if line.startswith("FAILED ")]
+    assert result.returncode == 0 or (result.returncode == 1 and failed and all(
+        " - inconclusive: bench late by " in line for line in failed)), result.stdout + result.stderr
     assert [(c["channel"], c["bitrate"]) for c in opened(log)] == [("PCAN_USBBUS2", 1000000)] * 2
 
 
