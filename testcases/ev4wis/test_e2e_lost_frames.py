@@ -7,6 +7,8 @@ receives comes one counter step late: with the contract's receiver each is OKSOM
 arrives every 40 ms, within its 60 ms timeout (VCU-FLT-01), and VcuFault stays OK (0). A VCU that took OKSOMELOST
 for an error would report REQUEST_INVALID (VCU-FLT-02) at the first of them. The bench's monitor, a receiver with
 the message's own parameters, counts the statuses on the bus: one OKSOMELOST per dropped frame and nothing rejected.
+Those are the bench's own part, judged as the stimulus node DRIVER's: in real time a late bench may send a window's
+frame outside it, which is no fault of the VCU's.
 """
 
 from __future__ import annotations
@@ -30,18 +32,33 @@ def test_every_other_request_frame_lost(bench) -> None:
     bench.received("VCU_VehicleState", "VcuFault")   # a silent VCU ends the case here, in one line
     bench.expect("no fault before the frames are lost", bench.value("VCU_VehicleState", "VcuFault"), 0)
     before = bench.e2e_statuses("DRV_MotionRequest")
-    for k in range(LOST):   # windows of one cycle, one cycle apart: each holds exactly one frame
-        bench.inject("drop", "DRV_MotionRequest", after=2 * k * CYCLE + HALF_TICK, duration=CYCLE)
-    bench.always("VcuFault stays OK (0) while every other DRV_MotionRequest frame is lost",
-                 lambda: bench.value("VCU_VehicleState", "VcuFault") == 0, 2 * LOST * CYCLE + REACTION_S)
+    # windows of one cycle, one cycle apart: each holds exactly one frame where the bench sends on time
+    faults = [bench.inject("drop", "DRV_MotionRequest", after=2 * k * CYCLE + HALF_TICK, duration=CYCLE)
+              for k in range(LOST)]
+    t0 = bench.now
+    bench.run(2 * LOST * CYCLE + REACTION_S)   # the whole pattern, whatever the VCU does (judged below)
+    t, codes = bench.history("VCU_VehicleState", "VcuFault", since=t0)
+    faulty = [(float(ti - t0), int(code)) for ti, code in zip(t, codes, strict=True) if code != 0]
+    bench.expect_true("VcuFault stays OK (0) while every other DRV_MotionRequest frame is lost",
+                      len(t) > 0 and not faulty, measured=f"{len(faulty)} of {len(t)} frames not 0" + (
+                          f", the first {faulty[0][1]} at +{faulty[0][0]:.3f} s" if faulty else ""),
+                      expected="0 in every VCU_VehicleState frame")
+    # The bench's own part, judged as the stimulus node's (a late bench in real time may send a window's frame
+    # outside it, or two in one): shown under DRIVER, it never fails the VCU, and a VCU failure beside it is
+    # inconclusive
+    dropped = [fault.frames for fault in faults]
+    bench.expect_true("the bench dropped exactly one DRV_MotionRequest frame per window", dropped == [1] * LOST,
+                      measured=" ".join(map(str, dropped)), expected=" ".join(["1"] * LOST), node="DRIVER")
     statuses = bench.e2e_statuses("DRV_MotionRequest")
     lost = statuses.get("OKSOMELOST", 0) - before.get("OKSOMELOST", 0)
-    bench.expect("DRV_MotionRequest frames one counter step late (OKSOMELOST), as the monitor saw them", lost, LOST,
-                 detail="one per dropped frame: the frame after it")
+    bench.expect("DRV_MotionRequest frames one counter step late (OKSOMELOST), as the monitor saw them", lost,
+                 sum(n == 1 for n in dropped), detail="one per window that dropped one frame: the frame after it",
+                 node="DRIVER")
     rejected = {name: n - before.get(name, 0) for name, n in statuses.items()
                 if name not in ("OK", "OKSOMELOST") and n > before.get(name, 0)}
     bench.expect_true("no DRV_MotionRequest frame with another status than OK or OKSOMELOST", not rejected,
-                      measured=", ".join(f"{name} {n}" for name, n in rejected.items()) or "none", expected="none")
+                      measured=", ".join(f"{name} {n}" for name, n in rejected.items()) or "none", expected="none",
+                      node="DRIVER")
     speeds = [bench.value(f"VCU_WheelCmd_{w}", "WheelSpeedCmd") for w in ("FL", "FR", "RL", "RR")]
     bench.expect_true("the VCU still commands the pivot's wheel speeds", all(s != 0.0 for s in speeds),
                       measured=", ".join(f"{s:g}" for s in speeds), expected="none 0 rpm")

@@ -25,8 +25,8 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from bench.errors import BenchError, LogError
-from bench.log.format import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
 from bench.log import logread
+from bench.log.format import DECODED_PREFIX, FRAMES_TOPIC, STEPS_TOPIC
 from bench.log.logread import LoggedFrame, read_decoded, read_frames, read_steps, summarise
 from bench.log.recorder import Recorder
 from tests.repo import BENCH_DBC, CHASSIS_DBC
