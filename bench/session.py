@@ -108,10 +108,6 @@ def resolve_bus_options(project: ProjectConfig, given: BusOptions, codebook: Cod
     return options
 
 
-#: s between two freezes of the heap in a process that never pauses between cases (bench.sim.clock.WallClock)
-HEAP_FREEZE_S = 1.0
-
-
 class BenchSession:
     """Everything one process needs to take part in a bench run."""
 
@@ -128,8 +124,7 @@ class BenchSession:
         if problems:
             raise InputProblems(problems)
         self.external = resolve_external(self.codebook, project.stimulus, settings.external)
-        self.clock: Clock = VirtualClock() if settings.virtual_time else \
-            WallClock(freeze_every=HEAP_FREEZE_S if role == "plant" else math.inf)
+        self.clock: Clock = VirtualClock() if settings.virtual_time else WallClock()
         channel = settings.channel
         if in_process(settings.interface) and not channel:
             channel = f"bench-{next(_virtual_channels)}"   # sessions in one process never mix

@@ -121,14 +121,7 @@ class WallClock:
 
     realtime = True
 
-    def __init__(self, freeze_every: float = math.inf) -> None:
-        """`freeze_every`: s of bench time between two `gc.freeze()` calls while the loop has time to spare, for a
-        process with no pause between cases (`bench plant`): without them its young heap grew until a full
-        collection stalled its tick loop (two of 25 ms each at the campaign's first case, CI's ABS example
-        campaign: IO_AbsSensors 10-42 ms late). A freeze moves the survivors out of the collector's view without
-        a collection (constant time); a cycle that dies after it stays in memory (as after `settle_heap`)."""
-        self.freeze_every = freeze_every
-        self._frozen_at = 0.0
+    def __init__(self) -> None:
         self.start()
         self.max_lag = 0.0   # worst lateness of a tick, s
         self._poller = select.poll()
@@ -209,9 +202,6 @@ class WallClock:
     def wait_until(self, t: float, stations: Sequence[Station]) -> None:
         """Return at bench time t, with what the stations' sockets received meanwhile read."""
         remaining = t - self.now()
-        if remaining > 0 and t - self._frozen_at >= self.freeze_every:
-            gc.freeze()
-            self._frozen_at = t
         stamped = all(station.stamped_batches for station in stations)
         if remaining < 0:
             self.max_lag = max(self.max_lag, -remaining)
