@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from bench.config import SCHEMA, TableKeys
+from bench.pytest.fixturedoc import write_or_check
 
 TARGET = Path("docs") / "reference" / "bench-toml.md"
 
@@ -61,16 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("target", nargs="?", default=str(TARGET), help=f"the page (default: {TARGET})")
     parser.add_argument("--check", action="store_true", help="write nothing; exit 1 when the page is out of date")
     args = parser.parse_args(argv)
-    target, text = Path(args.target), render()
-    if args.check:
-        current = target.read_text(encoding="utf-8") if target.is_file() else ""
-        if current != text:
-            print(f"{target}: out of date; run `python -m bench.cli.configdoc`", file=sys.stderr)
-            return 1
-        return 0
-    target.write_text(text, encoding="utf-8")
-    print(f"wrote {target}")
-    return 0
+    return write_or_check(Path(args.target), render(), args.check, "python -m bench.cli.configdoc")
 
 
 if __name__ == "__main__":

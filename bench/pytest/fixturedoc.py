@@ -178,11 +178,16 @@ def main(argv: list[str] | None = None) -> int:
     except BenchError as exc:
         print(f"python -m bench.pytest.fixturedoc: error: {exc}", file=sys.stderr)
         return 2
-    target = project.path.parent / TARGET
-    if args.check:
+    return write_or_check(project.path.parent / TARGET, text, args.check, "python -m bench.pytest.fixturedoc")
+
+
+def write_or_check(target: Path, text: str, check: bool, command: str) -> int:
+    """A generated reference page: write it, or with `check` only compare it (exit code 1 and a line naming
+    `command` when it is out of date). Also bench.cli.configdoc's."""
+    if check:
         current = target.read_text(encoding="utf-8") if target.is_file() else ""
         if current != text:
-            print(f"{target}: out of date; run `python -m bench.pytest.fixturedoc`", file=sys.stderr)
+            print(f"{target}: out of date; run `{command}`", file=sys.stderr)
             return 1
         return 0
     target.write_text(text, encoding="utf-8")
