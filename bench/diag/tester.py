@@ -93,16 +93,15 @@ class TesterPort:
                  channel: str | None = None) -> None:
         self.station = station
         self.channel = channel   # the kernel ISO-TP's interface, or None: the bench's own
-        self.kernel = channel is not None
         self.endpoint: IsoTpEndpoint | KernelIsoTpEndpoint = \
             KernelIsoTpEndpoint(channel, tx_id, rx_id, params) if channel is not None \
             else IsoTpEndpoint(tx_id, rx_id, station.send_now, params)
-        self.frame_ids = () if self.kernel else (rx_id,)
+        self.frame_ids = () if channel is not None else (rx_id,)
         self.users = 0
 
     @property
     def busy(self) -> bool:
-        return self.kernel or self.endpoint.busy
+        return self.channel is not None or self.endpoint.busy
 
     def on_frame(self, t: float, frame_id: int, data: bytes) -> None:
         self.endpoint.on_frame(t, data)
