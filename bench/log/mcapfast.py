@@ -1,4 +1,5 @@
-"""The log's fast path: MCAP Message records and message indexes packed in one go, into mcap's writer.
+"""The log's fast path: MCAP Message records and message indexes packed in one go, into mcap's writer; and
+read back without a call per field.
 
 mcap's pure-Python writer builds a Message object per message and writes its five fields one by one through a
 BytesIO; the log writes two messages per frame, and that was the largest part of its cost (docs/performance.md,
@@ -9,23 +10,52 @@ releases it was checked against (SUPPORTED, the same as pyproject.toml's pin). t
 test_recorder_batch.py compare its files with mcap's public writer's, record by record; any other release, or
 a writer whose state is not what these releases have, gets None here and the recorder writes through
 `Writer.add_message`.
+
+Reading (`read_records`) needs no internals: mcap's `StreamReader` reads every field of every record with a call
+of its own, message indexes included, which made reading a log slower than writing it; `read_records` splits
+the stream and its chunks with one unpack per record and leaves the rarer records to mcap's own `read`.
+tests/bench/log/test_mcapfast.py compares its records with `StreamReader`'s, on whole and cut logs.
 """
 
 from __future__ import annotations
 
 import bisect
+import io
 import itertools
 import operator
 import struct
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 from mcap._chunk_builder import ChunkBuilder
-from mcap.records import MessageIndex, Statistics
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import InvalidMagic
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    McapRecord,
+    Message,
+    MessageIndex,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+from mcap.stream_reader import get_chunk_data_stream
 from mcap.writer import Writer
+
+from bench.log.format import MAGIC
 
 SUPPORTED = ("1.6.",)   # mcap releases (version prefixes) whose writer state the fast path knows
 RECORD_OVERHEAD = 31  # bytes of an MCAP Message record besides its data
@@ -174,3 +204,68 @@ def fast_bulk_adder(writer: Writer) -> Callable[[list[int], list[int], list[byte
             writer.flush()  # type: ignore[no-untyped-call]   # mcap's Writer.flush carries no annotations
 
     return add_many
+
+
+_RECORD_HEAD = struct.Struct("<BQ")          # opcode, record length
+_MESSAGE_FIELDS_HEAD = struct.Struct("<HIQQ")   # channel id, sequence, log time, publish time
+_READERS: dict[int, Callable[[ReadDataStream], McapRecord]] = {
+    Opcode.ATTACHMENT: Attachment.read, Opcode.ATTACHMENT_INDEX: AttachmentIndex.read, Opcode.CHANNEL: Channel.read,
+    Opcode.CHUNK_INDEX: ChunkIndex.read, Opcode.DATA_END: DataEnd.read, Opcode.FOOTER: Footer.read,
+    Opcode.HEADER: Header.read, Opcode.METADATA: Metadata.read, Opcode.METADATA_INDEX: MetadataIndex.read,
+    Opcode.SCHEMA: Schema.read, Opcode.STATISTICS: Statistics.read, Opcode.SUMMARY_OFFSET: SummaryOffset.read,
+}
+
+
+def read_records(read: Callable[[int], bytes]) -> Iterator[McapRecord]:
+    """The records of an MCAP stream as mcap's `StreamReader(...).records` gives them (a chunk's records in place
+    of the chunk, up to the footer and its closing magic), less the message indexes, which nothing reads.
+
+    `read(n)` returns n bytes or raises mcap's `EndOfFile`; a bad magic raises `InvalidMagic`, as mcap's does."""
+    _read_magic(read)
+    while True:
+        opcode, length = _RECORD_HEAD.unpack(read(_RECORD_HEAD.size))
+        body = read(length)
+        if opcode == Opcode.MESSAGE:
+            yield _message(body, 0, length)
+        elif opcode == Opcode.CHUNK:
+            yield from _chunk_records(Chunk.read(_stream(body)))
+        elif opcode in _READERS:
+            record = _READERS[opcode](_stream(body))
+            yield record
+            if isinstance(record, Footer):
+                _read_magic(read)
+                return
+
+
+def _chunk_records(chunk: Chunk) -> Iterator[McapRecord]:
+    """A chunk's records, as mcap's `breakup_chunk` gives them."""
+    stream, size = get_chunk_data_stream(chunk)
+    data = stream.read(size)
+    at = 0
+    while at < size:
+        opcode, length = _RECORD_HEAD.unpack_from(data, at)
+        at += _RECORD_HEAD.size
+        end = at + length
+        if opcode == Opcode.MESSAGE:
+            yield _message(data, at, end)
+        elif opcode == Opcode.CHANNEL:
+            yield Channel.read(_stream(data[at:end]))
+        elif opcode == Opcode.SCHEMA:
+            yield Schema.read(_stream(data[at:end]))
+        at = end
+
+
+def _message(data: bytes, at: int, end: int) -> Message:
+    channel_id, sequence, log_time, publish_time = _MESSAGE_FIELDS_HEAD.unpack_from(data, at)
+    return Message(channel_id=channel_id, log_time=log_time, data=data[at + _MESSAGE_FIELDS:end],
+                   publish_time=publish_time, sequence=sequence)
+
+
+def _stream(body: bytes) -> ReadDataStream:
+    return ReadDataStream(io.BytesIO(body))
+
+
+def _read_magic(read: Callable[[int], bytes]) -> None:
+    magic = read(len(MAGIC))
+    if magic != MAGIC:
+        raise InvalidMagic(tuple(magic))
