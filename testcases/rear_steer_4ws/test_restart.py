@@ -9,7 +9,7 @@ within 0.3 % of |TargetSpeed|) while the VCU executes it (VcuFault 0, the reques
 `start` in steps.py, where every 4WS case sets its hand wheel — and from then on, while the car runs at its
 request, VCU-4WS-02 holds at its tolerance: |δ_r/X − k(u)| ≤ 0.01 in every commanded frame.
 
-Here: restart at 40, 80 and 100 km/h (the restarts of VCU-4WS-06), ADAPTIVE with the default law (FEEDFORWARD),
+Here: restart at 40, 80 and 100 km/h (the speeds of VCU-4WS-06), ADAPTIVE with the default law (FEEDFORWARD),
 hand wheel 0 until that moment, then 45° (front axle X = 3°). Judged: every VCU_WheelCmd_xx frame of the next
 JUDGE_S s that executes the hand wheel (front axle = X) while the car runs at its request: the
 commanded axle ratio δ_r/X (mean of the two wheels of an axle) against k(u) of docs/spec/formulas.md §5 at the
@@ -28,7 +28,7 @@ from testcases.rear_steer_4ws.steps import SPEED_TOL, commanded_axles, limit, st
 
 pytestmark = [pytest.mark.dut("VCU"), pytest.mark.req("VCU-4WS-01", "VCU-4WS-02")]
 
-SPEEDS_KMH = (40.0, 80.0, 100.0)      # the restarts of VCU-4WS-06 (issue 26: the miss was seen at 100 km/h)
+SPEEDS_KMH = (40.0, 80.0, 100.0)      # the speeds of VCU-4WS-06 (issue 26: the miss was seen at 100 km/h)
 HAND_WHEEL = 45.0                     # deg: front axle X = 3° at ratio 15 (as test_ratio)
 JUDGE_S = 1.0                         # s judged after the car runs at its request (the miss lasted ≥ 0.35 s)
 RATIO_ABS_TOL = limit("ratio_abs_tol")
