@@ -493,6 +493,7 @@ def _empty_shard(config: pytest.Config, out_dir: Path | None, aborted: bool,
     result = RunResult(started=datetime.now().astimezone().isoformat(timespec="seconds"),
                        interface=settings.interface, channel=settings.channel or "",
                        time_mode="virtual" if settings.virtual_time else "real", requirements=_catalogue(project),
+                       restbus_only=project.plant is None,
                        deselected=[*config.stash[_DESELECTED_KEY]])
     result.tables.append(Table("Shard", ["shard", "cases"], [[f"{which[0]}/{which[1]}", "none fell to this shard"]]))
     if worker:

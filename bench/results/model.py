@@ -186,6 +186,7 @@ class RunResult:
     channel: str
     time_mode: Literal["virtual", "real"]
     external: list[str] = field(default_factory=list)
+    restbus_only: bool = False   # the project has no plant: each simulated node was its database's start values
     cases: list[CaseResult] = field(default_factory=list)
     mcap_path: str = ""
     aborted: bool = False

@@ -71,6 +71,9 @@ def test_on_the_embedded_bus_the_cases_of_the_absent_epb_are_skipped(
     skipped = {name: why for name, (outcome, why) in verdicts.items() if outcome == "skipped"}
     assert len(skipped) == EPB_CASES and all("--external EPB" in why for why in skipped.values()), skipped
     assert sum(outcome == "passed" for outcome, _ in verdicts.values()) == OTHER_CASES, verdicts
+    # no reference ECU plays the absent EPB: the report says what does
+    heading = (out / "report.html").read_text().split('id="node-EPB"', 1)[1].split("</h2>", 1)[0]
+    assert "start values: the project has no plant" in heading and "reference ECU" not in heading, heading
 
 
 def test_the_log_holds_fd_29_bit_and_multiplexed_frames_as_the_database_declares(
