@@ -24,7 +24,7 @@ LOADED_HOST_FAILURES = (
     "tests/integration/test_run_integration.py::test_plant_and_runner_in_two_processes_over_udp_multicast",
     "tests/integration/test_stop_signals.py::test_sigterm_during_a_flood_at_the_bus_limit",
 )
-FAST = "python -m pytest -m 'not realtime'"
+FAST = "python -m pytest -n auto -m 'not realtime'"
 REALTIME = "python -m pytest -m realtime"
 
 
@@ -43,7 +43,7 @@ def test_readme_and_ci_run_both_steps() -> None:
     assert f"pip install -e '.[test]' && {FAST}" in block.group(1) and REALTIME in block.group(1)
     assert re.search(r"about \d+ minutes? on 2 cores", readme), "the README states the command's wall time"
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
-    fast, realtime = ci.find("python3 -m pytest -q -p no:cacheprovider -m 'not realtime'"), \
+    fast, realtime = ci.find("python3 -m pytest -q -p no:cacheprovider -n auto -m 'not realtime'"), \
         ci.find("python3 -m pytest -q -p no:cacheprovider -m realtime")
     assert 0 <= fast < realtime, "the suite, then its real-time tests, each a step of .ci/run"
 
