@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Collection
+from functools import cache
 from importlib.metadata import entry_points
 from types import ModuleType
 
@@ -40,14 +41,16 @@ def load_plant(name: str) -> PlantFactory:
     return loaded
 
 
-def _plant_module(name: str) -> ModuleType:
-    """The module that holds a plant's build function: it may also answer what a test case asks of the plant."""
+@cache
+def plant_module(name: str) -> ModuleType:
+    """The module that holds a plant's build function: it may also answer what a test case asks of the plant.
+    Looked up once per process (entry points and the plant's import are slow: not at each case's start)."""
     return importlib.import_module(load_plant(name).__module__)
 
 
 def plant_vehicles(name: str) -> tuple[str, ...]:
     """The vehicles a plant can be (its module's `vehicles()`); () when the plant names none."""
-    vehicles = getattr(_plant_module(name), "vehicles", None)
+    vehicles = getattr(plant_module(name), "vehicles", None)
     return tuple(vehicles()) if callable(vehicles) else ()
 
 
@@ -55,10 +58,18 @@ def plant_stimulus(name: str, vehicle: str) -> tuple[str, ...]:
     """The stimulus messages a scenario of the plant's `vehicle` sends (`start_scenario(stimulus=...)`), from the
     plant module's `stimulus(vehicle)`: test cases learn them here, never by importing the plant. ConfigError when
     the plant declares no stimulus or knows no such vehicle."""
-    stimulus = getattr(_plant_module(name), "stimulus", None)
+    stimulus = getattr(plant_module(name), "stimulus", None)
     if not callable(stimulus):
         raise ConfigError(f"plant {name!r} declares no stimulus(vehicle) beside its build function")
     try:
         return tuple(stimulus(vehicle))
     except ValueError as exc:
         raise ConfigError(f"plant {name!r}: {exc}") from None
+
+
+def prepare_plant(name: str) -> None:
+    """Ask now what a test case may ask of the plant (`plant_vehicles`, `plant_stimulus`): the plant's import and
+    the tables it builds when first asked then cost a case nothing, where in real time they stall the tick loop."""
+    if callable(getattr(plant_module(name), "stimulus", None)):
+        for vehicle in plant_vehicles(name):
+            plant_stimulus(name, vehicle)

@@ -23,7 +23,7 @@ from bench.diag.isotp import IsoTpParams
 from bench.diag.server import UdsServer
 from bench.errors import BenchError, ConfigError, InputProblems, unknown_names
 from bench.faults.plan import FaultPlan
-from bench.plugins import load_plant
+from bench.plugins import load_plant, prepare_plant
 from bench.sim.clock import Clock, Scheduler, VirtualClock, WallClock
 from bench.sim.node import Behaviour
 from bench.sim.restbus import Restbus
@@ -172,6 +172,10 @@ class BenchSession:
                 # the tester's modules (udsoncan, can-isotp: 0.4 s of import) now, not in the first case that reads
                 # a DTC: there the import stalled the tick loop by 29 and 31 ms, in two runs of the campaign
                 import bench.diag.tester  # noqa: F401
+            if project.plant is not None and self.runner is not None:
+                # what the cases ask of the plant (its vehicles' stimulus) imports it: now, not in the first case
+                # (with the plant in another process that import stalled the first case's tick loop 0.17-0.29 s)
+                prepare_plant(project.plant)
 
     def _diagnostics(self, declaration: Declaration, plant_nodes: set[str]) -> None:
         """The diagnostic side of every simulated node the declaration describes (its UDS server on the plant's
