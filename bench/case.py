@@ -325,6 +325,8 @@ class Case:
         counts = Counter((f.message, _NUMBER.sub("N", f.reason)) for f in seen)
         self.result.invalid = [[m, r, str(n)] for (m, r), n in sorted(counts.items(), key=lambda x: -x[1])]
         self.bench_verdict()
+        if self.session.self_timing is not None:   # what the bench does between cases is no case's timing
+            self.session.self_timing.pause()
 
     def bench_verdict(self) -> str:
         """Real time: the bench's own timing (bench.checks.timing.SelfTiming) and the gaps of the DUT's inputs from

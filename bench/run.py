@@ -77,6 +77,8 @@ class BenchRun:
         start-up still finds the run and writes an aborted report)."""
         self.session = BenchSession(self._project, self.settings, sink=self._sink)
         self.session.start()
+        if self.session.self_timing is not None:   # the bench's own timing counts during the cases (Case resumes it)
+            self.session.self_timing.pause()
         if self.recorder is not None:   # MCAP log time = the clock's epoch at bench time 0 + bench time
             self.recorder.origin(self.session.clock.epoch_ns, self.session.clock.realtime)
             self.session.faults.listener = self._log_fault

@@ -38,6 +38,7 @@ the reaction as seen on the bus, an upper bound on the ECU's own.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import Counter, deque
 from collections.abc import Sequence
@@ -426,11 +427,18 @@ class SelfTiming:
         self.sources: dict[str, _LateAccumulator] = {}
         self.events: deque[Late] = deque(maxlen=LATE_EVENTS)
         self.counted_from = -math.inf
+        self._appended = 0                            # events appended so far (the deque drops the oldest)
+        self._resumed: list[tuple[float, int]] = []   # (bench time, events appended before it) of each resume
 
     def resume(self, t: float) -> None:
         """A case starts at bench time t: what was due before it (while the bench paused between cases, by
         design, or set itself up) is not counted."""
         self.counted_from = t
+        self._resumed.append((t, self._appended))
+
+    def pause(self) -> None:
+        """Between cases (before the first, after each): nothing is counted until the next `resume`."""
+        self.counted_from = math.inf
 
     def add(self, what: str, late: float, t: float, bound: float = math.inf) -> None:
         if t < self.counted_from:
@@ -449,13 +457,18 @@ class SelfTiming:
         if acc.worst is None or late > acc.worst.late:
             acc.worst = event
         self.events.append(event)
+        self._appended += 1
 
     def since(self, t0: float) -> list[Late]:
         """The worst lateness of each source from bench time t0 on, worst against its bound first."""
+        # the events appended since the case of t0 began, whatever their own times: they are not in time order (a
+        # frame that waited in its socket is timed at its arrival, after events of later ticks)
+        begun = next((index for t, index in reversed(self._resumed) if t <= t0), 0)
+        newer = len(self.events) - max(0, begun - (self._appended - len(self.events)))
         worst: dict[str, Late] = {}
-        for event in reversed(self.events):
+        for event in itertools.islice(reversed(self.events), max(0, newer)):
             if event.t < t0:
-                break
+                continue
             if event.what not in worst or event.late > worst[event.what].late:
                 worst[event.what] = event
         return sorted(worst.values(), key=lambda e: (-(e.late / e.bound if e.bound else 0.0), -e.late))

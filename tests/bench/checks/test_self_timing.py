@@ -48,6 +48,37 @@ def _case(session: BenchSession, duts: list[str] | None = None) -> Case:
 
 
 # -- the figures ------------------------------------------------------------------------------------------------
+def test_between_cases_nothing_is_counted() -> None:
+    """`bench run` pauses the bench's own timing until the first case and after each: a stall while it starts or
+    writes a case's results is no case's, and the whole run's table says "during the cases"."""
+    timing = SelfTiming()
+    timing.pause()
+    timing.add("tick loop", 0.280, 0.001)                # the start, before the first case
+    timing.resume(1.0)
+    timing.add("tick loop", 0.004, 1.5)
+    timing.pause()                                       # the case ended
+    timing.add("tick loop", 0.090, 2.1)                  # its plots and results
+    timing.resume(3.0)
+    timing.add("tick loop", 0.006, 3.2)
+    rows = {row[0]: row for row in timing.table().rows}
+    assert rows["tick loop"][1] == "2" and float(rows["tick loop"][4]) == pytest.approx(6.0, abs=0.01), rows
+    assert [e.late for e in timing.since(0.0)] == [pytest.approx(0.006)]
+
+
+def test_a_case_sees_its_events_out_of_time_order() -> None:
+    """A frame that waited in its socket is timed at its arrival, which may come before the case started, after
+    events of the case's own ticks: the case's figures still hold every event since it began."""
+    timing = SelfTiming()
+    timing.add("tick loop", 0.050, 0.5)                  # the case before
+    timing.resume(1.0)
+    timing.add("tick loop", 0.250, 1.001)                # the case's first tick, late
+    timing.add("receive path", 0.030, 0.999)             # a frame that arrived just before the case began
+    timing.add("tick loop", 0.003, 1.2)
+    worst = {e.what: e.late for e in timing.since(1.0)}
+    assert worst == {"tick loop": pytest.approx(0.250)}, worst
+    assert [e.late for e in timing.since(0.0)][0] == pytest.approx(0.250)
+
+
 def test_self_timing_keeps_the_worst_per_source_and_names_what_passed_its_bound() -> None:
     timing = SelfTiming()
     timing.add("stimulus A", 0.001, 1.0, 0.02)          # on time: counted, no event
