@@ -20,6 +20,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -65,54 +66,33 @@ def floor(seconds: float, chrt: list[str]) -> dict[str, Any]:
     return {"loops": loops, "steal_percent": steal_share(before, steal())}
 
 
-def wait_for(path: Path, text: str, seconds: float) -> None:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        if path.exists() and text in path.read_text(errors="replace"):
-            return
-        time.sleep(0.2)
-    raise RuntimeError(f"{path.name}: no {text!r} within {seconds:g} s: {path.read_text(errors='replace')[-500:]}")
-
-
 def campaign(node: str, work: Path, chrt: list[str], keyword: str | None) -> dict[str, Any]:
     """One example's campaign; the bench's own lateness rows, outcomes and steal time."""
     bus = ["--interface", "udp_multicast", "--channel", common.random_group()]
     bench = [*chrt, sys.executable, "-m", "bench"]
     out = work / node
     shutil.rmtree(out, ignore_errors=True)
-    logs = {name: work / f"{node}.{name}.log" for name in ("plant", "ecu")}
-    files = {name: path.open("w") for name, path in logs.items()}
-    plant = subprocess.Popen([*bench, "plant", *bus, "--external", node, "--duration", "1500"], cwd=common.ROOT,
-                             stdout=files["plant"], stderr=subprocess.STDOUT)
-    ecu = None
+    plant = common.Proc([*bench, "plant", *bus, "--external", node, "--duration", "1500"])
+    processes = [plant]
     try:
-        wait_for(logs["plant"], "simulating", 60)
-        ecu = subprocess.Popen([*chrt, sys.executable, EXAMPLES[node], *bus], cwd=common.ROOT, stdout=files["ecu"],
-                               stderr=subprocess.STDOUT)
-        wait_for(logs["ecu"], "running", 60)
+        plant.wait_for("simulating", 60)
+        ecu = common.Proc([*chrt, sys.executable, EXAMPLES[node], *bus])
+        processes.append(ecu)
+        ecu.wait_for("running", 60)
         load, before, wall0 = common.load_average(), steal(), time.perf_counter()
         selection = ["-k", keyword] if keyword else []
         run = subprocess.run([*bench, "run", *bus, "--external", "all", "--dut", node, "--out", str(out), *selection],
                              cwd=common.ROOT, capture_output=True, text=True, timeout=1500)
         wall, stolen = time.perf_counter() - wall0, steal_share(before, steal())
     finally:
-        for process in (ecu, plant):
-            if process is not None:
-                process.send_signal(2)
-                try:
-                    process.wait(20)
-                except subprocess.TimeoutExpired:
-                    process.kill()
-        for file in files.values():
-            file.close()
+        for process in reversed(processes):
+            process.stop()
     results = json.loads((out / "results.json").read_text())
     table = next((t for t in results["tables"] if t["title"].startswith(SELF_TABLE)), None)
     if table is None:
         raise RuntimeError(f"{node}: no table {SELF_TABLE!r} in {out / 'results.json'}; exit {run.returncode}")
     rows = {row[0]: dict(zip(table["columns"], row)) for row in table["rows"]}
-    outcomes: dict[str, int] = {}
-    for case in results["cases"]:
-        outcomes[case["outcome"]] = outcomes.get(case["outcome"], 0) + 1
+    outcomes = dict(Counter(case["outcome"] for case in results["cases"]))
     return {"exit": run.returncode, "wall_s": wall, "load_before": load, "steal_percent": stolen,
             "outcomes": outcomes, "rows": rows,
             "inconclusive": [f"{c['name']}: {c.get('inconclusive', '')}" for c in results["cases"]

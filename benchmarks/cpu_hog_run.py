@@ -18,50 +18,17 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+import common
+from common import ROOT, Proc
+
 BENCH = [sys.executable, "-m", "bench"]
 DEFAULT_CASES = ["testcases/ev4wis/test_steering.py", "testcases/ev4wis/test_bad_requests.py"]
 HOG = "import time\nend = time.monotonic() + {seconds}\nwhile time.monotonic() < end:\n    pass\n"
-
-
-class Proc:
-    """A child whose merged output is collected by a thread, so that the script can wait for its ready line."""
-
-    def __init__(self, argv: list[str]) -> None:
-        self.process = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.lines: list[str] = []
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        assert self.process.stdout is not None
-        for line in self.process.stdout:
-            self.lines.append(line)
-
-    def wait_for(self, marker: str, seconds: float) -> None:
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            if any(marker in line for line in self.lines):
-                return
-            if self.process.poll() is not None:
-                break
-            time.sleep(0.05)
-        raise SystemExit(f"no {marker!r} from {self.process.args!r}:\n{''.join(self.lines)}")
-
-    def stop(self) -> None:
-        if self.process.poll() is None:
-            self.process.send_signal(2)
-            try:
-                self.process.wait(15)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
 
 
 def main() -> int:
@@ -75,8 +42,7 @@ def main() -> int:
     if args.out.exists():   # bench run would refuse it (exit 2) and the old results.json would be read as this run's
         parser.error(f"--out {args.out}: exists; give a new folder")
 
-    group = f"239.255.{random.randint(1, 254)}.{random.randint(1, 254)}"
-    bus = ["--interface", "udp_multicast", "--channel", group]
+    bus = ["--interface", "udp_multicast", "--channel", common.random_group()]
     plant = Proc([*BENCH, "plant", *bus, "--external", "VCU", "--duration", "1800"])
     procs = [plant]
     hogs: list[subprocess.Popen[bytes]] = []
