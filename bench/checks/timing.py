@@ -464,9 +464,9 @@ class SelfTiming:
         # the events appended since the case of t0 began, whatever their own times: they are not in time order (a
         # frame that waited in its socket is timed at its arrival, after events of later ticks)
         begun = next((index for t, index in reversed(self._resumed) if t <= t0), 0)
-        newer = len(self.events) - max(0, begun - (self._appended - len(self.events)))
+        dropped = self._appended - len(self.events)   # the oldest, gone from the bounded deque
         worst: dict[str, Late] = {}
-        for event in itertools.islice(reversed(self.events), max(0, newer)):
+        for event in itertools.islice(reversed(self.events), self._appended - max(begun, dropped)):
             if event.t < t0:
                 continue
             if event.what not in worst or event.late > worst[event.what].late:
