@@ -81,9 +81,8 @@ def record_ends(payloads: list[bytes]) -> list[int]:
 
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")   # opcode, record length, channel id, sequence, log time, publish time
-_MESSAGE_OPCODE = 0x05
 _MESSAGE_FIELDS = 22    # bytes of a Message record's fields before its data
-_INDEX_OPCODE = 0x07
+_MESSAGE_OPCODE = int(Opcode.MESSAGE)   # mcap's, as a plain int for the per-message paths
 
 
 class _MessageIndex(MessageIndex):
@@ -91,7 +90,7 @@ class _MessageIndex(MessageIndex):
 
     def write(self, stream: Any) -> None:
         size = 16 * len(self.records)
-        stream.write(struct.pack(f"<BQHI{size // 8}Q", _INDEX_OPCODE, 6 + size, self.channel_id, size,
+        stream.write(struct.pack(f"<BQHI{size // 8}Q", int(Opcode.MESSAGE_INDEX), 6 + size, self.channel_id, size,
                                  *itertools.chain.from_iterable(self.records)))
 
 
@@ -225,7 +224,7 @@ def read_records(read: Callable[[int], bytes]) -> Iterator[McapRecord]:
     while True:
         opcode, length = _RECORD_HEAD.unpack(read(_RECORD_HEAD.size))
         body = read(length)
-        if opcode == Opcode.MESSAGE:
+        if opcode == _MESSAGE_OPCODE:
             yield _message(body, 0, length)
         elif opcode == Opcode.CHUNK:
             yield from _chunk_records(Chunk.read(_stream(body)))
@@ -246,7 +245,7 @@ def _chunk_records(chunk: Chunk) -> Iterator[McapRecord]:
         opcode, length = _RECORD_HEAD.unpack_from(data, at)
         at += _RECORD_HEAD.size
         end = at + length
-        if opcode == Opcode.MESSAGE:
+        if opcode == _MESSAGE_OPCODE:
             yield _message(data, at, end)
         elif opcode == Opcode.CHANNEL:
             yield Channel.read(_stream(data[at:end]))
