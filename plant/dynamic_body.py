@@ -288,10 +288,11 @@ class EvBodyNode(BodyNode):
     def __init__(self, params: Ev4wisParams, wheels: Mapping[str, WheelSource], *, vehicle_code: int,
                  linked: Sequence[Behaviour] = ()) -> None:
         super().__init__(params.geometry, wheels, vehicle_code=vehicle_code, linked=linked)
-        self.body: VehicleBody = VehicleBody(params)
+        self.vehicle_body = VehicleBody(params)   # the attribute `body` keeps BodyNode's declared type
+        self.body = self.vehicle_body
         self.reset()
 
     def _restart(self, control: Mapping[str, float], t: float, dt: float) -> None:
         mu = control.get("RoadMu", 1.0)
-        self.body.set_mu(max(mu, MU_MIN) if ranges.finite(mu) else 1.0)
+        self.vehicle_body.set_mu(max(mu, MU_MIN) if ranges.finite(mu) else 1.0)
         super()._restart(control, t, dt)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Protocol
+from typing import Final, Protocol
 
 from plant.vehicles import SbwParams
 
@@ -44,10 +44,10 @@ _RAD = math.pi / 180.0
 class SensorFault:
     """What the plant's sensor model may do (BENCH_SbwSensorFault.SensorFault, dbc/bench.dbc)."""
 
-    NONE = 0
-    HANDWHEEL_STUCK = 1      # the hand-wheel angle sensor freezes at its value when the fault starts
-    HANDWHEEL_OFFSET = 2     # the hand-wheel angle sensor reads `offset` too much
-    PINION_OFFSET = 3        # the pinion angle sensor reads `offset` too much
+    NONE: Final = 0
+    HANDWHEEL_STUCK: Final = 1      # the hand-wheel angle sensor freezes at its value when the fault starts
+    HANDWHEEL_OFFSET: Final = 2     # the hand-wheel angle sensor reads `offset` too much
+    PINION_OFFSET: Final = 3        # the pinion angle sensor reads `offset` too much
 
 
 class SbwSensors:

@@ -71,10 +71,10 @@ class WheelSpeedSensors:
             kind = SensorFault(int(fault)) if 0 <= wheel <= 3 else SensorFault.NONE
         except (ValueError, OverflowError):
             kind = SensorFault.NONE
-        wheel = int(wheel) if kind != SensorFault.NONE else 0
-        if kind != self.fault or wheel != self.fault_wheel:
+        iwheel = int(wheel) if kind != SensorFault.NONE else 0
+        if kind != self.fault or iwheel != self.fault_wheel:
             self._held = None
-        self.fault, self.fault_wheel = kind, wheel
+        self.fault, self.fault_wheel = kind, iwheel
 
     def sample(self, true_kmh: Sequence[float], dt: float) -> list[float]:
         """One reading per wheel, km/h, quantised; dt = time since the previous sample (roughness)."""

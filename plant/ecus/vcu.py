@@ -178,12 +178,12 @@ class Vcu:
             return VcuFault.REQUEST_TIMEOUT, None
         if io.invalid("DRV_MotionRequest"):
             return VcuFault.REQUEST_INVALID, None
-        mode = req.get("DriveMode", math.nan)
+        fmode = req.get("DriveMode", math.nan)
         px, py = req.get("PivotX", math.nan), req.get("PivotY", math.nan)
         v = req.get("TargetSpeed", math.nan)
-        if not ranges.finite(mode, px, py, v) or mode not in _MODES:
+        if not ranges.finite(fmode, px, py, v) or fmode not in _MODES:
             return VcuFault.REQUEST_INVALID, None
-        mode = int(mode)
+        mode = int(fmode)
         hw = rear = 0.0
         if mode in (DriveMode.NORMAL, DriveMode.ADAPTIVE):
             steering = io.latest("DRV_Steering")
