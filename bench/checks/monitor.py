@@ -27,7 +27,8 @@ from typing import Any
 from bench import canid, e2e
 from bench.canid import IDENTITY
 from bench.database import sendtype
-from bench.database.codec import Codebook, DecodeError, MessageCodec
+from bench.database.codec import Codebook, MessageCodec
+from bench.database.errors import DecodeError
 from bench.diag.isotp import IsoTpFraming, IsoTpParams, IsoTpProblem
 from bench.errors import BenchError, BenchLimit
 

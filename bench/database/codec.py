@@ -25,31 +25,13 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Any, cast
 
-import bitstruct
 import cantools
-from cantools.database import errors as cantools_errors
 from cantools.database.can import Database, Message, Signal
 
 from bench import canid, e2e
 from bench.database import overrides, sendtype
+from bench.database.errors import FIELD_OVERFLOW, DecodeError, EncodeError
 from bench.errors import DatabaseError, SignalError, did_you_mean
-
-
-class DecodeError(cantools_errors.DecodeError, ValueError):
-    """A payload the database cannot decode (shorter than the message, an unknown multiplexer value).
-    A cantools DecodeError too, so code written against cantools catches it."""
-
-
-#: What cantools raises for a raw value its bit field cannot hold: bitstruct's C extension raises
-#: OverflowError, the pure-Python bitstruct (cantools' fallback) raises bitstruct.Error.
-_FIELD_OVERFLOW: tuple[type[Exception], ...] = (OverflowError, bitstruct.Error)
-
-
-# bitstruct ships no type information, so mypy sees its Error as Any (a base class it cannot check).
-class EncodeError(SignalError, cantools_errors.EncodeError, OverflowError, bitstruct.Error):  # type: ignore[misc]
-    """A value whose raw number does not fit its signal's bit field. It is each class cantools may raise
-    for that (OverflowError or bitstruct.Error, by bitstruct build) and cantools' EncodeError, so a
-    handler written for either catches it; a SignalError, so the bench reports it in one line."""
 
 
 class _Misfit(Exception):
@@ -354,7 +336,7 @@ class MessageCodec:
         data = values if isinstance(values, dict) else dict(values)
         try:
             encoded = self.message.encode(data, scaling=True, strict=False, padding=False)
-        except _FIELD_OVERFLOW as exc:
+        except FIELD_OVERFLOW as exc:
             raise EncodeError(f"{self.name}: {self._misfit(data) or exc}") from exc
         return bytearray(encoded)
 

@@ -12,7 +12,8 @@ from cantools.database import errors as cantools_errors
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.database.codec import Codebook, EncodeError, MessageCodec, load_codebook
+from bench.database.codec import Codebook, MessageCodec, load_codebook
+from bench.database.errors import EncodeError
 from bench.errors import SignalError
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 

@@ -36,7 +36,8 @@ from cantools.database.can import Message, Signal
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from bench.database.codec import DecodeError, EncodeError, MessageCodec, load_dbc
+from bench.database.codec import MessageCodec, load_dbc
+from bench.database.errors import DecodeError, EncodeError
 from bench.errors import DatabaseError
 from tests.repo import BENCH_DBC, CHASSIS_DBC, ROOT
 

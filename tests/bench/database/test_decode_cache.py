@@ -12,7 +12,8 @@ from cantools.database.can import Database, Message
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench.database.codec import RANGE_SLACK, DecodeError, MessageCodec, load_codebook
+from bench.database.codec import RANGE_SLACK, MessageCodec, load_codebook
+from bench.database.errors import DecodeError
 from tests.reference import COUNTER_VALUES, contract_checksum
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 

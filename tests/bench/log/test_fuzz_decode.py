@@ -24,7 +24,8 @@ from hypothesis import strategies as st
 from bench.checks.monitor import Monitor
 from bench.cli import main
 from bench.database.check import check_text
-from bench.database.codec import Codebook, DecodeError, load_codebook
+from bench.database.codec import Codebook, load_codebook
+from bench.database.errors import DecodeError
 from bench.errors import BenchError
 from bench.log.logread import MAGIC, read_decoded, read_frames, read_steps, summarise
 from bench.log.recorder import Recorder
