@@ -17,7 +17,7 @@ counter value), so a repeat costs one dict comparison. Every new value is checke
 from __future__ import annotations
 
 import heapq
-from collections.abc import Collection, Iterator, Mapping
+from collections.abc import Collection, Generator, Iterator, Mapping
 
 from bench import canid
 from bench.database import sendtype
@@ -211,9 +211,10 @@ class Restbus:
                               f"does not simulate (simulated: {', '.join(sorted(self.nodes)) or 'none'})")
         return slot
 
-    def due(self, tick: int) -> Iterator[tuple[int, bytes]]:
+    def due(self, tick: int) -> Generator[tuple[int, bytes], None, None]:
         """The frames due at this tick, each with its counter and checksum: the periodic ones in the messages' order,
-        then the event frames whose minimum gap has passed."""
+        then the event frames whose minimum gap has passed. A caller that stops early closes the generator, so that
+        the messages it did not take stay due (compiled, a generator is not closed when it is collected)."""
         queue = self.schedule
         if not queue or queue[0][0] > tick:
             if self.events:

@@ -287,16 +287,24 @@ class Station:
             kernel.check(faulty)
             if self.send_clock is not None and self._schedule and self._schedule[0][0] <= tick:
                 self._due = _due_ticks(self._schedule, tick)
-            for frame_id, data in self.restbus.due(tick):
-                if not kernel.offer(frame_id, data, faulty):
-                    self.send(t, frame_id, data)
+            due = self.restbus.due(tick)
+            try:
+                for frame_id, data in due:
+                    if not kernel.offer(frame_id, data, faulty):
+                        self.send(t, frame_id, data)
+            finally:
+                due.close()   # a send that raised: the tick's other messages stay due (Restbus.due)
         else:
             schedule = self._schedule
             if (schedule and schedule[0][0] <= tick) or self.restbus.events:   # Restbus.due's own tests
                 if self.send_clock is not None and schedule and schedule[0][0] <= tick:
                     self._due = _due_ticks(schedule, tick)
-                for frame_id, data in self.restbus.due(tick):
-                    self.send(t, frame_id, data)
+                due = self.restbus.due(tick)
+                try:
+                    for frame_id, data in due:
+                        self.send(t, frame_id, data)
+                finally:
+                    due.close()   # a send that raised: the tick's other messages stay due (Restbus.due)
         if self._outbox:
             self._flush(dt)
 

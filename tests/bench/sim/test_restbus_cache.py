@@ -182,8 +182,10 @@ def test_the_schedule_sends_what_a_scan_of_every_message_sent(node: str, steps: 
             theirs.resume_sending(name)
             continue
         tick += skip
-        if action == "partial":   # the caller reads `pick % 3` frames of this tick, then drops the generator
-            a = [f for _, f in zip(range(pick % 3), ours.due(tick))]
+        if action == "partial":   # the caller reads `pick % 3` frames of this tick, then closes the generator
+            due = ours.due(tick)
+            a = [f for _, f in zip(range(pick % 3), due)]
+            due.close()
             b = [f for _, f in zip(range(pick % 3), _scan_due(theirs, tick))]
         else:
             a, b = list(ours.due(tick)), list(_scan_due(theirs, tick))
