@@ -27,7 +27,8 @@ from bench.transport import open_bus
 class FakeBus(can.BusABC):
     """A python-can bus as far as the bench asks: what is sent goes to `sent` (and back into `inbox` when the bus
     loops a sender's frames back, `receive_own_messages=True`, as udp_multicast does); `recv` reads `inbox` first,
-    then `incoming` (any iterable, e.g. `flood(frame)`). Every keyword in `attributes` becomes an attribute: the
+    then `incoming` (any iterable, e.g. `flood(frame)`), and counts its calls in `reads` (each a look at the socket,
+found empty or not). Every keyword in `attributes` becomes an attribute: the
     bench asks a bus what it has (bench.transport.capabilities), never its class name. `socket`, when given, is the
     bus's socket (a raw SocketCAN socket is how the bench recognises SocketCAN)."""
 
@@ -36,6 +37,7 @@ class FakeBus(can.BusABC):
         self.sent: list[can.Message] = []
         self.inbox: deque[can.Message] = deque()
         self.incoming: Iterator[can.Message] = iter(incoming)
+        self.reads = 0
         super().__init__(channel=channel)
         if socket is not None:
             self.socket = socket
@@ -48,6 +50,7 @@ class FakeBus(can.BusABC):
             self.inbox.append(msg)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        self.reads += 1
         return (self.inbox.popleft() if self.inbox else next(self.incoming, None)), False
 
 

@@ -18,19 +18,45 @@ VEHICLE_CODES = {name: declared(name).code for name in vehicles()}
 CLAIMED = frozenset().union(*(messages_of(v) for v in vehicles()))
 
 
-def _session(vehicle: str) -> tuple[BenchSession, set[str]]:
-    """A session whose plant starts as `vehicle`, and the set of messages its behaviours set."""
+class _RecordingIO:
+    """A behaviour's NodeIO, noting every message it sets (send_values) and asks for (latest)."""
+
+    def __init__(self, io: object, sets: set[str], reads: set[str]) -> None:
+        self._io, self._sets, self._reads = io, sets, reads
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._io, name)
+
+    def send_values(self, message: str, **signals: float) -> None:
+        self._sets.add(message)
+        self._io.send_values(message, **signals)
+
+    def latest(self, message: str) -> object:
+        self._reads.add(message)
+        return self._io.latest(message)
+
+
+class _Recorded:
+    """One of the plant's behaviours, stepped on a _RecordingIO (the station's own attributes stay untouched: a
+    compiled station takes no other object in their place)."""
+
+    def __init__(self, behaviour: object, sets: set[str], reads: set[str]) -> None:
+        self._behaviour, self._sets, self._reads = behaviour, sets, reads
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._behaviour, name)
+
+    def step(self, io: object, t: float, dt: float) -> None:
+        self._behaviour.step(_RecordingIO(io, self._sets, self._reads), t, dt)
+
+
+def _session(vehicle: str) -> tuple[BenchSession, set[str], set[str]]:
+    """A session whose plant starts as `vehicle`, the set of messages its behaviours set and the set they read."""
     session = BenchSession(load_config(), RunSettings(vehicle=vehicle))
-    set_by_behaviours: set[str] = set()
-    restbus = session.plant.restbus
-    original = restbus.set_unchecked
-
-    def recording(message: str, signals: dict) -> None:
-        set_by_behaviours.add(message)
-        original(message, signals)
-
-    restbus.set_unchecked = recording
-    return session, set_by_behaviours
+    sets: set[str] = set()
+    reads: set[str] = set()
+    session.plant.behaviours[:] = [_Recorded(b, sets, reads) for b in session.plant.behaviours]
+    return session, sets, reads
 
 
 def _seen_since(session: BenchSession, since: float) -> set[str]:
@@ -40,13 +66,14 @@ def _seen_since(session: BenchSession, since: float) -> set[str]:
 
 @pytest.mark.parametrize("vehicle", sorted(vehicles()))
 def test_a_vehicle_sends_what_its_ecus_set_and_nothing_of_the_others(vehicle: str) -> None:
-    session, set_by_behaviours = _session(vehicle)
+    session, set_by_behaviours, _ = _session(vehicle)
     session.start()
     session.runner.restbus.set("BENCH_Control", Vehicle=VEHICLE_CODES[vehicle], ScenarioId=1)
     session.run_until(1.0)
     seen = _seen_since(session, 0.5)
     plant_sent = {c.name for c in session.codebook.sent_by(session.plant.restbus.nodes)}
     session.close()
+    assert set_by_behaviours, "the behaviours set nothing at all: the recording is broken"
     assert set_by_behaviours <= messages_of(vehicle), "set by the behaviours but not declared"
     assert set_by_behaviours <= seen, "set by the behaviours but not on the bus"
     others = CLAIMED - messages_of(vehicle)
@@ -62,24 +89,8 @@ def test_a_vehicle_reads_the_stimulus_its_declaration_names(vehicle: str) -> Non
     that sends only the declared messages leaves none of their inputs silent. (Some declared ones are read only in
     some states, e.g. DRV_Steering, which the VCU reads in NORMAL and ADAPTIVE only, so the converse is not asked
     of a 0.5 s run.)"""
-    session, _ = _session(vehicle)
+    session, _, read = _session(vehicle)
     stimulus_messages = {c.name for c in session.codebook.sent_by(session.project.stimulus)}
-    read: set[str] = set()
-
-    class Recording:
-        """The plant station's NodeIO, noting every message a behaviour asks for."""
-
-        def __init__(self, io: object) -> None:
-            self._io = io
-
-        def __getattr__(self, name: str) -> object:
-            return getattr(self._io, name)
-
-        def latest(self, message: str) -> object:
-            read.add(message)
-            return self._io.latest(message)
-
-    session.plant.io = Recording(session.plant.io)
     session.start()
     session.runner.restbus.set("BENCH_Control", Vehicle=VEHICLE_CODES[vehicle], ScenarioId=1)
     session.run_until(0.5)
@@ -89,7 +100,7 @@ def test_a_vehicle_reads_the_stimulus_its_declaration_names(vehicle: str) -> Non
 
 
 def test_switching_vehicle_switches_the_network() -> None:
-    session, _ = _session("EV4WIS")
+    session, _, _ = _session("EV4WIS")
     session.start()
     session.runner.restbus.set("BENCH_Control", Vehicle=VEHICLE_CODES["EV4WIS"], ScenarioId=1)
     session.run_until(0.5)

@@ -7,7 +7,7 @@ The expected cycles are read from the DBCs with cantools (GenMsgCycleTime, ms), 
 
 from __future__ import annotations
 
-import uuid
+from collections.abc import Callable
 
 import can
 import cantools
@@ -19,6 +19,7 @@ from bench.errors import ConfigError
 from bench.sim.clock import Scheduler, VirtualClock
 from bench.sim.restbus import Restbus
 from bench.sim.station import Station
+from tests.fakes import FakeBus
 from tests.repo import BENCH_DBC, CHASSIS_DBC
 
 DURATION = 0.2   # s of bench time
@@ -34,13 +35,23 @@ def _dbc_cycles(nodes: set[str]) -> dict[int, float]:
     return cycles
 
 
+class _StampingBus(FakeBus):
+    """A bus that notes each frame sent with the bench time it went out at."""
+
+    def __init__(self, now: Callable[[], float]) -> None:
+        super().__init__("tick")
+        self.now = now
+        self.stamped: list[tuple[float, int]] = []
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.stamped.append((self.now(), msg.arbitration_id))
+
+
 def _station(codebook: Codebook, nodes: set[str], clock: VirtualClock) -> tuple[Station, list[tuple[float, int]]]:
-    """A station on python-can's own virtual bus whose restbus frames are recorded as (bench time, id)."""
-    bus = can.Bus(interface="virtual", channel=f"tick-{uuid.uuid4()}")
+    """A station whose restbus frames are recorded as (bench time, id) by its bus."""
+    bus = _StampingBus(clock.now)
     station = Station("sender", bus, Restbus(codebook, nodes), Monitor(codebook), clock.now)
-    sent: list[tuple[float, int]] = []
-    station.send = lambda t, frame_id, data: sent.append((t, frame_id))   # type: ignore[method-assign]
-    return station, sent
+    return station, bus.stamped
 
 
 def _check_cycles(sent: list[tuple[float, int]], expected: dict[int, float]) -> None:
