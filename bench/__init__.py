@@ -5,6 +5,10 @@ from __future__ import annotations
 from functools import cache
 from importlib import metadata
 
+from bench import compiled
+
+compiled.install()   # before any module that may have a compiled form is imported
+
 DISTRIBUTION = "chassis-hil-bench"
 UNKNOWN_VERSION = "0+unknown"   # a PEP 440 local version: the bench run from a tree that is not installed
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bench import canid, e2e
+from bench import canid, compiled, e2e
 from bench.case import Case
 from bench.checks.findings import FindingCollector
 from bench.checks.monitor import CheckedFrame, DuplicateSender, Monitor
@@ -165,7 +165,7 @@ class BenchRun:
             started=self.started, interface=self.settings.interface, channel=self.settings.channel or "",
             time_mode="virtual" if self.settings.virtual_time else "real",
             external=sorted(session.external) if session else [], restbus_only=self._project.plant is None,
-            cases=list(self.cases.values()),
+            build=compiled.status(), cases=list(self.cases.values()),
             mcap_path=self.mcap_path.name if self.mcap_path.parent == self.out_dir else str(self.mcap_path),
             aborted=aborted, wall_time=time.monotonic() - self._wall0,
             sim_time=session.now() if session else 0.0,

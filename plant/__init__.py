@@ -5,3 +5,5 @@ bench, and never pytest or reporting. The bench finds the plant through the entr
 `bench.plants: chassis = plant.factory:build`, and only through it: a vehicle is a module of this package's
 plant/assemblies/ (plant/registry.py), and a plant from elsewhere registers an entry point of its own.
 """
+
+import bench  # noqa: F401  (the bench's choice between a module's compiled and source form comes first)

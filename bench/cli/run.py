@@ -18,7 +18,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from bench import options
+from bench import compiled, options
 from bench.cli.common import (
     BUS_OPTIONS,
     NODE_OPTIONS,
@@ -115,7 +115,7 @@ class _Progress:
     def _announce(self, total: int) -> None:
         self.total = total
         if total:   # none: `run` says why, in one line
-            self.console.print(f"bench: {self.total} cases", highlight=False)
+            self.console.print(f"bench: {self.total} cases; the bench's core: {compiled.status()}", highlight=False)
 
     @pytest.hookimpl(trylast=True)
     def pytest_sessionfinish(self, session: pytest.Session) -> None:

@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 from pluggy import Result
 
+from bench import compiled
 from bench.case import Case
 from bench.checks.steps import step_values
 from bench.config import ProjectConfig, RunSettings, load_config
@@ -493,7 +494,7 @@ def _empty_shard(config: pytest.Config, out_dir: Path | None, aborted: bool,
     result = RunResult(started=datetime.now().astimezone().isoformat(timespec="seconds"),
                        interface=settings.interface, channel=settings.channel or "",
                        time_mode="virtual" if settings.virtual_time else "real", requirements=_catalogue(project),
-                       restbus_only=project.plant is None,
+                       restbus_only=project.plant is None, build=compiled.status(),
                        deselected=[*config.stash[_DESELECTED_KEY]])
     result.tables.append(Table("Shard", ["shard", "cases"], [[f"{which[0]}/{which[1]}", "none fell to this shard"]]))
     if worker:

@@ -187,6 +187,7 @@ class RunResult:
     time_mode: Literal["virtual", "real"]
     external: list[str] = field(default_factory=list)
     restbus_only: bool = False   # the project has no plant: each simulated node was its database's start values
+    build: str = ""              # compiled (mypyc) or pure Python, and why (bench.compiled.status)
     cases: list[CaseResult] = field(default_factory=list)
     mcap_path: str = ""
     aborted: bool = False

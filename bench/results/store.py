@@ -91,7 +91,7 @@ def merge(parts: list[tuple[str, RunResult]], wall_time: float) -> RunResult:
     first = parts[0][1]
     merged = RunResult(started=min(p.started for _, p in parts), interface=first.interface,
                        channel=first.channel, time_mode=first.time_mode, external=first.external,
-                       restbus_only=first.restbus_only,
+                       restbus_only=first.restbus_only, build=first.build,
                        mcap_path=first.mcap_path, aborted=any(p.aborted for _, p in parts), wall_time=wall_time,
                        requirements=first.requirements)
     logs = []

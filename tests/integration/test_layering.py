@@ -229,7 +229,8 @@ def test_only_the_transport_asks_a_bus_what_it_is() -> None:
 BELOW_THE_SESSION = ("transport", "log", "sim", "checks", "faults", "database", "e2e", "diag", "results")
 ABOVE = ("bench.session", "bench.case", "bench.run", "bench.cli", "bench.report", "bench.pytest", "bench.stop")
 #: At most this many modules at bench/'s top level (issue 28): the rest lives in packages named for what they hold.
-TOP_LEVEL_MAX = 12
+#: bench/compiled.py is the thirteenth: bench/__init__.py installs its finder before any package is imported.
+TOP_LEVEL_MAX = 13
 
 
 def test_bench_is_grouped_into_packages() -> None:

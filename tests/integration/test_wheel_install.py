@@ -30,7 +30,9 @@ from tests.repo import BENCH_DBC, CHASSIS_DBC, MINIMAL_PROJECT_TOML, ROOT
 
 pytestmark = pytest.mark.wheel
 
-#: What the wheel is built from (pyproject's packages and readme); nothing else of the repository is copied.
+#: What the wheel is built from (pyproject's packages and readme); nothing else of the repository is copied, setup.py
+#: and any compiled module neither: a pure-Python wheel, built in seconds (tests/integration/test_compiled.py has the
+#: compiled form).
 SOURCES = ("pyproject.toml", "README.md", "bench", "plant")
 
 BENCH_TOML = MINIMAL_PROJECT_TOML
@@ -63,7 +65,7 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str,
     source.mkdir()
     for name in SOURCES:
         if (ROOT / name).is_dir():
-            shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__"))
+            shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__", "*.so"))
         else:
             shutil.copy(ROOT / name, source / name)
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
