@@ -32,6 +32,7 @@ class OptionalBuildExt(build_ext):
                 built = self.get_ext_fullpath(extension.name)
                 if os.path.exists(built):
                     os.remove(built)
+            self.extensions = []                # nothing to copy into the tree or the wheel
             print(f"chassis-hil-bench: not compiled ({type(error).__name__}: {error}); the bench runs as pure "
                   "Python", file=sys.stderr)
 
