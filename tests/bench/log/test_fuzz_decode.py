@@ -88,7 +88,10 @@ def spied() -> tuple[Codebook, list[tuple[int, int]]]:
     codebook = load_codebook([CHASSIS_DBC, BENCH_DBC])   # a private copy: its codecs get spies
     lengths: list[tuple[int, int]] = []
     for codec in codebook.by_id.values():
-        codec.decode = _Spy(codec, lengths)  # type: ignore[method-assign]
+        try:
+            codec.decode = _Spy(codec, lengths)  # type: ignore[method-assign]
+        except AttributeError:   # a compiled codec (bench/compiled.py) takes no spy: CI runs this on the source
+            pytest.skip("the codec is compiled and cannot be spied on; BENCH_COMPILED=0 runs this test")
     return codebook, lengths
 
 
