@@ -3,7 +3,7 @@
 `pip install` builds the modules that setup.py lists with mypyc, from their own source, where a C compiler is
 present; a compiled module is an extension file beside its `.py`. At import the extensions run unless
 `BENCH_COMPILED=0` is set (the same source as Python: what CI's frame-digest comparison runs) or a `.py` is newer
-than its extension (edited since the last `pip install -e .`: then every such module runs from its source, so an
+than its extension (edited since the last `pip install -e .`: then every compiled module runs from its source, so an
 edit is never silently lost).
 """
 
