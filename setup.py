@@ -21,6 +21,10 @@ COMPILED = sorted(str(path) for path in Path("plant").rglob("*.py") if path.name
 ]
 
 
+def _uncompiled(why: str) -> None:
+    print(f"chassis-hil-bench: not compiled ({why}); the bench runs as pure Python", file=sys.stderr)
+
+
 class OptionalBuildExt(build_ext):
     """A failed compile (no C compiler, no Python headers) leaves the modules as Python, with one line saying so."""
 
@@ -33,8 +37,7 @@ class OptionalBuildExt(build_ext):
                 if os.path.exists(built):
                     os.remove(built)
             self.extensions = []                # nothing to copy into the tree or the wheel
-            print(f"chassis-hil-bench: not compiled ({type(error).__name__}: {error}); the bench runs as pure "
-                  "Python", file=sys.stderr)
+            _uncompiled(f"{type(error).__name__}: {error}")
 
 
 def extensions() -> list[Extension]:
@@ -43,12 +46,12 @@ def extensions() -> list[Extension]:
     try:
         from mypyc.build import mypycify
     except ImportError:
-        print("chassis-hil-bench: mypyc is not installed: the bench runs as pure Python", file=sys.stderr)
+        _uncompiled("mypyc is not installed")
         return []
     try:
         return mypycify(COMPILED, opt_level="3", group_name="bench._compiled")
     except (Exception, SystemExit) as error:   # mypy's errors end in sys.exit: the modules stay Python
-        print(f"chassis-hil-bench: not compiled (mypyc: {error}); the bench runs as pure Python", file=sys.stderr)
+        _uncompiled(f"mypyc: {error}")
         return []
 
 

@@ -33,8 +33,10 @@ def _extension(directory: Path, name: str) -> Path | None:
     return None
 
 
+@cache
 def modules() -> dict[str, tuple[Path, Path]]:
-    """Every module of PACKAGES that has a compiled form, imported or not: its source and its extension."""
+    """Every module of PACKAGES that has a compiled form, imported or not: its source and its extension (one walk
+    of the packages' folders per process: the finder, `bench run`'s line and the report ask it)."""
     out: dict[str, tuple[Path, Path]] = {}
     for package in PACKAGES:
         spec = importlib.util.find_spec(package)

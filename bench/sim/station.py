@@ -278,6 +278,7 @@ class Station:
         if faults is not None and (faults.any or self._delayed):
             self._tick_faults(faults, t, dt)
         kernel = self.kernel
+        faulty = False
         if kernel is not None:   # the transport's periodic sending (bench/transport/periodic.py)
             stamp = self.stamp
             for frame_id, data, timestamp in kernel.echoes():   # what the kernel sent for this station: tx
@@ -285,26 +286,17 @@ class Station:
                 self.monitor.on_frame(self.now() if stamp is None else stamp(timestamp), frame_id, data, "tx")
             faulty = faults is not None and faults.any
             kernel.check(faulty)
-            if self.send_clock is not None and self._schedule and self._schedule[0][0] <= tick:
-                self._due = _due_ticks(self._schedule, tick)
+        schedule = self._schedule
+        if (schedule and schedule[0][0] <= tick) or self.restbus.events:   # Restbus.due's own tests
+            if self.send_clock is not None and schedule and schedule[0][0] <= tick:
+                self._due = _due_ticks(schedule, tick)
             due = self.restbus.due(tick)
             try:
                 for frame_id, data in due:
-                    if not kernel.offer(frame_id, data, faulty):
+                    if kernel is None or not kernel.offer(frame_id, data, faulty):
                         self.send(t, frame_id, data)
             finally:
                 due.close()   # a send that raised: the tick's other messages stay due (Restbus.due)
-        else:
-            schedule = self._schedule
-            if (schedule and schedule[0][0] <= tick) or self.restbus.events:   # Restbus.due's own tests
-                if self.send_clock is not None and schedule and schedule[0][0] <= tick:
-                    self._due = _due_ticks(schedule, tick)
-                due = self.restbus.due(tick)
-                try:
-                    for frame_id, data in due:
-                        self.send(t, frame_id, data)
-                finally:
-                    due.close()   # a send that raised: the tick's other messages stay due (Restbus.due)
         if self._outbox:
             self._flush(dt)
 

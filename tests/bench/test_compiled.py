@@ -34,8 +34,10 @@ def package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(compiled, "PACKAGES", ("fakecore",))
     monkeypatch.delenv(compiled.ENV, raising=False)
+    compiled.modules.cache_clear()
     compiled.from_source.cache_clear()
     yield root
+    compiled.modules.cache_clear()
     compiled.from_source.cache_clear()
     for name in [m for m in sys.modules if m.startswith("fakecore")]:
         del sys.modules[name]
